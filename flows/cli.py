@@ -1,0 +1,113 @@
+"""The ``valvemon`` command line (``../shared/spec/interfaces.md``).
+
+Every command takes ``--warehouse DIR`` (or ``$VALVEMON_WAREHOUSE``; default ``warehouse/``).
+Exit status 0 on success; otherwise non-zero with a one-line reason on stderr.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+
+from flows.config import WAREHOUSE_ENV
+from flows.errors import ValvemonError
+from schemas.plant_config import ConfigError
+
+app = typer.Typer(
+    name="valvemon",
+    help="Condition monitoring of electro-hydraulic servo valves (Steinboeck et al. 2013).",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+
+Warehouse = Annotated[
+    Optional[Path],
+    typer.Option("--warehouse", envvar=WAREHOUSE_ENV, help="Warehouse folder (lake, DuckDB file, reports). [default: warehouse/]"),
+]
+Config = Annotated[Path, typer.Option("--config", help="Plant configuration (TOML).")]
+Valves = Annotated[Optional[list[str]], typer.Option("--valves", help="Only these valve ids (repeat the option).")]
+From = Annotated[Optional[str], typer.Option("--from", help="Start (ISO-8601 date or date-time, UTC unless an offset is given).")]
+To = Annotated[Optional[str], typer.Option("--to", help="End, exclusive (ISO-8601).")]
+
+
+def _not_yet(what: str, issue: int) -> None:
+    raise ValvemonError(f"'valvemon {what}' is not implemented yet (issue {issue})")
+
+
+@app.command()
+def demo(warehouse: Warehouse = None) -> None:
+    """Simulate a small plant, run the whole pipeline on it, print the fleet's condition and the report's path."""
+    _not_yet("demo", 6)
+
+
+@app.command()
+def simulate(config: Config, out: Annotated[Path, typer.Option("--out", help="Archive folder.")], warehouse: Warehouse = None) -> None:
+    """Write a synthetic archive (exports + the truth)."""
+    _not_yet("simulate", 2)
+
+
+@app.command()
+def ingest(config: Config, paths: Annotated[list[Path], typer.Argument(help="Export files or folders.")], warehouse: Warehouse = None) -> None:
+    """Historian exports into the sensor lake."""
+    _not_yet("ingest", 3)
+
+
+@app.command()
+def monitor(config: Config, valves: Valves = None, start: From = None, end: To = None, warehouse: Warehouse = None) -> None:
+    """Lake to opening-area points and fits."""
+    _not_yet("monitor", 4)
+
+
+@app.command()
+def report(config: Config, warehouse: Warehouse = None) -> None:
+    """Refresh the views, write the pictures and the HTML report."""
+    _not_yet("report", 5)
+
+
+@app.command()
+def query(sql: Annotated[str, typer.Argument(help="SQL against the warehouse.")], warehouse: Warehouse = None) -> None:
+    """An ad-hoc query against the warehouse, printed as a table."""
+    _not_yet("query", 5)
+
+
+@app.command()
+def backfill(
+    config: Config,
+    start: Annotated[str, typer.Option("--from", help="First date (ISO-8601).")],
+    end: Annotated[str, typer.Option("--to", help="Last date, exclusive (ISO-8601).")],
+    valves: Valves = None,
+    warehouse: Warehouse = None,
+) -> None:
+    """Ingest + monitor over a span, resumable."""
+    _not_yet("backfill", 6)
+
+
+@app.command()
+def serve(config: Config, warehouse: Warehouse = None) -> None:
+    """The nightly deployment on a Prefect server."""
+    _not_yet("serve", 6)
+
+
+@app.command()
+def discrepancy(
+    config: Config,
+    valve: Annotated[str, typer.Option("--valve", help="Valve id.")],
+    start: From = None,
+    end: To = None,
+    warehouse: Warehouse = None,
+) -> None:
+    """The model-discrepancy workflow."""
+    _not_yet("discrepancy", 7)
+
+
+def main() -> None:
+    """Entry point: known failures become one line on stderr and exit status 1."""
+    try:
+        app()
+    except (ValvemonError, ConfigError) as exc:
+        print(f"valvemon: error: {exc}", file=sys.stderr)
+        sys.exit(1)

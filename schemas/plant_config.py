@@ -1,0 +1,478 @@
+"""The plant configuration (``../shared/spec/plant-config.md``): parsed, validated, in SI.
+
+:func:`parse_plant_config` takes the dictionary a TOML parser returns and gives a frozen
+:class:`PlantConfig`; every problem raises :class:`ConfigError` naming the key
+(``valves[1].tags.p1.unit``) and what was expected. :func:`plant_config_to_dict` writes a
+configuration back in the file's own units, so a round trip through TOML is lossless.
+
+Keys the project adds to the specification (all optional, documented in the README):
+
+- ``[export] sample_rate_hz`` (default 1000): the uniform grid the lake is built on. [Hz]
+- ``[export] max_gap_s`` (default 0.005): samples further apart than this are a gap;
+  nothing is interpolated across a gap. [s]
+- ``[export] duplicate_rule`` (default ``"last"``): the same tag and time with different
+  values keeps the ``"last"`` row in file order, or ``"first"``, or is an ``"error"``.
+- ``[valves] baseline_window = { start = ..., end = ... }`` (spec) and ``[valves] scenario``
+  (written by ``valvemon simulate`` for the record; ignored by monitoring).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from typing import Any, Callable
+from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
+
+from schemas.fields import EDGES, REQUIRED_SIGNALS, SIGNAL_KIND, SIGNALS
+from schemas.units import UnitError, si_factor
+
+
+class ConfigError(ValueError):
+    """An invalid plant configuration; the message names the key and the problem."""
+
+
+@dataclass(frozen=True)
+class TagSpec:
+    """One signal's historian tag and the unit its values are exported in."""
+
+    tag: str
+    unit: str
+
+
+@dataclass(frozen=True)
+class ExportSpec:
+    """How the plant's historian export files are laid out."""
+
+    layout: str = "long"
+    timestamp_column: str = "timestamp"
+    timestamp_format: str = "iso8601"
+    tag_column: str = "tag"
+    value_column: str = "value"
+    quality_column: str | None = None
+    good_quality: tuple[str, ...] = ()
+    separator: str = ","
+    decimal: str = "."
+    sample_rate_hz: float = 1000.0
+    max_gap_s: float = 0.005
+    duplicate_rule: str = "last"
+
+
+@dataclass(frozen=True)
+class ValveDesign:
+    """A valve type's design data (paper, Table 1), SI."""
+
+    x_max_m: float
+    bore_radius_m: float
+    spool_radius_m: float
+    taper_angle_port1_rad: float
+    taper_angle_port2_rad: float
+    underlap_m: tuple[float, float, float, float]
+    """Underlap per edge in the order s1, 1r, s2, 2r. [m]"""
+    contraction_coefficient: float
+
+    def taper_angle_rad(self, edge: str) -> float:
+        """Taper angle of an edge: port 1 for s1 and 1r, port 2 for s2 and 2r. [rad]"""
+        return self.taper_angle_port1_rad if edge in ("s1", "1r") else self.taper_angle_port2_rad
+
+
+@dataclass(frozen=True)
+class ValveSpec:
+    """One monitored valve with its positioning unit, SI."""
+
+    id: str
+    type: str
+    design: ValveDesign
+    commissioned: datetime
+    piston_diameter_m: float
+    rod_diameter_m: float
+    stroke_m: float
+    v01_m3: float
+    v02_m3: float
+    bulk_modulus_pa: float
+    density_kg_m3: float
+    tags: dict[str, TagSpec]
+    baseline_window: tuple[datetime, datetime] | None = None
+    scenario: str | None = None
+    overrides: frozenset[str] = field(default_factory=frozenset)
+    """Design keys this valve sets itself (kept for writing the file back)."""
+
+    @property
+    def piston_area_m2(self) -> float:
+        """Head-side piston area A1 = π D² / 4. [m²]"""
+        return math.pi * self.piston_diameter_m**2 / 4
+
+    @property
+    def annulus_area_m2(self) -> float:
+        """Rod-side annulus area A2 = A1 − π d² / 4. [m²]"""
+        return self.piston_area_m2 - math.pi * self.rod_diameter_m**2 / 4
+
+    def si_factor(self, signal: str) -> float:
+        """Factor from the exported unit of ``signal`` to SI."""
+        return si_factor(self.tags[signal].unit, SIGNAL_KIND[signal], self.design.x_max_m)
+
+
+@dataclass(frozen=True)
+class PlantConfig:
+    """A whole plant: export layout, valve types and monitored valves."""
+
+    name: str
+    timezone: str
+    export: ExportSpec
+    valve_types: dict[str, ValveDesign]
+    valves: tuple[ValveSpec, ...]
+
+    def valve(self, valve_id: str) -> ValveSpec:
+        """The valve with this id (``KeyError`` naming it if absent)."""
+        for v in self.valves:
+            if v.id == valve_id:
+                return v
+        raise KeyError(f"valve {valve_id!r} is not in plant {self.name!r}")
+
+    def tag_index(self) -> dict[str, tuple[str, str]]:
+        """Historian tag → (valve id, signal)."""
+        return {t.tag: (v.id, s) for v in self.valves for s, t in v.tags.items()}
+
+
+# --- parsing helpers -------------------------------------------------------------------------
+
+_VALVE_ID = re.compile(r"^[A-Za-z0-9_-]+$")
+
+
+def _table(value: Any, key: str) -> dict:
+    if not isinstance(value, dict):
+        raise ConfigError(f"{key}: expected a table, got {type(value).__name__}")
+    return value
+
+
+def _no_unknown(table: dict, allowed: set[str], key: str) -> None:
+    unknown = sorted(set(table) - allowed)
+    if unknown:
+        where = f"{key}." if key else ""
+        raise ConfigError(f"{where}{unknown[0]}: unknown key (expected one of {', '.join(sorted(allowed))})")
+
+
+def _required(table: dict, name: str, key: str) -> Any:
+    if name not in table:
+        where = f"{key}." if key else ""
+        raise ConfigError(f"{where}{name}: missing required key")
+    return table[name]
+
+
+def _str(value: Any, key: str, choices: tuple[str, ...] | None = None) -> str:
+    if not isinstance(value, str) or not value:
+        raise ConfigError(f"{key}: expected a non-empty string, got {value!r}")
+    if choices is not None and value not in choices:
+        raise ConfigError(f"{key}: {value!r} is not one of {', '.join(repr(c) for c in choices)}")
+    return value
+
+
+def _number(value: Any, key: str, lo: float | None = None, hi: float | None = None, *, open_lo: bool = False) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise ConfigError(f"{key}: expected a finite number, got {value!r}")
+    if lo is not None and (value <= lo if open_lo else value < lo):
+        raise ConfigError(f"{key}: {value!r} must be {'>' if open_lo else '>='} {lo:g}")
+    if hi is not None and value > hi:
+        raise ConfigError(f"{key}: {value!r} must be <= {hi:g}")
+    return float(value)
+
+
+def _instant(value: Any, key: str, tz: ZoneInfo) -> datetime:
+    if isinstance(value, str):
+        try:
+            value = datetime.fromisoformat(value.replace("Z", "+00:00"))
+        except ValueError:
+            raise ConfigError(f"{key}: {value!r} is not an ISO-8601 date-time") from None
+    if not isinstance(value, datetime):
+        raise ConfigError(f"{key}: expected an ISO-8601 date-time, got {value!r}")
+    if value.tzinfo is None:
+        value = value.replace(tzinfo=tz)
+    return value.astimezone(timezone.utc)
+
+
+# --- the tables ------------------------------------------------------------------------------
+
+_EXPORT_KEYS = {
+    "layout", "timestamp_column", "timestamp_format", "tag_column", "value_column",
+    "quality_column", "good_quality", "separator", "decimal", "sample_rate_hz", "max_gap_s",
+    "duplicate_rule",
+}  # fmt: skip
+
+
+def _parse_export(raw: Any) -> ExportSpec:
+    t = _table(raw, "export")
+    _no_unknown(t, _EXPORT_KEYS, "export")
+    layout = _str(_required(t, "layout", "export"), "export.layout", ("long", "wide"))
+    kw: dict[str, Any] = {"layout": layout}
+    kw["timestamp_column"] = _str(_required(t, "timestamp_column", "export"), "export.timestamp_column")
+    kw["timestamp_format"] = _str(t.get("timestamp_format", "iso8601"), "export.timestamp_format")
+    if layout == "long":
+        kw["tag_column"] = _str(_required(t, "tag_column", "export"), "export.tag_column")
+        kw["value_column"] = _str(_required(t, "value_column", "export"), "export.value_column")
+    if "quality_column" in t:
+        kw["quality_column"] = _str(t["quality_column"], "export.quality_column")
+        good = _required(t, "good_quality", "export")
+        if not isinstance(good, list) or not good or not all(isinstance(g, (str, int)) for g in good):
+            raise ConfigError("export.good_quality: expected a non-empty list of quality codes")
+        kw["good_quality"] = tuple(str(g) for g in good)
+    kw["separator"] = _str(t.get("separator", ","), "export.separator", (",", ";", "\t"))
+    kw["decimal"] = _str(t.get("decimal", "."), "export.decimal", (".", ","))
+    if kw["decimal"] == "," and kw["separator"] == ",":
+        raise ConfigError("export.decimal: ',' needs a separator other than ','")
+    kw["sample_rate_hz"] = _number(t.get("sample_rate_hz", 1000.0), "export.sample_rate_hz", 0, 1e6, open_lo=True)
+    kw["max_gap_s"] = _number(t.get("max_gap_s", 5.0 / kw["sample_rate_hz"]), "export.max_gap_s", 0, open_lo=True)
+    if kw["max_gap_s"] < 1.0 / kw["sample_rate_hz"]:
+        raise ConfigError("export.max_gap_s: must be at least one sample period")
+    kw["duplicate_rule"] = _str(t.get("duplicate_rule", "last"), "export.duplicate_rule", ("last", "first", "error"))
+    return ExportSpec(**kw)
+
+
+_DESIGN_KEYS = {
+    "x_max_mm", "bore_radius_mm", "spool_radius_mm", "taper_angle_port1_deg",
+    "taper_angle_port2_deg", "underlap_mm", "contraction_coefficient",
+}  # fmt: skip
+
+
+def _parse_underlaps(raw: Any, key: str, base: tuple[float, ...] | None) -> tuple[float, float, float, float]:
+    t = _table(raw, key)
+    _no_unknown(t, set(EDGES), key)
+    values = list(base) if base is not None else [None] * 4
+    for i, edge in enumerate(EDGES):
+        if edge in t:
+            values[i] = _number(t[edge], f"{key}.{edge}") * 1e-3
+        elif values[i] is None:
+            raise ConfigError(f"{key}.{edge}: missing required key")
+    return tuple(values)  # type: ignore[return-value]
+
+
+def _parse_design(t: dict, key: str, base: ValveDesign | None) -> ValveDesign:
+    """Design keys of a valve type (``base`` None) or a valve's overrides of its type."""
+
+    def get(name: str, lo: float, hi: float, scale: float, current: float | None, open_lo: bool = True) -> float:
+        if name in t:
+            return _number(t[name], f"{key}.{name}", lo, hi, open_lo=open_lo) * scale
+        if current is None:
+            raise ConfigError(f"{key}.{name}: missing required key")
+        return current
+
+    b = base
+    x_max = get("x_max_mm", 0, 50, 1e-3, b and b.x_max_m)
+    bore = get("bore_radius_mm", 0, 500, 1e-3, b and b.bore_radius_m)
+    spool = get("spool_radius_mm", 0, 500, 1e-3, b and b.spool_radius_m)
+    if spool >= bore:
+        raise ConfigError(f"{key}.spool_radius_mm: the spool radius must be smaller than the bore radius")
+    phi1 = get("taper_angle_port1_deg", 0, 89, math.pi / 180, b and b.taper_angle_port1_rad)
+    phi2 = get("taper_angle_port2_deg", 0, 89, math.pi / 180, b and b.taper_angle_port2_rad)
+    if "underlap_mm" in t:
+        underlaps = _parse_underlaps(t["underlap_mm"], f"{key}.underlap_mm", b and b.underlap_m)
+    elif b is None:
+        raise ConfigError(f"{key}.underlap_mm: missing required key")
+    else:
+        underlaps = b.underlap_m
+    for edge, u in zip(EDGES, underlaps):
+        if abs(u) >= x_max:
+            raise ConfigError(f"{key}.underlap_mm.{edge}: an underlap of {u * 1e3:g} mm is not smaller than the stroke x_max = {x_max * 1e3:g} mm")
+    alpha = get("contraction_coefficient", 0, 1.5, 1.0, b and b.contraction_coefficient)
+    return ValveDesign(x_max, bore, spool, phi1, phi2, underlaps, alpha)
+
+
+_VALVE_KEYS = {
+    "id", "type", "commissioned", "piston_diameter_mm", "rod_diameter_mm", "stroke_mm", "v01_l",
+    "v02_l", "bulk_modulus_gpa", "density_kg_m3", "tags", "baseline_window", "scenario",
+} | _DESIGN_KEYS  # fmt: skip
+
+
+def _parse_tags(raw: Any, key: str, x_max_m: float) -> dict[str, TagSpec]:
+    t = _table(raw, key)
+    _no_unknown(t, set(SIGNALS), key)
+    tags: dict[str, TagSpec] = {}
+    for signal in SIGNALS:
+        if signal not in t:
+            if signal in REQUIRED_SIGNALS:
+                raise ConfigError(f"{key}.{signal}: missing required signal")
+            continue
+        skey = f"{key}.{signal}"
+        spec = _table(t[signal], skey)
+        _no_unknown(spec, {"tag", "unit"}, skey)
+        tag = _str(_required(spec, "tag", skey), f"{skey}.tag")
+        unit = _str(_required(spec, "unit", skey), f"{skey}.unit")
+        try:
+            si_factor(unit, SIGNAL_KIND[signal], x_max_m)
+        except UnitError as exc:
+            raise ConfigError(f"{skey}.unit: {exc}") from None
+        tags[signal] = TagSpec(tag, unit)
+    return tags
+
+
+def _parse_valve(raw: Any, key: str, types: dict[str, ValveDesign], tz: ZoneInfo) -> ValveSpec:
+    t = _table(raw, key)
+    _no_unknown(t, _VALVE_KEYS, key)
+    vid = _str(_required(t, "id", key), f"{key}.id")
+    if not _VALVE_ID.match(vid):
+        raise ConfigError(f"{key}.id: {vid!r} may hold only letters, digits, '-' and '_'")
+    type_name = _str(_required(t, "type", key), f"{key}.type")
+    if type_name not in types:
+        raise ConfigError(f"{key}.type: unknown valve type {type_name!r} (defined: {', '.join(sorted(types)) or 'none'})")
+    overrides = frozenset(_DESIGN_KEYS & set(t))
+    design = _parse_design(t, key, types[type_name]) if overrides else types[type_name]
+
+    def num(name: str, lo: float, hi: float, scale: float) -> float:
+        return _number(_required(t, name, key), f"{key}.{name}", lo, hi, open_lo=True) * scale
+
+    piston = num("piston_diameter_mm", 0, 5000, 1e-3)
+    rod = num("rod_diameter_mm", 0, 5000, 1e-3)
+    if rod >= piston:
+        raise ConfigError(f"{key}.rod_diameter_mm: the rod must be thinner than the piston ({rod * 1e3:g} >= {piston * 1e3:g} mm)")
+    stroke = num("stroke_mm", 0, 20000, 1e-3)
+    v01 = num("v01_l", 0, 1e5, 1e-3)
+    v02 = num("v02_l", 0, 1e5, 1e-3)
+    annulus = math.pi * (piston**2 - rod**2) / 4
+    if v02 <= annulus * stroke:
+        raise ConfigError(
+            f"{key}.v02_l: {v02 * 1e3:g} L must exceed the rod-side stroke volume A2·stroke = "
+            f"{annulus * stroke * 1e3:.3g} L (v02 is the rod-side volume at X = 0)"
+        )
+    baseline = None
+    if "baseline_window" in t:
+        bkey = f"{key}.baseline_window"
+        b = _table(t["baseline_window"], bkey)
+        _no_unknown(b, {"start", "end"}, bkey)
+        start = _instant(_required(b, "start", bkey), f"{bkey}.start", tz)
+        end = _instant(_required(b, "end", bkey), f"{bkey}.end", tz)
+        if end <= start:
+            raise ConfigError(f"{bkey}.end: must be later than start")
+        baseline = (start, end)
+    return ValveSpec(
+        id=vid,
+        type=type_name,
+        design=design,
+        commissioned=_instant(_required(t, "commissioned", key), f"{key}.commissioned", tz),
+        piston_diameter_m=piston,
+        rod_diameter_m=rod,
+        stroke_m=stroke,
+        v01_m3=v01,
+        v02_m3=v02,
+        bulk_modulus_pa=num("bulk_modulus_gpa", 0, 10, 1e9),
+        density_kg_m3=num("density_kg_m3", 0, 5000, 1.0),
+        tags=_parse_tags(_required(t, "tags", key), f"{key}.tags", design.x_max_m),
+        baseline_window=baseline,
+        scenario=_str(t["scenario"], f"{key}.scenario") if "scenario" in t else None,
+        overrides=overrides,
+    )
+
+
+def parse_plant_config(data: dict) -> PlantConfig:
+    """Validate a plant configuration (as parsed from TOML) and convert it to SI.
+
+    Raises
+    ------
+    ConfigError
+        For unknown keys, missing required keys, impossible values, unknown units, duplicate
+        valve ids or a historian tag used twice; the message starts with the key's path.
+    """
+    _no_unknown(_table(data, "top level"), {"plant", "export", "valve_types", "valves"}, "")
+    plant = _table(_required(data, "plant", ""), "plant")
+    _no_unknown(plant, {"name", "timezone"}, "plant")
+    name = _str(_required(plant, "name", "plant"), "plant.name")
+    tz_name = _str(_required(plant, "timezone", "plant"), "plant.timezone")
+    try:
+        tz = ZoneInfo(tz_name)
+    except (ZoneInfoNotFoundError, ValueError):
+        raise ConfigError(f"plant.timezone: {tz_name!r} is not an IANA time zone name") from None
+    export = _parse_export(_required(data, "export", ""))
+    types_raw = _table(_required(data, "valve_types", ""), "valve_types")
+    types: dict[str, ValveDesign] = {}
+    for tname, traw in types_raw.items():
+        tkey = f"valve_types.{tname}"
+        tt = _table(traw, tkey)
+        _no_unknown(tt, _DESIGN_KEYS, tkey)
+        types[tname] = _parse_design(tt, tkey, None)
+    valves_raw = _required(data, "valves", "")
+    if not isinstance(valves_raw, list) or not valves_raw:
+        raise ConfigError("valves: expected at least one [[valves]] table")
+    valves = tuple(_parse_valve(v, f"valves[{i}]", types, tz) for i, v in enumerate(valves_raw))
+    seen_ids: dict[str, int] = {}
+    seen_tags: dict[str, str] = {}
+    for i, v in enumerate(valves):
+        if v.id in seen_ids:
+            raise ConfigError(f"valves[{i}].id: {v.id!r} is used twice (also valves[{seen_ids[v.id]}])")
+        seen_ids[v.id] = i
+        for signal, spec in v.tags.items():
+            here = f"valves[{i}].tags.{signal}.tag"
+            if spec.tag in seen_tags:
+                raise ConfigError(f"{here}: tag {spec.tag!r} is used twice (also {seen_tags[spec.tag]})")
+            seen_tags[spec.tag] = here
+    if export.layout == "wide":
+        reserved = {export.timestamp_column}
+        clash = reserved & set(seen_tags)
+        if clash:
+            raise ConfigError(f"export.timestamp_column: {clash.pop()!r} is also a tag name")
+    return PlantConfig(name, tz_name, export, types, valves)
+
+
+# --- writing back ----------------------------------------------------------------------------
+
+
+def _r(x: float) -> float:
+    """A unit-converted value rounded to 12 significant digits, so files stay readable."""
+    return float(f"{x:.12g}")
+
+
+def _design_dict(d: ValveDesign, keys: frozenset[str] | set[str]) -> dict:
+    full: dict[str, Callable[[], Any]] = {
+        "x_max_mm": lambda: _r(d.x_max_m * 1e3),
+        "bore_radius_mm": lambda: _r(d.bore_radius_m * 1e3),
+        "spool_radius_mm": lambda: _r(d.spool_radius_m * 1e3),
+        "taper_angle_port1_deg": lambda: _r(math.degrees(d.taper_angle_port1_rad)),
+        "taper_angle_port2_deg": lambda: _r(math.degrees(d.taper_angle_port2_rad)),
+        "underlap_mm": lambda: {e: _r(u * 1e3) for e, u in zip(EDGES, d.underlap_m)},
+        "contraction_coefficient": lambda: d.contraction_coefficient,
+    }
+    return {k: full[k]() for k in full if k in keys}
+
+
+def _iso(t: datetime) -> str:
+    return t.astimezone(timezone.utc).isoformat().replace("+00:00", "Z")
+
+
+def plant_config_to_dict(config: PlantConfig) -> dict:
+    """The configuration as a TOML-ready dictionary in the file's own units (mm, L, GPa, °)."""
+    e = config.export
+    export: dict[str, Any] = {"layout": e.layout, "timestamp_column": e.timestamp_column, "timestamp_format": e.timestamp_format}
+    if e.layout == "long":
+        export |= {"tag_column": e.tag_column, "value_column": e.value_column}
+    if e.quality_column is not None:
+        export |= {"quality_column": e.quality_column, "good_quality": list(e.good_quality)}
+    export |= {
+        "separator": e.separator,
+        "decimal": e.decimal,
+        "sample_rate_hz": e.sample_rate_hz,
+        "max_gap_s": e.max_gap_s,
+        "duplicate_rule": e.duplicate_rule,
+    }
+    valves = []
+    for v in config.valves:
+        d: dict[str, Any] = {"id": v.id, "type": v.type, "commissioned": _iso(v.commissioned)}
+        d |= _design_dict(v.design, v.overrides)
+        d |= {
+            "piston_diameter_mm": _r(v.piston_diameter_m * 1e3),
+            "rod_diameter_mm": _r(v.rod_diameter_m * 1e3),
+            "stroke_mm": _r(v.stroke_m * 1e3),
+            "v01_l": _r(v.v01_m3 * 1e3),
+            "v02_l": _r(v.v02_m3 * 1e3),
+            "bulk_modulus_gpa": _r(v.bulk_modulus_pa / 1e9),
+            "density_kg_m3": v.density_kg_m3,
+        }
+        if v.baseline_window is not None:
+            d["baseline_window"] = {"start": _iso(v.baseline_window[0]), "end": _iso(v.baseline_window[1])}
+        if v.scenario is not None:
+            d["scenario"] = v.scenario
+        d["tags"] = {s: {"tag": t.tag, "unit": t.unit} for s, t in v.tags.items()}
+        valves.append(d)
+    return {
+        "plant": {"name": config.name, "timezone": config.timezone},
+        "export": export,
+        "valve_types": {n: _design_dict(t, _DESIGN_KEYS) for n, t in config.valve_types.items()},
+        "valves": valves,
+    }

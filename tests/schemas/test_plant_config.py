@@ -1,0 +1,123 @@
+"""The plant configuration: the spec's example is accepted as written, broken ones are named."""
+
+import copy
+import math
+import tomllib
+from datetime import datetime, timezone
+from pathlib import Path
+
+import pytest
+import tomli_w
+
+from flows.config import load_plant_config
+from schemas.plant_config import ConfigError, parse_plant_config, plant_config_to_dict
+
+EXAMPLE = Path(__file__).parents[1] / "fixtures" / "plant_example.toml"
+
+
+@pytest.fixture
+def raw() -> dict:
+    return tomllib.loads(EXAMPLE.read_text())
+
+
+def test_example_is_accepted_in_si():
+    cfg = load_plant_config(EXAMPLE)
+    v = cfg.valve("V017")
+    assert cfg.name == "MILL1" and cfg.timezone == "Europe/Vienna"
+    assert cfg.export.good_quality == ("Good", "192")
+    assert v.design.x_max_m == pytest.approx(3.5e-3)
+    assert v.design.underlap_m == pytest.approx((4e-5,) * 4)
+    assert v.design.taper_angle_rad("1r") == pytest.approx(math.radians(10.48))
+    assert v.design.taper_angle_rad("s2") == pytest.approx(math.radians(5.24))
+    assert v.piston_area_m2 == pytest.approx(math.pi * 0.14**2 / 4)
+    assert v.annulus_area_m2 == pytest.approx(math.pi * (0.14**2 - 0.1**2) / 4)
+    assert v.v02_m3 == pytest.approx(7.1e-3) and v.bulk_modulus_pa == pytest.approx(1.5e9)
+    assert v.commissioned == datetime(2025, 3, 1, tzinfo=timezone.utc)
+    assert v.si_factor("p1") == 1e5 and v.si_factor("x_cyl") == 1e-3
+    assert cfg.tag_index()["MILL1.V017.XREF"] == ("V017", "x_ref")
+
+
+def test_round_trip_through_toml_is_lossless(raw, tmp_path):
+    cfg = parse_plant_config(raw)
+    path = tmp_path / "plant.toml"
+    path.write_bytes(tomli_w.dumps(plant_config_to_dict(cfg)).encode())
+    assert load_plant_config(path) == cfg
+
+
+def test_valve_overrides_its_type(raw):
+    raw["valves"][0]["underlap_mm"] = {"1r": 0.06}
+    raw["valves"][0]["contraction_coefficient"] = 0.7
+    v = parse_plant_config(raw).valve("V017")
+    assert v.design.underlap_m == pytest.approx((4e-5, 6e-5, 4e-5, 4e-5))
+    assert v.design.contraction_coefficient == 0.7
+    assert parse_plant_config(raw).valve_types["servo_4w"].contraction_coefficient == 0.675
+
+
+def test_naive_commissioning_time_is_plant_local(raw):
+    raw["valves"][0]["commissioned"] = "2025-07-01T02:00:00"
+    v = parse_plant_config(raw).valve("V017")
+    assert v.commissioned == datetime(2025, 7, 1, 0, 0, tzinfo=timezone.utc)  # CEST = UTC+2
+
+
+def _set(d: dict, path: str, value) -> None:
+    *parents, last = path.split(".")
+    for p in parents:
+        d = d[int(p)] if p.isdigit() else d[p]
+    if value is _DELETE:
+        del d[last]
+    else:
+        d[last] = value
+
+
+_DELETE = object()
+
+
+@pytest.mark.parametrize(
+    "path, value, message",
+    [
+        ("plant.colour", "red", "plant.colour: unknown key"),
+        ("export.layout", "tall", "export.layout: 'tall' is not one of"),
+        ("valves.0.v01_l", -3.0, "valves[0].v01_l: -3.0 must be > 0"),
+        ("valves.0.v02_l", 4.0, "valves[0].v02_l: 4 L must exceed the rod-side stroke volume"),
+        ("valves.0.tags.p1.unit", "bars", "valves[0].tags.p1.unit: unknown pressure unit 'bars'"),
+        ("valves.0.tags.p2.tag", "MILL1.V017.P1", "valves[0].tags.p2.tag: tag 'MILL1.V017.P1' is used twice"),
+        ("valves.0.tags.x_cyl", _DELETE, "valves[0].tags.x_cyl: missing required signal"),
+        ("valves.0.id", "V 17", "valves[0].id: 'V 17' may hold only letters"),
+        ("valves.0.type", "servo_3w", "valves[0].type: unknown valve type 'servo_3w'"),
+        ("valves.0.density_kg_m3", _DELETE, "valves[0].density_kg_m3: missing required key"),
+        ("valves.0.rod_diameter_mm", 150, "valves[0].rod_diameter_mm: the rod must be thinner"),
+        ("valve_types.servo_4w.underlap_mm", {"s1": 4.0, "1r": 0.04, "s2": 0.04, "2r": 0.04}, "valve_types.servo_4w.underlap_mm.s1: an underlap of 4 mm is not smaller than the stroke"),
+        ("valve_types.servo_4w.spool_radius_mm", 10.5, "spool radius must be smaller than the bore radius"),
+        ("plant.timezone", "Mars/Olympus", "plant.timezone: 'Mars/Olympus' is not an IANA time zone"),
+        ("valves.0.commissioned", "yesterday", "valves[0].commissioned: 'yesterday' is not an ISO-8601"),
+        ("valves.0.tags.x_spool.unit", "%", None),
+        ("valves.0.tags.x_cyl.unit", "%", "valves[0].tags.x_cyl.unit: unknown position unit '%'"),
+        ("export.good_quality", _DELETE, "export.good_quality: missing required key"),
+    ],
+)
+def test_broken_configurations_name_the_key(raw, path, value, message):
+    broken = copy.deepcopy(raw)
+    _set(broken, path, value)
+    if message is None:
+        parse_plant_config(broken)
+        return
+    with pytest.raises(ConfigError) as err:
+        parse_plant_config(broken)
+    assert message in str(err.value)
+
+
+def test_duplicate_valve_id(raw):
+    raw["valves"].append(copy.deepcopy(raw["valves"][0]))
+    for s, t in raw["valves"][1]["tags"].items():
+        t["tag"] = t["tag"].replace("V017", "V018")
+    with pytest.raises(ConfigError, match=r"valves\[1\]\.id: 'V017' is used twice"):
+        parse_plant_config(raw)
+
+
+def test_file_errors_name_the_file(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[plant\nname = 1")
+    with pytest.raises(ConfigError, match="bad.toml: not valid TOML"):
+        load_plant_config(bad)
+    with pytest.raises(ConfigError, match="missing.toml: no such configuration file"):
+        load_plant_config(tmp_path / "missing.toml")
