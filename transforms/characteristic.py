@@ -1,0 +1,293 @@
+"""Step 4a (initial opening-area characteristic) and step 5a (its plausibility check).
+
+:class:`Characteristic` is a piecewise-linear Â(u) on knots, linear beyond the end knots (the
+fit of step 4b shifts it and may evaluate a little outside the commissioning range).
+
+:func:`fit_characteristic` fits Â to points (u_i, A_i) by linear least squares in the hat-function
+basis. Knots follow the distribution of the points (paper: "the location of nodes is adaptively
+chosen depending on the distribution of the measurement points"): quantiles of u, one interval per
+``points_per_interval`` points, at most ``max_knots`` knots, never closer than
+``min_spacing_m`` (0.1 mm: several times the spool sensor noise, about 3 % of x_max).
+
+The nominal characteristic α_nominal·A(u) is computed by the flows layer from the model and
+handed in as arrays (:meth:`Characteristic.from_arrays`).
+
+:func:`plausibility` compares a baseline with the nominal characteristic over their common
+u-range (value, slope, shape, monotonicity, and the scale/shift of Eq. 8 that maps one onto the
+other). Default thresholds and why:
+
+* value scale Σ ÂN/ΣN² and slope ratio within [0.7, 1/0.7]: the nominal contraction coefficient
+  is a handbook value (0.6–0.75 for sharp edges depending on Reynolds number and edge radius,
+  ±15 % around the configured value), Eq. 7 itself carries β (±7 %) and a few per cent of
+  closed-edge leakage; ±30 % (log-symmetric) leaves room for all of it but not for the paper's
+  broken edge (α ×2.5);
+* relative RMS difference ≤ 0.3, for the same reason;
+* shape: the RMS error left after the best scale and shift (Eq. 8 of nominal onto baseline),
+  relative to the baseline's RMS, ≤ 0.1: a healthy valve differs from the ideal conical-gap
+  geometry by a few per cent;
+* shift |x̂| ≤ 0.2 mm: manufacturing underlaps vary by a few hundredths of a millimetre (model.md:
+  up to about 0.1 mm); the broken edge of Table 2 is +0.41 mm;
+* monotone: no segment slope below −5 % of the nominal mean slope (Â must grow with u).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = ["Characteristic", "Plausibility", "choose_knots", "fit_characteristic", "plausibility"]
+
+
+@dataclass(frozen=True, eq=False)
+class Characteristic:
+    """Piecewise-linear Â(u): values at strictly increasing knots, linear extrapolation."""
+
+    knots_u_m: np.ndarray
+    values_m2: np.ndarray
+
+    def __post_init__(self) -> None:
+        k = np.array(self.knots_u_m, dtype=np.float64, copy=True).reshape(-1)
+        v = np.array(self.values_m2, dtype=np.float64, copy=True).reshape(-1)
+        if k.shape != v.shape:
+            raise ValueError(f"knots ({k.shape[0]}) and values ({v.shape[0]}) differ in length")
+        if k.shape[0] < 2:
+            raise ValueError("a characteristic needs at least two knots")
+        if not (np.isfinite(k).all() and np.isfinite(v).all()):
+            raise ValueError("knots and values must be finite")
+        if np.any(np.diff(k) <= 0):
+            raise ValueError("knots must be strictly increasing")
+        k.setflags(write=False)
+        v.setflags(write=False)
+        object.__setattr__(self, "knots_u_m", k)
+        object.__setattr__(self, "values_m2", v)
+
+    @classmethod
+    def from_arrays(cls, u_m, values_m2) -> Characteristic:
+        """From a sampled curve (e.g. the nominal α·A(u) on a grid); sorted by u if needed."""
+        u = np.asarray(u_m, dtype=np.float64).reshape(-1)
+        v = np.asarray(values_m2, dtype=np.float64).reshape(-1)
+        if u.shape != v.shape:
+            raise ValueError("u and values differ in length")
+        order = np.argsort(u, kind="stable")
+        return cls(u[order], v[order])
+
+    @classmethod
+    def from_dict(cls, d: dict) -> Characteristic:
+        return cls(np.asarray(d["knots_u_m"]), np.asarray(d["values_m2"]))
+
+    def to_dict(self) -> dict[str, list[float]]:
+        return {"knots_u_m": self.knots_u_m.tolist(), "values_m2": self.values_m2.tolist()}
+
+    @property
+    def u_range(self) -> tuple[float, float]:
+        return float(self.knots_u_m[0]), float(self.knots_u_m[-1])
+
+    @property
+    def segment_slopes(self) -> np.ndarray:
+        return np.diff(self.values_m2) / np.diff(self.knots_u_m)
+
+    def _segment(self, u: np.ndarray) -> np.ndarray:
+        j = np.searchsorted(self.knots_u_m, u, side="right") - 1
+        return np.clip(j, 0, self.knots_u_m.shape[0] - 2)
+
+    def evaluate(self, u) -> np.ndarray:
+        """Â(u); linear extrapolation with the end segments."""
+        u = np.asarray(u, dtype=np.float64)
+        j = self._segment(u)
+        return self.values_m2[j] + self.segment_slopes[j] * (u - self.knots_u_m[j])
+
+    def slope(self, u) -> np.ndarray:
+        """dÂ/du (right-continuous at the knots)."""
+        u = np.asarray(u, dtype=np.float64)
+        return self.segment_slopes[self._segment(u)]
+
+    def __call__(self, u) -> np.ndarray:
+        return self.evaluate(u)
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, Characteristic):
+            return NotImplemented
+        return np.array_equal(self.knots_u_m, other.knots_u_m) and np.array_equal(self.values_m2, other.values_m2)
+
+    def __hash__(self) -> int:
+        return hash((self.knots_u_m.tobytes(), self.values_m2.tobytes()))
+
+
+def choose_knots(
+    u,
+    *,
+    max_knots: int = 12,
+    min_spacing_m: float = 1e-4,
+    points_per_interval: int = 200,
+) -> np.ndarray:
+    """Knots at quantiles of ``u``: the end knots at min/max, one interval per
+    ``points_per_interval`` points (at most ``max_knots − 1``), inner knots dropped where they would
+    come closer than ``min_spacing_m`` to a kept neighbour."""
+    u = np.asarray(u, dtype=np.float64)
+    u = u[np.isfinite(u)]
+    if u.shape[0] < 2:
+        raise ValueError("need at least two points to place knots")
+    if max_knots < 2:
+        raise ValueError("max_knots must be >= 2")
+    lo, hi = float(u.min()), float(u.max())
+    if hi - lo < min_spacing_m:
+        raise ValueError(f"points span {hi - lo:.3g} m, less than the minimum knot spacing {min_spacing_m:g} m")
+    n_int = int(np.clip(u.shape[0] // max(points_per_interval, 1), 1, max_knots - 1))
+    q = np.quantile(u, np.linspace(0.0, 1.0, n_int + 1))
+    kept = [lo]
+    for k in q[1:-1]:
+        if k - kept[-1] >= min_spacing_m and hi - k >= min_spacing_m:
+            kept.append(float(k))
+    kept.append(hi)
+    return np.array(kept)
+
+
+def fit_characteristic(
+    u,
+    area,
+    *,
+    knots=None,
+    max_knots: int = 12,
+    min_spacing_m: float = 1e-4,
+    points_per_interval: int = 200,
+) -> Characteristic:
+    """Step 4a: least-squares piecewise-linear Â through the points (u_i, A_i).
+
+    ``knots`` fixes the knots; otherwise :func:`choose_knots`. Hat-function basis; the normal
+    equations are tridiagonal and assembled with ``bincount`` (no loop over points).
+    """
+    u = np.asarray(u, dtype=np.float64).reshape(-1)
+    a = np.asarray(area, dtype=np.float64).reshape(-1)
+    if u.shape != a.shape:
+        raise ValueError("u and area differ in length")
+    ok = np.isfinite(u) & np.isfinite(a)
+    u, a = u[ok], a[ok]
+    if knots is None:
+        k = choose_knots(u, max_knots=max_knots, min_spacing_m=min_spacing_m, points_per_interval=points_per_interval)
+    else:
+        k = np.asarray(knots, dtype=np.float64).reshape(-1)
+        if k.shape[0] < 2 or np.any(np.diff(k) <= 0):
+            raise ValueError("knots must be at least two, strictly increasing")
+    n_k = k.shape[0]
+    if u.shape[0] < 2:
+        raise ValueError("need at least two finite points")
+    j = np.clip(np.searchsorted(k, u, side="right") - 1, 0, n_k - 2)
+    t = (u - k[j]) / (k[j + 1] - k[j])
+    w0, w1 = 1.0 - t, t
+    diag = np.bincount(j, w0 * w0, minlength=n_k) + np.bincount(j + 1, w1 * w1, minlength=n_k)
+    off = np.bincount(j, w0 * w1, minlength=n_k - 1)[: n_k - 1]
+    rhs = np.bincount(j, w0 * a, minlength=n_k) + np.bincount(j + 1, w1 * a, minlength=n_k)
+    g = np.diag(diag) + np.diag(off, 1) + np.diag(off, -1)
+    values, *_ = np.linalg.lstsq(g, rhs, rcond=None)
+    return Characteristic(k, values)
+
+
+@dataclass(frozen=True)
+class Plausibility:
+    """Step 5a's verdict and the numbers behind it (see the module docstring for the bounds)."""
+
+    ok: bool
+    reasons: tuple[str, ...]
+    u_lo_m: float
+    u_hi_m: float
+    scale: float
+    slope_ratio: float
+    rel_rms: float
+    shape_error: float
+    alpha_vs_nominal: float
+    x_hat_vs_nominal_m: float
+    min_rel_slope: float
+    limits: dict = field(default_factory=dict)
+
+
+def plausibility(
+    baseline: Characteristic,
+    nominal: Characteristic,
+    *,
+    u_range: tuple[float, float] | None = None,
+    n_grid: int = 201,
+    ratio_bounds: tuple[float, float] = (0.7, 1.0 / 0.7),
+    max_rel_rms: float = 0.3,
+    max_shape_error: float = 0.1,
+    max_shift_m: float = 0.2e-3,
+    monotone_tolerance: float = 0.05,
+    x_search_m: float = 1.5e-3,
+) -> Plausibility:
+    """Step 5a: is the baseline Â reasonable in value and shape compared with the nominal?
+
+    Compared over ``u_range`` (default: where both are defined by knots, i.e. the baseline's
+    covered range within the nominal's). Returns :class:`Plausibility`; ``ok`` is False with the
+    failed checks in ``reasons``.
+    """
+    from transforms.fit import fit_arrays  # fit imports this module
+
+    lo = max(baseline.u_range[0], nominal.u_range[0])
+    hi = min(baseline.u_range[1], nominal.u_range[1])
+    if u_range is not None:
+        lo, hi = max(lo, u_range[0]), min(hi, u_range[1])
+    limits = {
+        "ratio_bounds": ratio_bounds,
+        "max_rel_rms": max_rel_rms,
+        "max_shape_error": max_shape_error,
+        "max_shift_m": max_shift_m,
+        "monotone_tolerance": monotone_tolerance,
+    }
+    if not hi > lo:
+        nan = float("nan")
+        return Plausibility(False, ("no common u-range",), lo, hi, nan, nan, nan, nan, nan, nan, nan, limits)
+    g = np.linspace(lo, hi, n_grid)
+    b = baseline.evaluate(g)
+    nv = nominal.evaluate(g)
+    reasons: list[str] = []
+
+    scale = float(b @ nv / (nv @ nv)) if nv @ nv > 0 else float("nan")
+    rel_rms = float(np.sqrt(np.mean((b - nv) ** 2)) / np.sqrt(np.mean(nv**2)))
+    gc = g - g.mean()
+    slope_b = float(gc @ b / (gc @ gc))
+    slope_n = float(gc @ nv / (gc @ gc))
+    slope_ratio = slope_b / slope_n if slope_n > 0 else float("nan")
+    mean_slope_n = (nv[-1] - nv[0]) / (hi - lo)
+    # segments of the baseline that overlap (lo, hi)
+    k = baseline.knots_u_m
+    seg = (k[1:] > lo) & (k[:-1] < hi)
+    min_rel_slope = float(baseline.segment_slopes[seg].min() / mean_slope_n) if mean_slope_n > 0 else float("nan")
+
+    res = fit_arrays(
+        g, b, np.array([0, n_grid]), [nominal], x_bound_m=x_search_m, min_points=3, min_coverage_m=0.0, n_grid=121
+    )
+    alpha0 = float(res["alpha_hat"][0])
+    x0 = float(res["x_hat_m"][0])
+    shape_error = float(res["e_m2"][0] / np.sqrt(np.mean(b**2))) if np.mean(b**2) > 0 else float("nan")
+
+    lo_r, hi_r = ratio_bounds
+    if not (mean_slope_n > 0 and slope_n > 0):
+        reasons.append("nominal characteristic not increasing over the range")
+    if not lo_r <= scale <= hi_r:
+        reasons.append(f"value scale {scale:.3g} outside [{lo_r:.3g}, {hi_r:.3g}]")
+    if not lo_r <= slope_ratio <= hi_r:
+        reasons.append(f"slope ratio {slope_ratio:.3g} outside [{lo_r:.3g}, {hi_r:.3g}]")
+    if not rel_rms <= max_rel_rms:
+        reasons.append(f"relative RMS difference {rel_rms:.3g} > {max_rel_rms:g}")
+    if not shape_error <= max_shape_error:
+        reasons.append(f"shape error {shape_error:.3g} > {max_shape_error:g}")
+    if not abs(x0) <= max_shift_m:
+        reasons.append(f"shift {x0 * 1e3:+.3f} mm beyond ±{max_shift_m * 1e3:g} mm")
+    if not min_rel_slope >= -monotone_tolerance:
+        reasons.append(f"not monotone (min segment slope {min_rel_slope:.3g} × nominal mean slope)")
+    if res["status"][0] != "ok":
+        reasons.append(f"scale/shift fit: {res['status'][0]}")
+    return Plausibility(
+        ok=not reasons,
+        reasons=tuple(reasons),
+        u_lo_m=float(lo),
+        u_hi_m=float(hi),
+        scale=scale,
+        slope_ratio=slope_ratio,
+        rel_rms=rel_rms,
+        shape_error=shape_error,
+        alpha_vs_nominal=alpha0,
+        x_hat_vs_nominal_m=x0,
+        min_rel_slope=min_rel_slope,
+        limits=limits,
+    )

@@ -1,0 +1,122 @@
+"""Step 2: Savitzky–Golay smoothing and first derivatives as polars expressions.
+
+A Savitzky–Golay filter of length L = 2h + 1 and order p is a fixed weighted sum over the
+centred stencil (scipy's ``savgol_coeffs``), so over a uniform grid it is a weighted
+``rolling_sum`` of the whole column. The stencil is never laid across a window boundary or an
+irregular step: rows with fewer than h samples of the same uniform run on either side
+(``run_index < h`` or ``run_remaining < h``, from :mod:`transforms.windows`) get null. The result
+is exact for polynomials in time of degree ≤ p (for odd p the centred derivative is even exact
+for degree p + 1, its weights being those of order p + 1).
+
+Outputs for the lake's signals (:data:`DEFAULT_OUTPUTS`):
+
+| input     | smoothed          | first derivative |
+|-----------|-------------------|------------------|
+| p1_pa     | p1_smooth_pa      | dp1_dt_pa_s      |
+| p2_pa     | p2_smooth_pa      | dp2_dt_pa_s      |
+| x_cyl_m   | x_cyl_smooth_m    | v_cyl_m_s        |
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from functools import lru_cache
+
+import numpy as np
+import polars as pl
+from scipy.signal import savgol_coeffs
+
+__all__ = [
+    "DEFAULT_OUTPUTS",
+    "add_savgol",
+    "savgol_exprs",
+    "savgol_valid",
+    "savgol_weights",
+]
+
+DEFAULT_OUTPUTS: dict[str, tuple[str | None, str | None]] = {
+    "p1_pa": ("p1_smooth_pa", "dp1_dt_pa_s"),
+    "p2_pa": ("p2_smooth_pa", "dp2_dt_pa_s"),
+    "x_cyl_m": ("x_cyl_smooth_m", "v_cyl_m_s"),
+}
+"""input column → (smoothed column, derivative column); None skips one of the two."""
+
+
+@lru_cache(maxsize=64)
+def _weights(window: int, order: int, deriv: int) -> tuple[float, ...]:
+    if window % 2 != 1 or window < 3:
+        raise ValueError(f"window must be odd and >= 3, got {window}")
+    if not 0 <= order < window:
+        raise ValueError(f"order must be in [0, window), got {order}")
+    # use="dot": w[0] multiplies the oldest sample of the stencil, as rolling_sum's weights do
+    return tuple(float(v) for v in savgol_coeffs(window, order, deriv=deriv, delta=1.0, use="dot"))
+
+
+def savgol_weights(window: int, order: int, deriv: int = 0) -> np.ndarray:
+    """Stencil weights (oldest sample first) for unit sample spacing; divide a derivative by Δt."""
+    return np.array(_weights(window, order, deriv))
+
+
+def savgol_valid(window: int) -> pl.Expr:
+    """True where the centred stencil of ``window`` samples lies inside one uniform run."""
+    h = window // 2
+    return (pl.col("run_index") >= h) & (pl.col("run_remaining") >= h)
+
+
+def savgol_exprs(
+    column: str,
+    *,
+    window: int,
+    order: int,
+    sample_period_s: float,
+    smooth_name: str | None,
+    deriv_name: str | None,
+    valid: pl.Expr | None = None,
+) -> list[pl.Expr]:
+    """Expressions for the smoothed value and/or the first time derivative of ``column``.
+
+    ``valid`` (default :func:`savgol_valid`) masks rows whose stencil would leave the run.
+    """
+    if sample_period_s <= 0:
+        raise ValueError("sample_period_s must be > 0")
+    if valid is None:
+        valid = savgol_valid(window)
+    col = pl.col(column)
+    out: list[pl.Expr] = []
+    if smooth_name is not None:
+        w0 = list(_weights(window, order, 0))
+        out.append(
+            pl.when(valid).then(col.rolling_sum(window, weights=w0, center=True)).alias(smooth_name)
+        )
+    if deriv_name is not None:
+        w1 = list(_weights(window, order, 1))
+        out.append(
+            pl.when(valid)
+            .then(col.rolling_sum(window, weights=w1, center=True) * (1.0 / sample_period_s))
+            .alias(deriv_name)
+        )
+    return out
+
+
+def add_savgol(
+    framed: pl.DataFrame | pl.LazyFrame,
+    *,
+    window: int,
+    order: int,
+    sample_period_s: float,
+    outputs: Mapping[str, tuple[str | None, str | None]] = DEFAULT_OUTPUTS,
+) -> pl.DataFrame | pl.LazyFrame:
+    """Add smoothed values and derivatives to a frame carrying ``run_index``/``run_remaining``."""
+    valid = savgol_valid(window)
+    exprs: list[pl.Expr] = []
+    for column, (smooth_name, deriv_name) in outputs.items():
+        exprs += savgol_exprs(
+            column,
+            window=window,
+            order=order,
+            sample_period_s=sample_period_s,
+            smooth_name=smooth_name,
+            deriv_name=deriv_name,
+            valid=valid,
+        )
+    return framed.with_columns(exprs)

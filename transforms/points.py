@@ -1,0 +1,141 @@
+"""Opening-area points: Eq. 7 and its three siblings (model.md), as polars expressions.
+
+With V1 = V01 + A1 X and V2 = V02 − A2 X, and the nominally closed edge of the same port taken
+as carrying no flow:
+
+    α_s1 A_s1(x) = sqrt(ρ/2) (dp1/dt V1 + β A1 v_X) / (β sign(p_s − p1) sqrt|p_s − p1|)   x ≥  max(x_1r, x_s2)
+    α_2r A_2r(x) = sqrt(ρ/2) (β A2 v_X − dp2/dt V2) / (β sign(p2 − p_r) sqrt|p2 − p_r|)   x ≥  max(x_1r, x_s2)
+    α_1r A_1r(x) = sqrt(ρ/2) (dp1/dt V1 + β A1 v_X) / (β sign(p_r − p1) sqrt|p_r − p1|)   x ≤ −max(x_s1, x_2r)
+    α_s2 A_s2(x) = sqrt(ρ/2) (β A2 v_X − dp2/dt V2) / (β sign(p2 − p_s) sqrt|p2 − p_s|)   x ≤ −max(x_s1, x_2r)
+
+Each point is reported at the edge's opening coordinate u = +x (s1, 2r) or u = −x (1r, s2).
+Which samples become points is step 3 (:mod:`transforms.selection`); here only the formulas.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from math import sqrt
+
+import polars as pl
+
+from transforms.params import EDGES, MonitorParams
+
+__all__ = [
+    "EDGE_PORT",
+    "EDGE_SIGN",
+    "POINT_COLUMNS",
+    "Signals",
+    "area_expr",
+    "edge_dp_expr",
+    "opening_area_points",
+    "opening_coordinate_expr",
+    "port_numerator_expr",
+]
+
+EDGE_PORT: dict[str, int] = {"s1": 1, "1r": 1, "s2": 2, "2r": 2}
+EDGE_SIGN: dict[str, int] = {"s1": +1, "1r": -1, "s2": -1, "2r": +1}
+"""u = EDGE_SIGN[edge] · x."""
+
+POINT_COLUMNS = ("valve_id", "window_id", "window_start", "timestamp_utc", "edge", "u_m", "area_m2")
+
+
+@dataclass(frozen=True)
+class Signals:
+    """Which columns carry each quantity of Eq. 7 (defaults: lake + :mod:`transforms.derivatives`).
+
+    The chamber pressures default to the Savitzky–Golay smoothed values (noise factor 0.33, and
+    the same time support as the derivatives); X enters only the volumes, where its noise is
+    irrelevant, so the raw column is used.
+    """
+
+    ps: str = "ps_pa"
+    pr: str = "pr_pa"
+    p1: str = "p1_smooth_pa"
+    p2: str = "p2_smooth_pa"
+    x_spool: str = "x_spool_m"
+    x_cyl: str = "x_cyl_m"
+    dp1_dt: str = "dp1_dt_pa_s"
+    dp2_dt: str = "dp2_dt_pa_s"
+    v_cyl: str = "v_cyl_m_s"
+
+
+DEFAULT_SIGNALS = Signals()
+
+
+def _check_edge(edge: str) -> None:
+    if edge not in EDGES:
+        raise ValueError(f"unknown edge {edge!r}; edges are {EDGES}")
+
+
+def port_numerator_expr(port: int, params: MonitorParams, signals: Signals = DEFAULT_SIGNALS) -> pl.Expr:
+    """Numerator of Eq. 7 without sqrt(ρ/2): port 1 ``dp1/dt V1 + β A1 v_X``,
+    port 2 ``β A2 v_X − dp2/dt V2`` (β times the flow into chamber 1 / out of chamber 2)."""
+    beta = params.bulk_modulus_pa
+    x_cyl, v = pl.col(signals.x_cyl), pl.col(signals.v_cyl)
+    if port == 1:
+        v1 = params.v01_m3 + params.piston_area_m2 * x_cyl
+        return pl.col(signals.dp1_dt) * v1 + (beta * params.piston_area_m2) * v
+    if port == 2:
+        v2 = params.v02_m3 - params.annulus_area_m2 * x_cyl
+        return (beta * params.annulus_area_m2) * v - pl.col(signals.dp2_dt) * v2
+    raise ValueError(f"port must be 1 or 2, got {port}")
+
+
+def edge_dp_expr(edge: str, signals: Signals = DEFAULT_SIGNALS) -> pl.Expr:
+    """Pressure difference whose sign is the flow direction in Eq. 4:
+    s1: p_s − p1, 1r: p_r − p1, s2: p2 − p_s, 2r: p2 − p_r."""
+    _check_edge(edge)
+    ps, pr, p1, p2 = (pl.col(c) for c in (signals.ps, signals.pr, signals.p1, signals.p2))
+    return {"s1": ps - p1, "1r": pr - p1, "s2": p2 - ps, "2r": p2 - pr}[edge]
+
+
+def opening_coordinate_expr(edge: str, signals: Signals = DEFAULT_SIGNALS) -> pl.Expr:
+    """u = +x for s1 and 2r, u = −x for 1r and s2."""
+    _check_edge(edge)
+    x = pl.col(signals.x_spool)
+    return x if EDGE_SIGN[edge] > 0 else -x
+
+
+def area_expr(edge: str, params: MonitorParams, signals: Signals = DEFAULT_SIGNALS) -> pl.Expr:
+    """α·A of ``edge`` by Eq. 7 (or its sibling), exactly as model.md writes it.
+
+    Infinite/NaN where Δp = 0; step 3 removes such samples (minimum |Δp|).
+    """
+    _check_edge(edge)
+    dp = edge_dp_expr(edge, signals)
+    num = port_numerator_expr(EDGE_PORT[edge], params, signals)
+    return (sqrt(params.density_kg_m3 / 2.0) * num) / (params.bulk_modulus_pa * dp.sign() * dp.abs().sqrt())
+
+
+def opening_area_points(
+    frame: pl.DataFrame | pl.LazyFrame,
+    params: MonitorParams,
+    *,
+    selected: Mapping[str, pl.Expr] | None = None,
+    signals: Signals = DEFAULT_SIGNALS,
+    edges: tuple[str, ...] = EDGES,
+) -> pl.DataFrame | pl.LazyFrame:
+    """Long frame of points ``valve_id, window_id, window_start, timestamp_utc, edge, u_m, area_m2``.
+
+    ``selected[edge]`` is a boolean expression choosing the rows that become the edge's points
+    (from :func:`transforms.selection.selected_expr`); without it every row with a derivative
+    becomes a point of every edge. Rows are grouped by edge (in :data:`EDGES` order), in time
+    order within an edge.
+    """
+    parts = []
+    for edge in edges:
+        keep = selected[edge] if selected is not None else pl.col(signals.dp1_dt).is_not_null()
+        parts.append(
+            frame.filter(keep).select(
+                pl.col("valve_id"),
+                pl.col("window_id"),
+                pl.col("window_start"),
+                pl.col("timestamp_utc"),
+                pl.lit(edge, dtype=pl.Utf8).alias("edge"),
+                opening_coordinate_expr(edge, signals).alias("u_m"),
+                area_expr(edge, params, signals).alias("area_m2"),
+            )
+        )
+    return pl.concat(parts, how="vertical")
