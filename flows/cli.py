@@ -45,9 +45,41 @@ def demo(warehouse: Warehouse = None) -> None:
 
 
 @app.command()
-def simulate(config: Config, out: Annotated[Path, typer.Option("--out", help="Archive folder.")], warehouse: Warehouse = None) -> None:
+def simulate(
+    out: Annotated[Path, typer.Option("--out", help="Archive folder: plant.toml, truth.parquet, exports/.")],
+    config: Annotated[Optional[Path], typer.Option("--config", help="Plant configuration (TOML); without it a plant is generated.")] = None,
+    n_valves: Annotated[Optional[int], typer.Option("--n-valves", help="Valves of a generated plant (V001…). \\[default: 3]")] = None,
+    plant: Annotated[Optional[str], typer.Option("--plant", help="Name of a generated plant. \\[default: SIM1]")] = None,
+    commissioned: Annotated[Optional[str], typer.Option("--commissioned", help="Commissioning of a generated plant's valves (ISO-8601). \\[default: 2025-01-01T00:00:00Z]")] = None,
+    start: Annotated[Optional[str], typer.Option("--from", help="Start (ISO-8601, UTC unless an offset is given). \\[default: the (latest) commissioning]")] = None,
+    end: Annotated[Optional[str], typer.Option("--to", help="End, exclusive (ISO-8601).")] = None,
+    days: Annotated[Optional[float], typer.Option("--days", help="Length of the span instead of --to. \\[default: 1]")] = None,
+    hours: Annotated[Optional[str], typer.Option("--hours", help="Span in operating hours, END or START:END (instead of --from/--to).")] = None,
+    windows_per_day: Annotated[int, typer.Option("--windows-per-day", help="Monitoring windows per UTC day, evenly spaced from 00:00.")] = 24,
+    window_s: Annotated[float, typer.Option("--window-s", help="Window length. \\[s]")] = 10.0,
+    scenario: Annotated[Optional[list[str]], typer.Option("--scenario", help="NAME for every valve, or VALVE=NAME (repeat); healthy, wear, broken_edge\\[:EDGE]\\[@HOURS]. \\[default: the valve's scenario key, else healthy]")] = None,
+    seed: Annotated[int, typer.Option("--seed", help="Seed of everything random; the same seed gives the same bytes.")] = 0,
+    fmt: Annotated[str, typer.Option("--format", help="long | wide (CSV in that layout) | parquet (in the plant's layout).")] = "long",
+    layout: Annotated[Optional[str], typer.Option("--layout", help="Layout of a generated plant's Parquet files: long | wide. \\[default: long]")] = None,
+    gzip: Annotated[bool, typer.Option("--gzip", help="Compress CSV files (.csv.gz).")] = False,
+    overwrite: Annotated[bool, typer.Option("--overwrite", help="Replace an archive already in --out.")] = False,
+    quiet: Annotated[bool, typer.Option("--quiet", help="No progress bar.")] = False,
+    warehouse: Warehouse = None,
+) -> None:
     """Write a synthetic archive (exports + the truth)."""
-    _not_yet("simulate", 2)
+    from flows.archive import SimulateRequest, run_simulate
+
+    request = SimulateRequest(
+        out=out, config_path=config, n_valves=n_valves, plant=plant, commissioned=commissioned, start=start, end=end,
+        days=days, hours=hours, windows_per_day=windows_per_day, window_s=window_s, scenarios=tuple(scenario or ()),
+        seed=seed, format=fmt, layout=layout, gzip=gzip, overwrite=overwrite,
+    )  # fmt: skip
+    summary = run_simulate(request, show_progress=not quiet)
+    typer.echo(
+        f"wrote {len(summary.files)} export files ({summary.bytes / 1e6:,.1f} MB, {summary.rows:,} rows), "
+        f"{summary.windows:,} valve windows ({summary.valve_seconds:,.0f} valve-s) in {summary.wall_s:,.1f} s "
+        f"→ {summary.out}"
+    )
 
 
 @app.command()

@@ -1,0 +1,232 @@
+"""Historian export writers for synthetic archives: long CSV, wide CSV and Parquet, one file a day.
+
+A writer is opened on one file (one UTC day of a plant) and fed *chunks*: a block of
+consecutive samples for every tag of the plant, as an int64 array of µs-UTC timestamps (n,)
+and a float64 array of values in the tags' export units (n, n_tags), columns in the order of
+:attr:`ExportColumns.tags`. Chunks arrive in time order, so the file's rows are in time order;
+in the long layout the rows of one time stamp follow the tag order (valve by valve, signal by
+signal). Nothing but the current chunk is ever held in memory.
+
+Values are rounded to a per-tag number of decimals before they are written, in every format
+(:func:`decimals_for_step`), so the long CSV, the wide CSV and the Parquet file of an archive
+hold exactly the same numbers, and a CSV field is the shortest decimal that reads back as the
+very float written (polars prints the shortest round-trip representation).
+
+Gzip: each chunk is written as its own gzip member (polars ``write_csv(compression="gzip")``),
+which RFC 1952 allows; ``gzip``/``zcat``, Python's ``gzip``, polars, pandas and DuckDB read
+such a multi-member file as one stream. The member headers carry no time stamp, so the bytes
+are reproducible.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import BinaryIO
+
+import numpy as np
+import polars as pl
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from schemas.plant_config import ExportSpec
+
+ISO8601_FORMAT = "%Y-%m-%dT%H:%M:%S%.6fZ"
+"""How ``timestamp_format = "iso8601"`` is written: UTC, microseconds, a ``Z``."""
+
+PARQUET_COMPRESSION = "zstd"
+
+
+def decimals_for_step(step: float, noise_std: float = 0.0) -> int | None:
+    """Decimals that keep a signal's resolution: the smallest d with 10^-d <= resolution / 10.
+
+    The resolution is the quantisation step, or (without quantisation) the noise standard
+    deviation; both in the unit the value is written in. The rounding error is then at most
+    1/20 of a quantisation step, so the quantisation level of every sample stays recoverable.
+    ``None`` (no rounding) when the signal has neither.
+    """
+    resolution = step if step > 0 else noise_std
+    if not resolution > 0:
+        return None
+    return max(0, math.ceil(-math.log10(resolution / 10.0) - 1e-9))
+
+
+@dataclass(frozen=True)
+class ExportColumns:
+    """The tags of one archive, in column order, with their rounding."""
+
+    tags: tuple[str, ...]
+    decimals: tuple[int | None, ...]
+    """Decimals each tag's values are rounded to (``None``: written at full precision)."""
+
+    def __post_init__(self):
+        if len(self.tags) != len(self.decimals):
+            raise ValueError("one decimals entry per tag")
+        if len(set(self.tags)) != len(self.tags):
+            raise ValueError("tags must be unique")
+
+    def round(self, values: np.ndarray) -> np.ndarray:
+        """``values`` (n, n_tags) rounded column by column, in place; returns it."""
+        for d in sorted({d for d in self.decimals if d is not None}):
+            cols = [i for i, di in enumerate(self.decimals) if di == d]
+            values[:, cols] = np.round(values[:, cols], d)
+        return values
+
+
+def export_suffix(file_format: str, gzip: bool) -> str:
+    """File name suffix: ``.csv``, ``.csv.gz`` or ``.parquet``."""
+    if file_format == "parquet":
+        return ".parquet"
+    return ".csv.gz" if gzip else ".csv"
+
+
+class DayWriter:
+    """Writes the chunks of one day into one export file (see the module docstring)."""
+
+    def __init__(self, path: Path, export: ExportSpec, columns: ExportColumns, timezone: str):
+        self.path = Path(path)
+        self.export = export
+        self.columns = columns
+        self.timezone = timezone
+        self.rows = 0
+        """Rows written so far (long layout: one per sample and tag; wide: one per sample)."""
+
+    # -- the time column ---------------------------------------------------------------------
+
+    def _time_series(self, timestamps_us: np.ndarray, n_repeat: int, for_parquet: bool) -> pl.Series:
+        """The time column as the export's ``timestamp_format`` asks.
+
+        ``iso8601``: Datetime(µs, UTC), written as ``2025-03-01T00:00:00.001000Z`` (Parquet:
+        a native UTC timestamp); ``epoch_ms``: integer milliseconds since 1970 UTC; any other
+        value is a strftime pattern applied to the plant's local time (``[plant] timezone``),
+        since such timestamps carry no offset (Parquet: the formatted strings).
+        """
+        fmt = self.export.timestamp_format
+        name = self.export.timestamp_column
+        ts = np.repeat(timestamps_us, n_repeat) if n_repeat > 1 else timestamps_us
+        if fmt == "epoch_ms":
+            return pl.Series(name, ts // 1000, dtype=pl.Int64)
+        s = pl.Series(name, ts, dtype=pl.Int64).cast(pl.Datetime("us", "UTC"))
+        if fmt == "iso8601":
+            return s
+        s = s.dt.convert_time_zone(self.timezone)
+        return s.dt.to_string(fmt) if for_parquet else s
+
+    def _csv_datetime_format(self) -> str | None:
+        fmt = self.export.timestamp_format
+        if fmt == "iso8601":
+            return ISO8601_FORMAT
+        if fmt == "epoch_ms":
+            return None
+        return fmt
+
+    # -- frames ------------------------------------------------------------------------------
+
+    def _frame(self, timestamps_us: np.ndarray, values: np.ndarray, for_parquet: bool) -> pl.DataFrame:
+        e = self.export
+        n, k = values.shape
+        if k != len(self.columns.tags):
+            raise ValueError(f"chunk has {k} columns, the archive has {len(self.columns.tags)} tags")
+        if timestamps_us.shape != (n,):
+            raise ValueError("one time stamp per chunk row")
+        self.columns.round(values)
+        if e.layout == "long":
+            codes = np.tile(np.arange(k, dtype=np.int32), n)
+            tag = pa.DictionaryArray.from_arrays(pa.array(codes), pa.array(self.columns.tags, pa.string()))
+            if for_parquet:
+                tag_series = pl.from_arrow(tag.dictionary_decode()).alias(e.tag_column)
+            else:
+                tag_series = pl.from_arrow(tag).alias(e.tag_column)
+            cols = [
+                self._time_series(timestamps_us, k, for_parquet),
+                tag_series,
+                pl.Series(e.value_column, values.reshape(-1), dtype=pl.Float64),
+            ]
+            if e.quality_column is not None:
+                cols.append(pl.repeat(e.good_quality[0], n * k, dtype=pl.String, eager=True).alias(e.quality_column))
+            return pl.DataFrame(cols)
+        cols = [self._time_series(timestamps_us, 1, for_parquet)]
+        cols += [pl.Series(tag, np.ascontiguousarray(values[:, i]), dtype=pl.Float64) for i, tag in enumerate(self.columns.tags)]
+        if e.quality_column is not None:
+            cols.append(pl.repeat(e.good_quality[0], n, dtype=pl.String, eager=True).alias(e.quality_column))
+        return pl.DataFrame(cols)
+
+    def write(self, timestamps_us: np.ndarray, values: np.ndarray) -> int:
+        """Append a chunk; returns the number of rows written. ``values`` is rounded in place."""
+        raise NotImplementedError
+
+    def close(self) -> None:
+        """Finish the file."""
+        raise NotImplementedError
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+class CsvDayWriter(DayWriter):
+    """Long or wide CSV with the export's separator and decimal mark, optionally gzip."""
+
+    def __init__(self, path: Path, export: ExportSpec, columns: ExportColumns, timezone: str, gzip: bool = False):
+        super().__init__(path, export, columns, timezone)
+        self.gzip = gzip
+        self._fh: BinaryIO | None = open(self.path, "wb")
+
+    def write(self, timestamps_us: np.ndarray, values: np.ndarray) -> int:
+        if self._fh is None:
+            raise ValueError(f"{self.path}: writer is closed")
+        df = self._frame(timestamps_us, values, for_parquet=False)
+        df.write_csv(
+            self._fh,
+            include_header=self.rows == 0,
+            separator=self.export.separator,
+            decimal_comma=self.export.decimal == ",",
+            datetime_format=self._csv_datetime_format(),
+            compression="gzip" if self.gzip else "uncompressed",
+        )
+        self.rows += df.height
+        return df.height
+
+    def close(self) -> None:
+        if self._fh is not None:
+            self._fh.close()
+            self._fh = None
+
+
+class ParquetDayWriter(DayWriter):
+    """Long or wide Parquet (zstd), one row group per chunk, streamed with pyarrow."""
+
+    def __init__(self, path: Path, export: ExportSpec, columns: ExportColumns, timezone: str):
+        super().__init__(path, export, columns, timezone)
+        self._writer: pq.ParquetWriter | None = None
+        self._closed = False
+
+    def write(self, timestamps_us: np.ndarray, values: np.ndarray) -> int:
+        if self._closed:
+            raise ValueError(f"{self.path}: writer is closed")
+        table = self._frame(timestamps_us, values, for_parquet=True).to_arrow()
+        if self._writer is None:
+            self._writer = pq.ParquetWriter(self.path, table.schema, compression=PARQUET_COMPRESSION)
+        self._writer.write_table(table)
+        self.rows += table.num_rows
+        return table.num_rows
+
+    def close(self) -> None:
+        if self._writer is not None:
+            self._writer.close()
+            self._writer = None
+        self._closed = True
+
+
+def open_day_writer(
+    path: Path, export: ExportSpec, columns: ExportColumns, timezone: str, file_format: str, gzip: bool = False
+) -> DayWriter:
+    """A writer for one day's file: ``file_format`` is ``"csv"`` or ``"parquet"`` (layout from ``export``)."""
+    if file_format == "parquet":
+        return ParquetDayWriter(path, export, columns, timezone)
+    if file_format == "csv":
+        return CsvDayWriter(path, export, columns, timezone, gzip=gzip)
+    raise ValueError(f"unknown export file format {file_format!r}")
