@@ -1,0 +1,204 @@
+"""Operating inputs of one window: reference trajectory of the cylinder, the unknown load
+F_l and the supply/return pressures. All deterministic for a given ``numpy.random.Generator``.
+
+Reference trajectory: dwells and minimum-jerk moves,
+
+    X(t) = X_a + d (10 s^3 - 15 s^4 + 6 s^5),  s = (t - t_a) / T_m,  T_m = 1.875 |d| / v_peak,
+
+alternating in direction between random targets (see
+:class:`~model.params.TrajectoryParams`): smooth position, velocity and acceleration, peak
+velocity v_peak, peak acceleration 5.77 |d| / T_m^2.
+
+Supply pressure: p_s(t) = p_s0 + drift t + A sin(2 pi f t + phase) (see
+:class:`~model.params.SupplyParams`); return pressure constant per window.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from .params import LoadParams, PlantParams, SupplyParams, TrajectoryParams
+
+
+@njit(cache=True)
+def supply_pressure_kernel(t, p_s0, drift, amplitude, omega, phase):
+    """p_s(t) [Pa] = p_s0 + drift t + amplitude sin(omega t + phase)."""
+    return p_s0 + drift * t + amplitude * math.sin(omega * t + phase)
+
+
+@dataclass(frozen=True)
+class SupplyProfile:
+    """Supply and return pressure of one window.
+
+    Attributes
+    ----------
+    p_s0_pa : float
+        Supply level at t = 0 of the window (without ripple). [Pa]
+    drift_pa_s : float
+        Slow linear drift. [Pa/s]
+    ripple_amplitude_pa : float
+        Pump ripple amplitude. [Pa]
+    ripple_frequency_hz : float
+        Pump ripple frequency. [Hz]
+    ripple_phase_rad : float
+        Ripple phase at t = 0. [rad]
+    p_r_pa : float
+        Return pressure. [Pa]
+    """
+
+    p_s0_pa: float
+    drift_pa_s: float
+    ripple_amplitude_pa: float
+    ripple_frequency_hz: float
+    ripple_phase_rad: float
+    p_r_pa: float
+
+    def as_array(self) -> np.ndarray:
+        """[p_s0, drift, amplitude, omega, phase, p_r] for the kernels."""
+        return np.array([self.p_s0_pa, self.drift_pa_s, self.ripple_amplitude_pa,
+                         2.0 * math.pi * self.ripple_frequency_hz, self.ripple_phase_rad,
+                         self.p_r_pa])
+
+    def p_s(self, t_s):
+        """Supply pressure at window times ``t_s`` [s]. [Pa]"""
+        a = self.as_array()
+        t = np.asarray(t_s, float)
+        return a[0] + a[1] * t + a[2] * np.sin(a[3] * t + a[4])
+
+
+def draw_supply(rng: np.random.Generator, supply: SupplyParams) -> SupplyProfile:
+    """A window's supply profile drawn from ``supply`` (see :class:`SupplyParams`)."""
+    return SupplyProfile(
+        p_s0_pa=supply.p_s_nominal_pa + rng.uniform(-1, 1) * supply.p_s_window_spread_pa,
+        drift_pa_s=rng.uniform(-1, 1) * supply.p_s_drift_max_pa_s,
+        ripple_amplitude_pa=supply.ripple_amplitude_pa,
+        ripple_frequency_hz=supply.ripple_frequency_hz,
+        ripple_phase_rad=rng.uniform(0.0, 2.0 * math.pi),
+        p_r_pa=supply.p_r_nominal_pa + rng.uniform(-1, 1) * supply.p_r_window_spread_pa,
+    )
+
+
+def minimum_jerk(t, t0: float, duration: float, x_a: float, x_b: float):
+    """Minimum-jerk move from x_a at t0 to x_b at t0 + duration: (position, velocity) at
+    times ``t`` [s] (constant outside the move). [m], [m/s]"""
+    s = np.clip((np.asarray(t, float) - t0) / duration, 0.0, 1.0)
+    d = x_b - x_a
+    pos = x_a + d * (10 * s**3 - 15 * s**4 + 6 * s**5)
+    vel = d / duration * (30 * s**2 - 60 * s**3 + 30 * s**4)
+    return pos, vel
+
+
+def reference_trajectory(rng: np.random.Generator, duration_s: float, sample_rate_hz: float,
+                         traj: TrajectoryParams = TrajectoryParams(),
+                         X0_m: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Reference position and velocity of the cylinder at the sample instants k / f_s.
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator
+    duration_s : float
+        Window length. [s]
+    sample_rate_hz : float
+        Sample rate. [Hz]
+    traj : TrajectoryParams
+    X0_m : float, optional
+        Start position; default uniform in [X_low, X_high]. [m]
+
+    Returns
+    -------
+    (X_ref, v_ref) : ndarray, shape (n,)
+        n = round(duration * f_s). [m], [m/s]. The window starts with a dwell (v_ref = 0).
+    """
+    n = int(round(duration_s * sample_rate_hz))
+    t = np.arange(n) / sample_rate_hz
+    X = float(rng.uniform(traj.X_low_m, traj.X_high_m)) if X0_m is None else float(X0_m)
+    pos = np.full(n, X)
+    vel = np.zeros(n)
+    t_now = float(rng.uniform(*traj.first_dwell_s))
+    direction = 1.0 if rng.uniform() < 0.5 else -1.0
+    while t_now < duration_s:
+        room_up = traj.X_high_m - X
+        room_down = X - traj.X_low_m
+        if direction > 0 and room_up < traj.min_travel_m:
+            direction = -1.0
+        elif direction < 0 and room_down < traj.min_travel_m:
+            direction = 1.0
+        room = room_up if direction > 0 else room_down
+        dist = float(rng.uniform(min(traj.min_travel_m, room), room))
+        v_rng = traj.v_extend_m_s if direction > 0 else traj.v_retract_m_s
+        v_peak = float(rng.uniform(*v_rng))
+        T_m = 1.875 * dist / v_peak
+        target = X + direction * dist
+        mask = t >= t_now
+        p, v = minimum_jerk(t[mask], t_now, T_m, X, target)
+        pos[mask] = p
+        vel[mask] = v
+        X = target
+        t_now += T_m + float(rng.uniform(*traj.dwell_s))
+        direction = -direction
+    return pos, vel
+
+
+def load_profile(rng: np.random.Generator, duration_s: float, sample_rate_hz: float,
+                 load: LoadParams = LoadParams(), start_level_n: float | None = None) -> np.ndarray:
+    """Piecewise-constant unknown external load F_l at the sample instants.
+
+    Changes arrive as a Poisson process of rate ``load.rate_per_s``; each level is 0 with
+    probability ``load.p_zero``, else uniform in +-``load.level_max_n``.
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        F_l (> 0 opposes extension). [N]
+    """
+    n = int(round(duration_s * sample_rate_hz))
+
+    def level():
+        return 0.0 if rng.uniform() < load.p_zero else float(rng.uniform(-1, 1) * load.level_max_n)
+
+    out = np.empty(n)
+    current = level() if start_level_n is None else float(start_level_n)
+    k0 = 0
+    t_next = float(rng.exponential(1.0 / load.rate_per_s)) if load.rate_per_s > 0 else math.inf
+    while k0 < n:
+        k1 = min(n, int(math.ceil(t_next * sample_rate_hz)))
+        out[k0:k1] = current
+        k0 = k1
+        current = level()
+        t_next += float(rng.exponential(1.0 / load.rate_per_s))
+    return out
+
+
+@dataclass(frozen=True)
+class WindowInputs:
+    """Exogenous inputs of one simulated window, at the sample instants.
+
+    Attributes
+    ----------
+    X_ref_m : ndarray, shape (n,)
+        Reference cylinder position. [m]
+    v_ref_m_s : ndarray, shape (n,)
+        Reference cylinder velocity (feed-forward). [m/s]
+    F_l_n : ndarray, shape (n,)
+        External load, held between samples. [N]
+    supply : SupplyProfile
+        Supply and return pressure.
+    """
+
+    X_ref_m: np.ndarray
+    v_ref_m_s: np.ndarray
+    F_l_n: np.ndarray
+    supply: SupplyProfile
+
+
+def window_inputs(params: PlantParams, duration_s: float, rng: np.random.Generator) -> WindowInputs:
+    """Draw all inputs of a window (trajectory, load, supply) from ``rng``."""
+    fs = params.sensors.sample_rate_hz
+    supply = draw_supply(rng, params.supply)
+    X_ref, v_ref = reference_trajectory(rng, duration_s, fs, params.trajectory)
+    F_l = load_profile(rng, duration_s, fs, params.load)
+    return WindowInputs(X_ref, v_ref, F_l, supply)
