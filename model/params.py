@@ -411,8 +411,9 @@ class SensorParams:
 class TrajectoryParams:
     """Reference moves of the cylinder within a window (see :mod:`model.trajectory`).
 
-    A window is a sequence of dwells and minimum-jerk moves alternating in direction between
-    random targets in [X_low, X_high]. Peak speeds are drawn per move; extension (load goes
+    A window is a sequence of dwells and smooth moves (cruise between raised-cosine velocity
+    ramps, or minimum-jerk) alternating in direction between random targets in
+    [X_low, X_high]. Peak speeds and ramp times are drawn per move; extension (load goes
     down) is faster than retraction (load is lifted) because the valve is matched so. With
     the nominal valve of :data:`TABLE1`, |x| > 1 mm needs |v_X| > ~0.10 m/s extending and
     > ~0.05 m/s retracting; the peak speeds below keep the steady spool stroke below ~2.9 mm
@@ -433,15 +434,22 @@ class TrajectoryParams:
         Range of dwell durations between moves. [s]
     first_dwell_s : tuple(float, float)
         Range of the dwell that opens every window (the window starts at rest). [s]
+    ramp_s : tuple(float, float)
+        Range of the raised-cosine ramp time T_a of a move. [s] (0.3-0.6 s: peak acceleration
+        pi v / (2 T_a) <= 1.3 m/s^2, i.e. at most ~8 kN of inertial force on 6000 kg)
+    profile : str
+        ``"cosine"`` (default) or ``"minimum_jerk"``.
     """
 
     X_low_m: float = 0.04
     X_high_m: float = 0.57
     min_travel_m: float = 0.15
-    v_extend_m_s: tuple[float, float] = (0.16, 0.24)
-    v_retract_m_s: tuple[float, float] = (0.09, 0.13)
+    v_extend_m_s: tuple[float, float] = (0.14, 0.24)
+    v_retract_m_s: tuple[float, float] = (0.07, 0.13)
     dwell_s: tuple[float, float] = (0.2, 0.8)
     first_dwell_s: tuple[float, float] = (0.2, 0.5)
+    ramp_s: tuple[float, float] = (0.3, 0.6)
+    profile: str = "cosine"
 
 
 @dataclass(frozen=True)

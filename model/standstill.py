@@ -244,8 +244,8 @@ def standstill(params: PlantParams = TABLE1, condition: ValveCondition | None = 
     Returns
     -------
     RestState
-        Spool position x and pressures p1, p2 (Table 1's healthy valve, p_r = 0:
-        x ~ -0.01 mm, p1 ~ 33 bar, p2 ~ 146 bar).
+        Spool position x and pressures p1, p2 (Table 1's healthy valve, p_s = 200 bar,
+        p_r = 0: x = -0.036 mm, inside the 0.04 mm underlap, p1 = 33.1 bar, p2 = 145.7 bar).
     """
     cond = params.nominal_condition if condition is None else condition
     p_s, p_r = _pressures(params, p_s_pa, p_r_pa)

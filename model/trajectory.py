@@ -1,13 +1,16 @@
 """Operating inputs of one window: reference trajectory of the cylinder, the unknown load
 F_l and the supply/return pressures. All deterministic for a given ``numpy.random.Generator``.
 
-Reference trajectory: dwells and minimum-jerk moves,
+Reference trajectory: dwells and smooth moves alternating in direction between random
+targets (see :class:`~model.params.TrajectoryParams`). The default move profile is a
+cruise at v_peak between raised-cosine velocity ramps of duration T_a,
 
-    X(t) = X_a + d (10 s^3 - 15 s^4 + 6 s^5),  s = (t - t_a) / T_m,  T_m = 1.875 |d| / v_peak,
+    v(tau) = v_peak (1 - cos(pi tau / T_a)) / 2        (0 <= tau <= T_a, mirrored at the end)
 
-alternating in direction between random targets (see
-:class:`~model.params.TrajectoryParams`): smooth position, velocity and acceleration, peak
-velocity v_peak, peak acceleration 5.77 |d| / T_m^2.
+so position, velocity and acceleration are continuous (peak acceleration pi v_peak / (2 T_a))
+and the spool spends most of a move at its cruise opening. A move too short for a cruise
+lowers v_peak to |d| / T_a. The alternative ``"minimum_jerk"`` profile is
+X = X_a + d (10 s^3 - 15 s^4 + 6 s^5), s = (t - t_a) / T_m, T_m = 1.875 |d| / v_peak.
 
 Supply pressure: p_s(t) = p_s0 + drift t + A sin(2 pi f t + phase) (see
 :class:`~model.params.SupplyParams`); return pressure constant per window.
@@ -92,6 +95,35 @@ def minimum_jerk(t, t0: float, duration: float, x_a: float, x_b: float):
     return pos, vel
 
 
+def cosine_move(t, t0: float, x_a: float, x_b: float, v_peak: float, t_ramp: float):
+    """Move from x_a to x_b starting at t0: raised-cosine velocity ramps of ``t_ramp`` [s]
+    around a cruise at ``v_peak`` [m/s] (lowered to |d| / t_ramp for short moves).
+
+    Returns
+    -------
+    (position, velocity, duration)
+        At times ``t`` (constant outside the move) [m], [m/s], and the move's length [s].
+    """
+    d = x_b - x_a
+    dist = abs(d)
+    sgn = 1.0 if d >= 0 else -1.0
+    vp = min(v_peak, dist / t_ramp)
+    t_c = dist / vp - t_ramp if vp > 0 else 0.0
+    total = 2 * t_ramp + t_c
+    tau = np.clip(np.asarray(t, float) - t0, 0.0, total)
+    ramp_d = 0.5 * vp * t_ramp
+    w = np.pi / t_ramp
+    up = tau < t_ramp
+    down = tau > t_ramp + t_c
+    pos = np.where(up, 0.5 * vp * (tau - np.sin(w * tau) / w), ramp_d + vp * (tau - t_ramp))
+    vel = np.where(up, 0.5 * vp * (1 - np.cos(w * tau)), vp)
+    td = np.clip(total - tau, 0.0, None)
+    pos = np.where(down, dist - 0.5 * vp * (td - np.sin(w * td) / w), pos)
+    vel = np.where(down, 0.5 * vp * (1 - np.cos(w * td)), vel)
+    vel = np.where(tau >= total, 0.0, vel)
+    return x_a + sgn * pos, sgn * vel, total
+
+
 def reference_trajectory(rng: np.random.Generator, duration_s: float, sample_rate_hz: float,
                          traj: TrajectoryParams = TrajectoryParams(),
                          X0_m: float | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -131,10 +163,16 @@ def reference_trajectory(rng: np.random.Generator, duration_s: float, sample_rat
         dist = float(rng.uniform(min(traj.min_travel_m, room), room))
         v_rng = traj.v_extend_m_s if direction > 0 else traj.v_retract_m_s
         v_peak = float(rng.uniform(*v_rng))
-        T_m = 1.875 * dist / v_peak
         target = X + direction * dist
         mask = t >= t_now
-        p, v = minimum_jerk(t[mask], t_now, T_m, X, target)
+        if traj.profile == "cosine":
+            t_ramp = float(rng.uniform(*traj.ramp_s))
+            p, v, T_m = cosine_move(t[mask], t_now, X, target, v_peak, t_ramp)
+        elif traj.profile == "minimum_jerk":
+            T_m = 1.875 * dist / v_peak
+            p, v = minimum_jerk(t[mask], t_now, T_m, X, target)
+        else:
+            raise ValueError(f"unknown move profile {traj.profile!r}")
         pos[mask] = p
         vel[mask] = v
         X = target

@@ -1,0 +1,110 @@
+"""Eq. 3 opening areas: continuity, monotonicity, underlap shift, magnitudes of model.md."""
+
+import math
+
+import numpy as np
+import pytest
+
+from model import EDGES, TABLE1, ValveCondition, edge_area, opening_coordinate, valve_areas
+
+G = TABLE1.geometry
+R, r = G.bore_radius_m, G.spool_radius_m
+PHIS = {1: G.taper_angle_port1_rad, 2: G.taper_angle_port2_rad}
+MM2 = 1e-6
+
+
+def area(u, xu, port, x_l=None):
+    return edge_area(u, xu, PHIS[port], R, r, x_l)
+
+
+def branch_points(xu, port, frac=0.5):
+    delta = (R - r) * math.tan(PHIS[port])
+    return -xu + delta, -xu + frac * delta
+
+
+@pytest.mark.parametrize("port", [1, 2])
+@pytest.mark.parametrize("xu", [0.0, 4e-5, 1.5e-4, 4.5e-4])
+@pytest.mark.parametrize("frac", [0.05, 0.5, 1.0])
+def test_continuous_at_branch_points(port, xu, frac):
+    delta = (R - r) * math.tan(PHIS[port])
+    x_l = -xu + frac * delta
+    for b in branch_points(xu, port, frac):
+        eps = 1e-13
+        a_lo, a_hi = area(np.array([b - eps, b + eps]), xu, port, x_l)
+        assert abs(a_hi - a_lo) <= 1e-7 * a_hi, (b, a_lo, a_hi)
+        # slopes either side agree closely (model.md: < 0.2 % at x_l; open/transition differ
+        # only by pi (R - r) sin(phi))
+        h = 1e-10
+        s_lo = (area(b - eps, xu, port, x_l) - area(b - h, xu, port, x_l)) / (h - eps)
+        s_hi = (area(b + h, xu, port, x_l) - area(b + eps, xu, port, x_l)) / (h - eps)
+        assert abs(s_hi - s_lo) <= 0.01 * abs(s_hi) + math.pi * (R - r) * math.sin(PHIS[port]) * 1.01
+
+
+@pytest.mark.parametrize("port", [1, 2])
+@pytest.mark.parametrize("xu", [0.0, 4e-5, 1e-4, 4.5e-4])
+def test_monotone_over_whole_stroke(port, xu):
+    u = np.linspace(-G.x_max_m, G.x_max_m, 200_001)
+    a = area(u, xu, port)
+    assert np.all(np.diff(a) > 0)
+    assert np.all(a > 0)
+
+
+@pytest.mark.parametrize("port", [1, 2])
+@pytest.mark.parametrize("dxu", [1e-6, 5e-5, 4.13e-4])
+def test_underlap_change_is_exact_shift(port, dxu):
+    xu = 4e-5
+    u = np.linspace(-G.x_max_m, G.x_max_m - dxu, 5001)
+    a_shifted = area(u, xu + dxu, port)
+    a_moved = area(u + dxu, xu, port)
+    np.testing.assert_allclose(a_shifted, a_moved, rtol=1e-9)
+
+
+def test_magnitudes_of_model_md():
+    xu = 5e-5
+    # port 1: ~40 mm^2 fully open, ~1.2 mm^2 at u = 0, ~0.02 mm^2 closed at -x_max
+    assert area(G.x_max_m, xu, 1) / MM2 == pytest.approx(40.0, rel=0.03)
+    assert area(0.0, xu, 1) / MM2 == pytest.approx(1.2, rel=0.05)
+    assert area(-G.x_max_m, xu, 1) / MM2 == pytest.approx(0.02, rel=0.1)
+    # port 2 closed: ~0.03 mm^2 (0.037 with Eq. 3 as written)
+    assert 0.025 < area(-G.x_max_m, xu, 2) / MM2 < 0.045
+    # port 2 opens at half the taper angle: about half the fully open area of port 1
+    assert area(G.x_max_m, xu, 2) / area(G.x_max_m, xu, 1) == pytest.approx(
+        math.sin(PHIS[2]) / math.sin(PHIS[1]), rel=0.05)
+
+
+def test_scalar_and_array_shapes():
+    assert isinstance(area(0.0, 4e-5, 1), float)
+    assert area(np.zeros((3, 2)), 4e-5, 1).shape == (3, 2)
+
+
+def test_x_l_outside_interval_rejected():
+    delta = (R - r) * math.tan(PHIS[1])
+    with pytest.raises(ValueError):
+        area(0.0, 4e-5, 1, x_l=-4e-5)          # x_l = -x_u: open end excluded
+    with pytest.raises(ValueError):
+        area(0.0, 4e-5, 1, x_l=-4e-5 + 1.01 * delta)
+    area(0.0, 4e-5, 1, x_l=-4e-5 + delta)       # closed end allowed
+
+
+def test_opening_coordinate_signs():
+    assert opening_coordinate(1e-3, "s1") == 1e-3
+    assert opening_coordinate(1e-3, "2r") == 1e-3
+    assert opening_coordinate(1e-3, "1r") == -1e-3
+    assert opening_coordinate(1e-3, "s2") == -1e-3
+    with pytest.raises(ValueError):
+        opening_coordinate(0.0, "s3")
+
+
+def test_valve_areas_order_and_edges():
+    cond = ValveCondition(underlap_m=(3e-5, 5e-5, 7e-5, 9e-5))
+    x = np.linspace(-G.x_max_m, G.x_max_m, 101)
+    A = valve_areas(x, G, cond)
+    assert A.shape == (4, x.size)
+    x_l = cond.x_l_m(G)
+    for i, e in enumerate(EDGES):
+        port = 1 if e in ("s1", "1r") else 2
+        expected = area(opening_coordinate(x, e), cond.underlap_m[i], port, x_l[i])
+        np.testing.assert_allclose(A[i], expected, rtol=1e-12)
+    # x > 0 opens s1 and 2r, closes 1r and s2
+    assert A[0, -1] > 30 * MM2 and A[3, -1] > 15 * MM2
+    assert A[1, -1] < 0.1 * MM2 and A[2, -1] < 0.1 * MM2
