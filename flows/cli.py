@@ -83,9 +83,25 @@ def simulate(
 
 
 @app.command()
-def ingest(config: Config, paths: Annotated[list[Path], typer.Argument(help="Export files or folders.")], warehouse: Warehouse = None) -> None:
+def ingest(
+    config: Config,
+    paths: Annotated[list[Path], typer.Argument(help="Export files or folders.")],
+    warehouse: Warehouse = None,
+    force: Annotated[bool, typer.Option("--force", help="Read files again even if the manifest already holds their content.")] = False,
+) -> None:
     """Historian exports into the sensor lake."""
-    _not_yet("ingest", 3)
+    import flows.ingest as ingest_flows
+    from flows.config import warehouse_dir
+
+    ingest_flows.quiet_prefect_console()
+    counts = ingest_flows.ingest_flow(
+        config_path=str(config),
+        paths=[str(p) for p in paths],
+        warehouse=str(warehouse_dir(warehouse)),
+        force=force,
+        show_progress=True,
+    )
+    typer.echo(ingest_flows.summary_line(counts))
 
 
 @app.command()

@@ -123,3 +123,94 @@ def pandera_schema(fields: tuple[Field, ...], name: str) -> pa.DataFrameSchema:
 
 
 SENSOR_SCHEMA = pandera_schema(SENSOR_FIELDS, "sensor_frame")
+
+
+# --- ingest: raw rows, quarantine, gaps, manifest, runs ---------------------------------------
+
+UTC_NS = pl.Datetime("ns", "UTC")
+"""Export timestamps before they are put on the lake's grid (PI writes 100 ns)."""
+
+RAW_ROW_FIELDS: tuple[Field, ...] = (
+    Field("line", pl.Int64, "", "Line of the source file (CSV, header = line 1) or row (Parquet, first row = 1).", ge=1),
+    Field("tag", pl.Utf8, "", "Historian tag name as exported."),
+    Field("timestamp_utc", UTC_NS, "", "Sample time at the export's full resolution, UTC."),
+    Field("value_si", pl.Float64, "", "Sample value converted to the SI unit of the tag's signal (Pa or m).", ge=-1e12, le=1e12),
+)
+"""One accepted sample of one tag, as the ingest reads it from an export (long form)."""
+
+QUARANTINE_FIELDS: tuple[Field, ...] = (
+    Field("file_sha256", pl.Utf8, "", "Content hash of the source file."),
+    Field("source_file", pl.Utf8, "", "Path of the source file as given to the ingest."),
+    Field("line", pl.Int64, "", "Line of the source file (CSV, header = line 1) or row (Parquet, first row = 1).", ge=1),
+    Field("tag", pl.Utf8, "", "Historian tag name.", nullable=True),
+    Field("timestamp_raw", pl.Utf8, "", "Timestamp as written in the export.", nullable=True),
+    Field("value_raw", pl.Utf8, "", "Value as written in the export (e.g. a PI digital state).", nullable=True),
+    Field("quality", pl.Utf8, "", "Quality code as written in the export.", nullable=True),
+    Field("reason", pl.Utf8, "", "Why the sample was set aside.", isin=("bad_quality", "non_numeric", "non_finite", "missing_value", "missing_tag")),
+    Field("run_id", pl.Utf8, "", "Ingest run that read the file."),
+    Field("ingested_at", UTC_US, "", "When the ingest read the file."),
+)
+"""Samples of an export set aside by the ingest (table ``quarantine``)."""
+
+GAP_FIELDS: tuple[Field, ...] = (
+    Field("file_sha256", pl.Utf8, "", "Content hash of the source file."),
+    Field("source_file", pl.Utf8, "", "Path of the source file as given to the ingest."),
+    Field("valve_id", pl.Utf8, "", "Valve identifier."),
+    Field("signal", pl.Utf8, "", "Signal of the plant configuration's [valves.tags].", isin=SIGNALS),
+    Field("tag", pl.Utf8, "", "Historian tag name."),
+    Field("gap_start", UTC_US, "", "Last sample before the gap (UTC, truncated to µs)."),
+    Field("gap_end", UTC_US, "", "First sample after the gap (UTC, truncated to µs)."),
+    Field("duration_s", pl.Float64, "s", "Time between the two samples.", ge=0.0),
+)
+"""Gaps longer than ``export.max_gap_s`` between consecutive accepted samples of a tag (table ``ingest_gaps``)."""
+
+MANIFEST_FIELDS: tuple[Field, ...] = (
+    Field("file_sha256", pl.Utf8, "", "Content hash (SHA-256) of the file; the table's key."),
+    Field("source_file", pl.Utf8, "", "Path of the file when it was ingested."),
+    Field("size_bytes", pl.Int64, "B", "File size.", ge=0),
+    Field("file_format", pl.Utf8, "", "How the file was read.", isin=("csv", "csv.gz", "parquet")),
+    Field("layout", pl.Utf8, "", "Export layout of the plant configuration.", isin=("long", "wide")),
+    Field("rows_in", pl.Int64, "", "Data rows in the file.", ge=0),
+    Field("samples_in", pl.Int64, "", "Tag values in the file (long: one per row; wide: non-empty cells).", ge=0),
+    Field("quarantined", pl.Int64, "", "Samples set aside (table quarantine).", ge=0),
+    Field("duplicates", pl.Int64, "", "Exact duplicate samples dropped (same tag, time and value).", ge=0),
+    Field("conflicts", pl.Int64, "", "Samples dropped by export.duplicate_rule (same tag and time, other value).", ge=0),
+    Field("gaps", pl.Int64, "", "Gaps longer than export.max_gap_s (table ingest_gaps).", ge=0),
+    Field("rows_out", pl.Int64, "", "Lake rows (valve × grid instant) the file yields.", ge=0),
+    Field("rows_added", pl.Int64, "", "Lake rows that were not in the lake before.", ge=0),
+    Field("lake_conflicts", pl.Int64, "", "Lake rows already present with other values, resolved by export.duplicate_rule.", ge=0),
+    Field("partitions", pl.Int64, "", "Lake partitions (valve, UTC date) the file touches.", ge=0),
+    Field("valves", pl.Utf8, "", "Valve ids found in the file, comma-separated."),
+    Field("time_start", UTC_US, "", "Earliest accepted sample (UTC).", nullable=True),
+    Field("time_end", UTC_US, "", "Latest accepted sample (UTC).", nullable=True),
+    Field("run_id", pl.Utf8, "", "Ingest run that ingested the file."),
+    Field("ingested_at", UTC_US, "", "When the file was ingested."),
+)
+"""One row per ingested export file (table ``ingest_manifest``)."""
+
+INGEST_RUN_FIELDS: tuple[Field, ...] = (
+    Field("run_id", pl.Utf8, "", "Identifier of the ingest run; the table's key."),
+    Field("started_at", UTC_US, "", "When the run started."),
+    Field("finished_at", UTC_US, "", "When the run ended (null while running or after a crash).", nullable=True),
+    Field("status", pl.Utf8, "", "running, ok or failed.", isin=("running", "ok", "failed")),
+    Field("message", pl.Utf8, "", "The error of a failed run.", nullable=True),
+    Field("config_file", pl.Utf8, "", "Plant configuration used."),
+    Field("files_seen", pl.Int64, "", "Export files named by the run.", ge=0),
+    Field("files_ingested", pl.Int64, "", "Files read into the lake.", ge=0),
+    Field("files_skipped", pl.Int64, "", "Files skipped because the manifest already holds their content.", ge=0),
+    Field("rows_read", pl.Int64, "", "Data rows read.", ge=0),
+    Field("samples_read", pl.Int64, "", "Tag values read.", ge=0),
+    Field("rows_written", pl.Int64, "", "Lake rows produced.", ge=0),
+    Field("rows_added", pl.Int64, "", "Lake rows new to the lake.", ge=0),
+    Field("quarantined", pl.Int64, "", "Samples set aside.", ge=0),
+    Field("duplicates", pl.Int64, "", "Exact duplicate samples dropped.", ge=0),
+    Field("conflicts", pl.Int64, "", "Samples dropped by export.duplicate_rule.", ge=0),
+    Field("lake_conflicts", pl.Int64, "", "Lake rows replaced or kept by export.duplicate_rule.", ge=0),
+    Field("gaps", pl.Int64, "", "Gaps found.", ge=0),
+    Field("partitions_written", pl.Int64, "", "Lake partition files replaced.", ge=0),
+)
+"""One row per ``valvemon ingest`` run with its counts (table ``ingest_runs``)."""
+
+RAW_ROW_SCHEMA = pandera_schema(RAW_ROW_FIELDS, "raw_rows")
+QUARANTINE_SCHEMA = pandera_schema(QUARANTINE_FIELDS, "quarantine")
+GAP_SCHEMA = pandera_schema(GAP_FIELDS, "ingest_gaps")

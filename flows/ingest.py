@@ -1,0 +1,525 @@
+"""``valvemon ingest``: historian exports into the sensor lake (the Prefect flow and its plain core).
+
+:func:`run_ingest` does the work file by file: read the export (:func:`read_export`), turn it into
+lake partitions (``transforms.ingest.process_export``), merge each with the stored partition and
+replace it atomically (``flows.lake``), then record the file in the manifest together with its
+quarantined samples and gaps in one DuckDB transaction. A file whose content hash is in the
+manifest is skipped (``force`` re-reads it; the lake then stays the same unless the
+configuration changed). A run that dies part-way can simply be run again: a file is in the
+manifest only after all its partitions are written, and merging rows the lake already holds
+changes nothing, so the rerun ends with the same lake as one clean run.
+
+:func:`ingest_flow` is the Prefect flow the command line runs: one task per file.
+Method, rules and counts: ``docs/ingest.md``.
+"""
+
+from __future__ import annotations
+
+import fcntl
+import gzip
+import hashlib
+import io
+import os
+import uuid
+import zlib
+from contextlib import contextmanager
+from dataclasses import asdict, dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Callable, Iterator
+
+import polars as pl
+from prefect import flow, task
+from prefect.cache_policies import NO_CACHE
+
+from flows.config import load_plant_config
+from flows.errors import ValvemonError
+from flows.lake import partition_path, read_partition, write_partition
+from flows.warehouse_db import connect, ensure_ingest_tables, insert_frame, query_frame
+from schemas.fields import GAP_FIELDS, GAP_SCHEMA, INGEST_RUN_FIELDS, MANIFEST_FIELDS, QUARANTINE_FIELDS, QUARANTINE_SCHEMA, polars_schema
+from schemas.plant_config import ConfigError, ExportSpec, PlantConfig
+from transforms.ingest import Grid, IngestError, TagTable, merge_partition, process_export, tags_by_column
+
+EXPORT_SUFFIXES = (".csv", ".csv.gz", ".txt", ".tsv", ".tsv.gz", ".txt.gz", ".parquet", ".pq")
+"""Files a folder argument contributes (searched recursively, sorted by path)."""
+
+_GZIP_MAGIC = b"\x1f\x8b"
+_PARQUET_MAGIC = b"PAR1"
+
+
+# --- files -----------------------------------------------------------------------------------
+
+
+def discover_files(paths: list[str | Path]) -> list[Path]:
+    """The export files named by the arguments: files as given, folders searched recursively.
+
+    Raises
+    ------
+    ValvemonError
+        For a path that does not exist, or when nothing is found.
+    """
+    out: list[Path] = []
+    seen: set[Path] = set()
+    for p in map(Path, paths):
+        if p.is_dir():
+            found = sorted(f for f in p.rglob("*") if f.is_file() and f.name.lower().endswith(EXPORT_SUFFIXES) and not f.name.startswith("."))
+        elif p.exists():
+            found = [p]
+        else:
+            raise ValvemonError(f"{p}: no such file or folder")
+        for f in found:
+            key = f.resolve()
+            if key not in seen:
+                seen.add(key)
+                out.append(f)
+    if not out:
+        raise ValvemonError(f"no export files ({', '.join(EXPORT_SUFFIXES)}) in {', '.join(map(str, paths))}")
+    return out
+
+
+def sniff_format(path: Path, head: bytes) -> str:
+    """``"parquet"``, ``"csv.gz"`` or ``"csv"``, from the file's first bytes (then its name)."""
+    if head.startswith(_PARQUET_MAGIC):
+        return "parquet"
+    if head.startswith(_GZIP_MAGIC):
+        return "csv.gz"
+    if path.name.lower().endswith((".parquet", ".pq")):
+        return "parquet"
+    return "csv"
+
+
+def _csv_options(export: ExportSpec) -> dict:
+    return {
+        "separator": export.separator,
+        "decimal_comma": export.decimal == ",",
+        "infer_schema": False,
+        "encoding": "utf8-lossy",
+        "quote_char": '"',
+    }
+
+
+def _value_columns(columns: list[str], export: ExportSpec) -> list[str]:
+    if export.layout == "long":
+        return [export.value_column] if export.value_column in columns else []
+    skip = {export.timestamp_column, export.quality_column}
+    return [c for c in columns if c not in skip]
+
+
+def read_csv_export(data: bytes, export: ExportSpec) -> pl.DataFrame:
+    """A CSV export's bytes (decompressed) → frame in file order.
+
+    Value columns are read as Float64 (the fast path); only if some cell is not a number are
+    those columns read again as text, so that quarantine can show what the file says.
+    """
+    opts = _csv_options(export)
+    header = pl.read_csv(io.BytesIO(data), n_rows=0, **opts).columns
+    values = _value_columns(header, export)
+    df = pl.read_csv(io.BytesIO(data), schema_overrides={c: pl.Float64 for c in values}, ignore_errors=True, **opts)
+    suspicious = [c for c in values if df[c].null_count()]
+    if suspicious:
+        text = pl.read_csv(io.BytesIO(data), columns=suspicious, **opts)
+        df = df.with_columns([text[c] for c in suspicious])
+    return df
+
+
+@dataclass
+class ExportFile:
+    """An export as read: its frame, where its rows start, and what identifies the file."""
+
+    frame: pl.DataFrame
+    first_line: int
+    file_format: str
+    sha256: str
+    size_bytes: int
+
+
+def read_export(path: Path, export: ExportSpec) -> ExportFile:
+    """Read one export file (CSV, gzip CSV or Parquet) and hash its bytes.
+
+    Raises
+    ------
+    ValvemonError
+        Naming the file: unreadable, empty, truncated gzip, not CSV/Parquet.
+    """
+    try:
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise ValvemonError(f"{path}: cannot read the file ({exc.strerror or exc})") from None
+    if not raw:
+        raise ValvemonError(f"{path}: empty file (expected a {export.layout} export with a header line)")
+    digest = hashlib.sha256(raw).hexdigest()
+    fmt = sniff_format(path, raw[:4])
+    try:
+        if fmt == "parquet":
+            df = pl.read_parquet(io.BytesIO(raw))
+            first_line = 1
+        else:
+            data = raw
+            if fmt == "csv.gz":
+                try:
+                    data = gzip.decompress(raw)
+                except (EOFError, gzip.BadGzipFile, zlib.error) as exc:
+                    raise ValvemonError(f"{path}: truncated or corrupt gzip file ({exc})") from None
+                if not data.strip():
+                    raise ValvemonError(f"{path}: empty file inside the gzip (expected a {export.layout} export with a header line)")
+            if not data.strip():
+                raise ValvemonError(f"{path}: empty file (expected a {export.layout} export with a header line)")
+            df = read_csv_export(data, export)
+            first_line = 2
+    except ValvemonError:
+        raise
+    except (pl.exceptions.PolarsError, OSError, ValueError) as exc:
+        kind = "Parquet" if fmt == "parquet" else "CSV"
+        reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise ValvemonError(f"{path}: not a readable {kind} export ({reason})") from None
+    if df.height == 0:
+        raise ValvemonError(f"{path}: no data rows (only a header)")
+    return ExportFile(df, first_line, fmt, digest, len(raw))
+
+
+# --- one file --------------------------------------------------------------------------------
+
+
+@dataclass
+class FileReport:
+    """What ingesting one file did."""
+
+    path: str
+    sha256: str
+    skipped: bool = False
+    rows_in: int = 0
+    samples_in: int = 0
+    quarantined: int = 0
+    duplicates: int = 0
+    conflicts: int = 0
+    gaps: int = 0
+    rows_out: int = 0
+    rows_added: int = 0
+    lake_conflicts: int = 0
+    partitions: int = 0
+    partitions_written: int = 0
+    valves: tuple[str, ...] = ()
+
+
+def _now() -> datetime:
+    return datetime.now(timezone.utc)
+
+
+def manifest_hashes(warehouse: Path) -> set[str]:
+    """Content hashes of the files the manifest holds."""
+    if not (Path(warehouse) / "valvemon.duckdb").exists():
+        return set()
+    with connect(warehouse) as con:
+        ensure_ingest_tables(con)
+        return set(query_frame(con, "SELECT file_sha256 FROM ingest_manifest")["file_sha256"].to_list())
+
+
+def _table(frame: pl.DataFrame, fields) -> pl.DataFrame:
+    return frame.select([f.name for f in fields]).cast(dict(polars_schema(fields)))
+
+
+def ingest_file(path: str | Path, config: PlantConfig, warehouse: str | Path, run_id: str, *, force: bool = False, tags: TagTable | None = None) -> FileReport:
+    """Ingest one export file into the lake and record it (module doc).
+
+    Raises
+    ------
+    ValvemonError
+        Naming the file and, where it applies, the line, tag, time and what was expected.
+    """
+    path, warehouse = Path(path), Path(warehouse)
+    export = config.export
+    ef = read_export(path, export)
+    report = FileReport(str(path), ef.sha256)
+    if not force and ef.sha256 in manifest_hashes(warehouse):
+        report.skipped = True
+        return report
+    try:
+        result = process_export(ef.frame, config, first_line=ef.first_line, tags=tags)
+    except IngestError as exc:
+        raise ValvemonError(f"{path}: {exc}") from None
+    c = result.counts
+    report.rows_in, report.samples_in, report.quarantined = c.rows_in, c.samples_in, c.quarantined
+    report.duplicates, report.conflicts, report.gaps, report.rows_out = c.duplicates, c.conflicts, c.gaps, c.rows_out
+    report.valves = c.valves
+    report.partitions = len(result.partitions)
+    gap_us = max(int(round(export.max_gap_s * 1e6)), 1)
+    for part in result.partitions:
+        target = partition_path(warehouse, part.valve_id, part.date)
+        try:
+            merged = merge_partition(read_partition(target), part.frame, export.duplicate_rule, tags_by_column(config, part.valve_id))
+        except IngestError as exc:
+            raise ValvemonError(f"{path}: {exc}") from None
+        report.rows_added += merged.rows_added
+        report.lake_conflicts += merged.lake_conflicts
+        if merged.changed:
+            write_partition(target, merged.frame, gap_us=gap_us)
+            report.partitions_written += 1
+    record_file(warehouse, *file_records(path, ef, result, report, run_id, export.layout))
+    return report
+
+
+def file_records(path: Path, ef: ExportFile, result, report: FileReport, run_id: str, layout: str) -> tuple[dict, pl.DataFrame, pl.DataFrame]:
+    """The manifest row, quarantine rows and gap rows of one ingested file, per the registry."""
+    now = _now()
+    extra = {"file_sha256": ef.sha256, "source_file": str(path), "run_id": run_id, "ingested_at": now}
+    quarantine = _table(result.quarantine.with_columns(**{k: pl.lit(v) for k, v in extra.items()}), QUARANTINE_FIELDS)
+    QUARANTINE_SCHEMA.validate(quarantine, lazy=True)
+    gaps = _table(result.gaps.with_columns(file_sha256=pl.lit(ef.sha256), source_file=pl.lit(str(path))), GAP_FIELDS)
+    GAP_SCHEMA.validate(gaps, lazy=True)
+    c = result.counts
+    manifest = {
+        "file_sha256": ef.sha256,
+        "source_file": str(path),
+        "size_bytes": ef.size_bytes,
+        "file_format": ef.file_format,
+        "layout": layout,
+        "rows_in": c.rows_in,
+        "samples_in": c.samples_in,
+        "quarantined": c.quarantined,
+        "duplicates": c.duplicates,
+        "conflicts": c.conflicts,
+        "gaps": c.gaps,
+        "rows_out": c.rows_out,
+        "rows_added": report.rows_added,
+        "lake_conflicts": report.lake_conflicts,
+        "partitions": report.partitions,
+        "valves": ",".join(c.valves),
+        "time_start": c.time_start,
+        "time_end": c.time_end,
+        "run_id": run_id,
+        "ingested_at": now,
+    }
+    return manifest, quarantine, gaps
+
+
+def record_file(warehouse: Path, manifest: dict, quarantine: pl.DataFrame, gaps: pl.DataFrame) -> None:
+    """Write one file's manifest row, quarantine and gaps in one transaction.
+
+    Earlier quarantine and gap rows of the same content hash are replaced, so a file ingested
+    again (``force``, or after a crash) is never counted twice.
+    """
+    sha = manifest["file_sha256"]
+    with connect(warehouse) as con:
+        ensure_ingest_tables(con)
+        con.execute("BEGIN TRANSACTION")
+        try:
+            con.execute("DELETE FROM quarantine WHERE file_sha256 = ?", [sha])
+            con.execute("DELETE FROM ingest_gaps WHERE file_sha256 = ?", [sha])
+            insert_frame(con, "quarantine", quarantine)
+            insert_frame(con, "ingest_gaps", gaps)
+            insert_frame(con, "ingest_manifest", pl.DataFrame([manifest], schema=polars_schema(MANIFEST_FIELDS)), replace=True)
+            con.execute("COMMIT")
+        except BaseException:
+            con.execute("ROLLBACK")
+            raise
+
+
+# --- a run -----------------------------------------------------------------------------------
+
+
+@dataclass
+class RunSummary:
+    """Counts of one ingest run (also stored in ``ingest_runs``)."""
+
+    run_id: str
+    files_seen: int = 0
+    files_ingested: int = 0
+    files_skipped: int = 0
+    rows_read: int = 0
+    samples_read: int = 0
+    rows_written: int = 0
+    rows_added: int = 0
+    quarantined: int = 0
+    duplicates: int = 0
+    conflicts: int = 0
+    lake_conflicts: int = 0
+    gaps: int = 0
+    partitions_written: int = 0
+    files: list[FileReport] = field(default_factory=list)
+
+    def add(self, r: FileReport) -> None:
+        self.files.append(r)
+        if r.skipped:
+            self.files_skipped += 1
+            return
+        self.files_ingested += 1
+        self.rows_read += r.rows_in
+        self.samples_read += r.samples_in
+        self.rows_written += r.rows_out
+        self.rows_added += r.rows_added
+        self.quarantined += r.quarantined
+        self.duplicates += r.duplicates
+        self.conflicts += r.conflicts
+        self.lake_conflicts += r.lake_conflicts
+        self.gaps += r.gaps
+        self.partitions_written += r.partitions_written
+
+    def counts(self) -> dict:
+        d = asdict(self)
+        d.pop("files")
+        return d
+
+    def line(self) -> str:
+        """The one-line summary the command prints."""
+        return summary_line(self.counts())
+
+
+def summary_line(c: dict) -> str:
+    """One line of a run's counts (:meth:`RunSummary.counts`)."""
+    skipped = f" ({c['files_skipped']} already ingested, skipped)" if c["files_skipped"] else ""
+    return (
+        f"ingested {c['files_ingested']} of {c['files_seen']} files{skipped}: "
+        f"{c['rows_read']:,} rows read, {c['rows_written']:,} lake rows written "
+        f"({c['rows_added']:,} new) in {c['partitions_written']} partitions, "
+        f"{c['quarantined']:,} quarantined, {c['duplicates']:,} duplicates, "
+        f"{c['conflicts'] + c['lake_conflicts']:,} conflicts, {c['gaps']:,} gaps"
+    )
+
+
+@contextmanager
+def ingest_lock(warehouse: Path) -> Iterator[None]:
+    """One ingest at a time per warehouse (an advisory lock on ``WAREHOUSE/.ingest.lock``)."""
+    warehouse.mkdir(parents=True, exist_ok=True)
+    fh = open(warehouse / ".ingest.lock", "a+")
+    try:
+        try:
+            fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise ValvemonError(f"{warehouse}: another ingest is running on this warehouse") from None
+        yield
+    finally:
+        fh.close()
+
+
+def _run_row(summary: RunSummary, started: datetime, config_file: str, status: str, message: str | None) -> pl.DataFrame:
+    row = summary.counts() | {
+        "started_at": started,
+        "finished_at": None if status == "running" else _now(),
+        "status": status,
+        "message": message,
+        "config_file": config_file,
+    }
+    return pl.DataFrame([{f.name: row[f.name] for f in INGEST_RUN_FIELDS}], schema=polars_schema(INGEST_RUN_FIELDS))
+
+
+def _store_run(warehouse: Path, row: pl.DataFrame) -> None:
+    with connect(warehouse) as con:
+        ensure_ingest_tables(con)
+        insert_frame(con, "ingest_runs", row, replace=True)
+
+
+FileRunner = Callable[..., FileReport]
+
+
+def run_ingest(
+    config_path: str | Path,
+    paths: list[str | Path],
+    warehouse: str | Path,
+    *,
+    force: bool = False,
+    show_progress: bool = False,
+    file_runner: FileRunner | None = None,
+) -> RunSummary:
+    """Ingest export files into the lake, file by file; the counts are stored in ``ingest_runs``.
+
+    Parameters
+    ----------
+    config_path : path
+        The plant configuration.
+    paths : list of path
+        Export files and folders (searched recursively for :data:`EXPORT_SUFFIXES`), taken in
+        the order given (a folder's files sorted by path). With ``duplicate_rule = "last"``
+        a later file wins over an earlier one where they disagree.
+    warehouse : path
+        The warehouse folder.
+    force : bool
+        Read files again even if the manifest already holds their content hash.
+    show_progress : bool
+        A rich progress bar on stderr (only when stderr is a terminal).
+    file_runner : callable, optional
+        Runs one file (``ingest_file``'s signature); the Prefect flow passes its task.
+
+    Raises
+    ------
+    ValvemonError
+        The first file that cannot be ingested (files before it stay ingested); the run is
+        stored with status ``failed`` and the message.
+    """
+    warehouse = Path(warehouse)
+    config = load_plant_config(config_path)
+    try:
+        Grid.from_export(config.export.sample_rate_hz, config.export.max_gap_s)
+    except IngestError as exc:
+        raise ConfigError(f"{config_path}: {exc}") from None
+    files = discover_files(paths)
+    runner = file_runner or ingest_file
+    tags = TagTable.from_config(config)
+    summary = RunSummary(run_id=f"{_now():%Y%m%dT%H%M%SZ}-{uuid.uuid4().hex[:8]}", files_seen=len(files))
+    started = _now()
+    with ingest_lock(warehouse):
+        _store_run(warehouse, _run_row(summary, started, str(config_path), "running", None))
+        try:
+            with _progress(files, show_progress) as advance:
+                for f in files:
+                    summary.add(runner(f, config, warehouse, summary.run_id, force=force, tags=tags))
+                    advance(f)
+        except BaseException as exc:
+            message = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+            _store_run(warehouse, _run_row(summary, started, str(config_path), "failed", message))
+            raise
+        _store_run(warehouse, _run_row(summary, started, str(config_path), "ok", None))
+    return summary
+
+
+@contextmanager
+def _progress(files: list[Path], show: bool) -> Iterator[Callable[[Path], None]]:
+    """A rich progress bar over the files' bytes (stderr, terminals only)."""
+    from rich.console import Console
+    from rich.progress import BarColumn, DownloadColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+    console = Console(stderr=True)
+    if not show or not console.is_terminal:
+        yield lambda f: None
+        return
+    sizes = {f: (f.stat().st_size if f.exists() else 0) for f in files}
+    columns = (TextColumn("ingest"), BarColumn(), DownloadColumn(), TextColumn("files"), MofNCompleteColumn(), TimeRemainingColumn())
+    with Progress(*columns, console=console, transient=True) as progress:
+        bar = progress.add_task("ingest", total=sum(sizes.values()) or 1)
+        files_bar = progress.add_task("files", total=len(files), visible=False)
+
+        def advance(f: Path) -> None:
+            progress.advance(bar, sizes.get(f, 0))
+            progress.advance(files_bar, 1)
+
+        yield advance
+
+
+# --- Prefect ---------------------------------------------------------------------------------
+
+
+def quiet_prefect_console() -> None:
+    """Keep Prefect's console log (run states, tracebacks) off the command line's stderr.
+
+    The command prints its own summary and a one-line error; the flow and task runs are still
+    recorded by the Prefect API. Applies to logging set up later (environment) and now.
+    """
+    import logging
+
+    os.environ["PREFECT_LOGGING_HANDLERS_CONSOLE_LEVEL"] = "CRITICAL"
+    for lg in [logging.getLogger(), *(v for v in logging.root.manager.loggerDict.values() if isinstance(v, logging.Logger))]:
+        for h in lg.handlers:
+            if type(h).__name__ == "PrefectConsoleHandler":
+                h.setLevel(logging.CRITICAL)
+
+
+@task(name="ingest-file", cache_policy=NO_CACHE, persist_result=False)
+def ingest_file_task(path: Path, config: PlantConfig, warehouse: Path, run_id: str, *, force: bool = False, tags: TagTable | None = None) -> FileReport:
+    """One export file into the lake (:func:`ingest_file`)."""
+    return ingest_file(path, config, warehouse, run_id, force=force, tags=tags)
+
+
+@flow(name="valvemon-ingest", persist_result=False, validate_parameters=False)
+def ingest_flow(config_path: str, paths: list[str], warehouse: str, force: bool = False, show_progress: bool = False) -> dict:
+    """Historian exports into the sensor lake; returns the run's counts (:class:`RunSummary`)."""
+    summary = run_ingest(config_path, paths, warehouse, force=force, show_progress=show_progress, file_runner=ingest_file_task)
+    return summary.counts()

@@ -1,0 +1,150 @@
+"""One export frame → lake partitions, quarantine, gaps and counts (no I/O).
+
+:func:`process_export` is everything the ingest does to a file between reading it and writing
+the lake: samples (:mod:`.samples`), per-tag sorting, duplicates and grid (:mod:`.grid`),
+per-valve assembly, UTC-day split and validation (:mod:`.frames`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from datetime import datetime
+
+import numpy as np
+import polars as pl
+
+from schemas.fields import REQUIRED_SIGNALS, SIGNAL_COLUMN
+from schemas.plant_config import PlantConfig
+from transforms.ingest.frames import Partition, assemble_valve, split_days, validate_raw_rows, validate_sensor_frame
+from transforms.ingest.grid import Grid, prepare_tag, to_grid
+from transforms.ingest.samples import TagTable, check_required_signals, samples_of
+
+GAP_COLUMNS = {
+    "valve_id": pl.String,
+    "signal": pl.String,
+    "tag": pl.String,
+    "gap_start": pl.Datetime("us", "UTC"),
+    "gap_end": pl.Datetime("us", "UTC"),
+    "duration_s": pl.Float64,
+}
+
+
+@dataclass
+class ExportCounts:
+    """What an export held and what became of it (see ``docs/ingest.md``, "Counts")."""
+
+    rows_in: int = 0
+    samples_in: int = 0
+    quarantined: int = 0
+    duplicates: int = 0
+    conflicts: int = 0
+    gaps: int = 0
+    rows_out: int = 0
+    accepted: int = 0
+    """Samples left after quarantine and de-duplication (samples_in − quarantined − duplicates − conflicts)."""
+    time_start: datetime | None = None
+    time_end: datetime | None = None
+    valves: tuple[str, ...] = ()
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+@dataclass
+class ExportResult:
+    """The lake content, quarantine and gaps of one export."""
+
+    partitions: list[Partition]
+    quarantine: pl.DataFrame
+    gaps: pl.DataFrame
+    counts: ExportCounts
+
+
+def tags_by_column(config: PlantConfig, valve_id: str) -> dict[str, str]:
+    """Lake column → historian tag of one valve."""
+    v = config.valve(valve_id)
+    return {SIGNAL_COLUMN[s]: t.tag for s, t in v.tags.items()}
+
+
+def process_export(df: pl.DataFrame, config: PlantConfig, *, first_line: int = 2, tags: TagTable | None = None) -> ExportResult:
+    """Turn one export, as read, into validated lake partitions.
+
+    Parameters
+    ----------
+    df : DataFrame
+        The export in file order, columns as the file names them (layout per
+        ``config.export.layout``); values may be text or numbers.
+    config : PlantConfig
+        The plant.
+    first_line : int
+        Line number of ``df``'s first row: 2 for a CSV with a header line, 1 for Parquet rows.
+    tags : TagTable, optional
+        ``TagTable.from_config(config)``, when the caller already has it.
+
+    Raises
+    ------
+    IngestError
+        For everything the ingest refuses (see :mod:`transforms.ingest.samples`, duplicate rule
+        ``"error"``, a failed pandera check); names the line, tag, time and what was expected.
+    """
+    tags = tags or TagTable.from_config(config)
+    export = config.export
+    grid = Grid.from_export(export.sample_rate_hz, export.max_gap_s)
+    samples = samples_of(df, config, tags, first_line=first_line)
+    valves = check_required_signals(samples.tags_present, config)
+    acc = samples.accepted
+    validate_raw_rows(acc)
+    counts = ExportCounts(rows_in=samples.rows_in, samples_in=samples.samples_in, quarantined=samples.quarantine.height, valves=tuple(valves))
+    if acc.height:
+        counts.time_start = acc["timestamp_utc"].min()
+        counts.time_end = acc["timestamp_utc"].max()
+
+    tag_id = acc["tag_id"].to_numpy()
+    t_all = acc["timestamp_utc"].to_physical().to_numpy()
+    v_all = acc["value_si"].to_numpy()
+    line_all = acc["line"].to_numpy()
+    order = np.argsort(tag_id, kind="stable")
+    sorted_ids = tag_id[order]
+    present_ids = np.unique(sorted_ids)
+    bounds = np.searchsorted(sorted_ids, np.r_[present_ids, np.iinfo(np.int32).max])
+
+    gridded: dict[str, dict] = {}
+    gap_frames = []
+    for j, tid in enumerate(present_ids):
+        sel = order[bounds[j] : bounds[j + 1]]
+        tag, valve_id, signal = tags.tags[tid], tags.valve_ids[tid], tags.signals[tid]
+        series = prepare_tag(t_all[sel], v_all[sel], line_all[sel], export.duplicate_rule, tag)
+        counts.duplicates += series.duplicates
+        counts.conflicts += series.conflicts
+        counts.accepted += len(series.t_ns)
+        g = to_grid(series.t_ns, series.values, grid)
+        gridded.setdefault(valve_id, {})[signal] = g
+        if len(g.gap_start_ns):
+            counts.gaps += len(g.gap_start_ns)
+            gap_frames.append(
+                pl.DataFrame(
+                    {
+                        "valve_id": [valve_id] * len(g.gap_start_ns),
+                        "signal": [signal] * len(g.gap_start_ns),
+                        "tag": [tag] * len(g.gap_start_ns),
+                        "gap_start": pl.Series(g.gap_start_ns // 1000).cast(pl.Datetime("us", "UTC")),
+                        "gap_end": pl.Series(g.gap_end_ns // 1000).cast(pl.Datetime("us", "UTC")),
+                        "duration_s": (g.gap_end_ns - g.gap_start_ns) / 1e9,
+                    },
+                    schema=GAP_COLUMNS,
+                )
+            )
+
+    partitions: list[Partition] = []
+    for valve_id in valves:
+        signals = gridded.get(valve_id, {})
+        if not all(s in signals for s in REQUIRED_SIGNALS):
+            continue  # every sample of a required signal was quarantined: no lake rows
+        frame = assemble_valve(valve_id, signals)
+        counts.rows_out += frame.height
+        names = tags_by_column(config, valve_id)
+        for day, part in split_days(frame):
+            validate_sensor_frame(part, names)
+            partitions.append(Partition(valve_id, day, part))
+    gaps = pl.concat(gap_frames) if gap_frames else pl.DataFrame(schema=GAP_COLUMNS)
+    return ExportResult(partitions, samples.quarantine, gaps, counts)

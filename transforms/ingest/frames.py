@@ -1,0 +1,148 @@
+"""Gridded tags → the canonical sensor frame per valve and UTC day; pandera validation.
+
+A lake row is one valve at one grid instant. It exists where *every required signal*
+(``ps, pr, p1, p2, x_spool, x_cyl``) has a value at that instant; ``x_ref`` is filled where its
+tag has a value and null elsewhere. Columns, dtypes and order come from
+:data:`schemas.fields.SENSOR_FIELDS`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from datetime import date
+
+import numpy as np
+import pandera.errors
+import polars as pl
+
+from schemas.fields import RAW_ROW_FIELDS, RAW_ROW_SCHEMA, REQUIRED_SIGNALS, SENSOR_FIELDS, SENSOR_SCHEMA, SIGNAL_COLUMN, polars_schema
+from transforms.ingest.errors import IngestError
+from transforms.ingest.grid import Gridded
+
+SENSOR_POLARS_SCHEMA = polars_schema(SENSOR_FIELDS)
+US_PER_DAY = 86_400_000_000
+
+
+def empty_sensor_frame() -> pl.DataFrame:
+    """A sensor frame without rows."""
+    return pl.DataFrame(schema=SENSOR_POLARS_SCHEMA)
+
+
+def assemble_valve(valve_id: str, signals: dict[str, Gridded]) -> pl.DataFrame:
+    """One valve's gridded signals → its sensor frame, sorted by time.
+
+    Parameters
+    ----------
+    valve_id : str
+        The valve.
+    signals : dict
+        Signal name (``"p1"``, …) → that tag on the grid; every required signal present.
+    """
+    req = [signals[s] for s in REQUIRED_SIGNALS]
+    t = req[0].t_us
+    if not all(np.array_equal(g.t_us, t) for g in req[1:]):
+        for g in req[1:]:
+            t = np.intersect1d(t, g.t_us, assume_unique=True)
+    data: dict[str, object] = {"timestamp_utc": t}
+    for s, col in SIGNAL_COLUMN.items():
+        g = signals.get(s)
+        if g is None:
+            data[col] = pl.Series(col, [None] * len(t), dtype=pl.Float64)
+            continue
+        if len(g.t_us) == len(t) and np.array_equal(g.t_us, t):
+            data[col] = g.values
+            continue
+        pos = np.searchsorted(g.t_us, t)
+        pos_c = np.minimum(pos, max(len(g.t_us) - 1, 0))
+        found = (pos < len(g.t_us)) & (g.t_us[pos_c] == t) if len(g.t_us) else np.zeros(len(t), dtype=bool)
+        vals = g.values[pos_c] if len(g.t_us) else np.zeros(len(t))
+        data[col] = pl.Series(col, vals, dtype=pl.Float64).scatter(np.flatnonzero(~found), None) if not found.all() else vals
+    frame = pl.DataFrame(data).with_columns(
+        pl.col("timestamp_utc").cast(pl.Datetime("us")).dt.replace_time_zone("UTC"),
+        valve_id=pl.lit(valve_id, dtype=pl.String),
+    )
+    frame = frame.with_columns(date=pl.col("timestamp_utc").dt.date())
+    return frame.select(SENSOR_POLARS_SCHEMA.names()).cast(dict(SENSOR_POLARS_SCHEMA))
+
+
+def split_days(frame: pl.DataFrame) -> list[tuple[date, pl.DataFrame]]:
+    """A valve's sensor frame (sorted by time) → one slice per UTC date."""
+    if frame.height == 0:
+        return []
+    t = frame["timestamp_utc"].to_physical().to_numpy()
+    day = t // US_PER_DAY
+    cuts = np.r_[0, np.flatnonzero(np.diff(day)) + 1, len(t)]
+    out = []
+    for a, b in zip(cuts[:-1], cuts[1:]):
+        part = frame.slice(int(a), int(b - a))
+        out.append((part["date"][0], part))
+    return out
+
+
+def _first_failure(err: pandera.errors.SchemaErrors) -> tuple[str | None, int | None, str, object]:
+    fc = err.failure_cases
+    if not isinstance(fc, pl.DataFrame):
+        fc = pl.from_pandas(fc) if hasattr(fc, "to_dict") else pl.DataFrame(fc)
+    with_index = fc.filter(pl.col("index").is_not_null()) if "index" in fc.columns else fc
+    row = (with_index if with_index.height else fc).row(0, named=True)
+    index = row.get("index")
+    return row.get("column"), None if index is None else int(index), str(row.get("check")), row.get("failure_case")
+
+
+def validate_sensor_frame(frame: pl.DataFrame, tags_by_column: dict[str, str]) -> pl.DataFrame:
+    """Validate one partition with the sensor-frame pandera schema (names, dtypes, physical ranges).
+
+    Parameters
+    ----------
+    frame : DataFrame
+        A collected sensor frame.
+    tags_by_column : dict
+        Lake column → historian tag, for the message.
+
+    Raises
+    ------
+    IngestError
+        Naming the tag, the time and the failed check.
+    """
+    try:
+        return SENSOR_SCHEMA.validate(frame, lazy=True)
+    except pandera.errors.SchemaErrors as err:
+        column, index, check, value = _first_failure(err)
+        when = ""
+        if index is not None and index < frame.height:
+            when = f" at {frame['timestamp_utc'][index].isoformat().replace('+00:00', 'Z')}"
+            if column in frame.columns:
+                value = frame[column][index]
+        tag = tags_by_column.get(column or "")
+        where = f"valve {frame['valve_id'][0] if frame.height else '?'}, column {column}{when}"
+        raise IngestError(f"{where}: value {value!r} fails check {check!r} of the sensor frame", tag=tag) from None
+
+
+def validate_raw_rows(accepted: pl.DataFrame) -> None:
+    """Validate accepted samples with the raw-row pandera schema.
+
+    Raises
+    ------
+    IngestError
+        Naming the line, the tag, the time and the failed check.
+    """
+    frame = accepted.select([f.name for f in RAW_ROW_FIELDS])
+    try:
+        RAW_ROW_SCHEMA.validate(frame, lazy=True)
+    except pandera.errors.SchemaErrors as err:
+        column, index, check, value = _first_failure(err)
+        line = tag = None
+        when = ""
+        if index is not None and index < frame.height:
+            line, tag = int(frame["line"][index]), frame["tag"][index]
+            when = f" at {frame['timestamp_utc'][index]}"
+        raise IngestError(f"{column}{when}: value {value!r} fails check {check!r} of the raw rows", line=line, tag=tag) from None
+
+
+@dataclass(frozen=True)
+class Partition:
+    """One lake partition's new content: a valve on a UTC date."""
+
+    valve_id: str
+    date: date
+    frame: pl.DataFrame

@@ -1,0 +1,253 @@
+"""Export timestamps to UTC nanoseconds: ISO-8601, epoch milliseconds, strftime patterns, local time.
+
+``export.timestamp_format`` decides how text is read:
+
+- ``"iso8601"``: ``2025-03-01T12:00:00.1234567Z``, ``…+01:00``, ``…+0100``, ``…+01``, a space
+  instead of the ``T``, 0 to 9 fractional digits (PI writes 7). Text without an offset is local
+  time in ``plant.timezone``.
+- ``"epoch_ms"``: milliseconds since 1970-01-01 UTC (integer or decimal).
+- any other string is a chrono/strftime pattern such as ``"%d.%m.%Y %H:%M:%S%.f"``; with
+  ``%z``/``%#z``/``%:z`` it carries its offset, otherwise it is local time.
+
+Parquet exports may also hold typed timestamps: zoned ones are converted to UTC, naive ones are
+local time.
+
+Local time is converted with the IANA rules of ``plant.timezone``. The autumn hour that occurs
+twice is resolved by row order, per tag: within one tag's rows in file order, rows of the
+repeated hour are summer time until the local time goes backwards, winter time from then on.
+A local time inside the spring gap does not exist; the ingest refuses it, naming the row.
+
+Everything stays at nanosecond resolution here; the lake's µs grid comes later (``grid``).
+"""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import polars as pl
+
+from transforms.ingest.errors import IngestError
+
+UTC_NS = pl.Datetime("ns", "UTC")
+
+_OFFSET_AT_END = re.compile(r"(Z|[+-]\d\d(:?\d\d)?)$")
+_ZONED_DIRECTIVES = ("%z", "%#z", "%:z", "%::z")
+
+
+def _iso_formats(sample: str) -> list[tuple[str, bool]]:
+    """Candidate chrono formats for ISO-8601 text, the likeliest (as ``sample`` looks) first."""
+    sample = sample.strip()
+    seps = [" ", "T"] if len(sample) > 10 and sample[10] == " " else ["T", " "]
+    zoned_first = bool(_OFFSET_AT_END.search(sample))
+    zoned = [(f"%Y-%m-%d{s}%H:%M:%S%.f%#z", True) for s in seps]
+    naive = [(f"%Y-%m-%d{s}%H:%M:%S%.f", False) for s in seps]
+    return zoned + naive if zoned_first else naive + zoned
+
+
+def _example(fmt: str) -> str:
+    if fmt == "iso8601":
+        return "e.g. 2025-03-01T12:00:00.123Z or 2025-03-01 13:00:00.123+01:00"
+    if fmt == "epoch_ms":
+        return "milliseconds since 1970-01-01 UTC, e.g. 1740830400123"
+    return f"the pattern {fmt!r}"
+
+
+def _first_failure(raw: pl.Series, ok: pl.Series, lines: pl.Series | None, fmt: str, tags: pl.Series | None) -> IngestError:
+    bad = (~ok.fill_null(False)).arg_true()
+    i = int(bad[0])
+    text = raw[i]
+    tag = None if tags is None else tags[i]
+    if text is None or (isinstance(text, str) and not text.strip()):
+        return IngestError("missing timestamp", line=_line(lines, i), tag=tag)
+    return IngestError(
+        f"timestamp {str(text)!r} does not match export.timestamp_format {fmt!r} (expected {_example(fmt)})",
+        line=_line(lines, i),
+        tag=tag,
+    )
+
+
+def localize(
+    naive: pl.Series,
+    timezone: str,
+    *,
+    groups: pl.Series | None = None,
+    lines: pl.Series | None = None,
+    tags: pl.Series | None = None,
+) -> pl.Series:
+    """Naive local wall-clock times → UTC, the repeated autumn hour resolved by row order.
+
+    Parameters
+    ----------
+    naive : Series of Datetime without time zone
+        Local times in file order (nulls stay null).
+    timezone : str
+        IANA name of the plant's time zone.
+    groups : Series, optional
+        Key of independent row sequences (the tag, in a long export); row order is judged
+        within each group. None: the whole column is one sequence (a wide export).
+    lines : Series, optional
+        Line number of each element, for error messages (default: position + 1).
+    tags : Series of str, optional
+        Tag of each element, named in error messages.
+
+    Raises
+    ------
+    IngestError
+        For a time inside the spring gap (it does not exist in ``timezone``).
+    """
+    naive = naive.cast(pl.Datetime("ns"))
+    if timezone == "UTC":
+        return naive.dt.replace_time_zone("UTC")
+    zoned = naive.dt.replace_time_zone(timezone, ambiguous="null", non_existent="null")
+    unresolved = zoned.is_null() & naive.is_not_null()
+    if not unresolved.any():
+        return zoned.dt.convert_time_zone("UTC")
+    pos = unresolved.arg_true()
+    sub = pl.DataFrame(
+        {
+            "pos": pos,
+            "grp": pl.Series(np.zeros(len(pos), dtype=np.int64)) if groups is None else groups.gather(pos),
+            "naive": naive.gather(pos),
+        }
+    )
+    earliest = sub["naive"].dt.replace_time_zone(timezone, ambiguous="earliest", non_existent="null")
+    if earliest.null_count():
+        i = int(sub["pos"][int(earliest.is_null().arg_true()[0])])
+        raise IngestError(
+            f"local time {naive[i]} does not exist in {timezone} (clocks jump forward at the start of summer time)",
+            line=_line(lines, i),
+            tag=None if tags is None else tags[i],
+        )
+    key = [pl.col("grp"), pl.col("naive").dt.year()]
+    folded = sub.with_columns(
+        went_back=(pl.col("naive") < pl.col("naive").cum_max().shift(1)).fill_null(False).over(key)
+    ).with_columns(fold=pl.col("went_back").cast(pl.Int8).cum_max().over(key) > 0)
+    resolved = folded.select(
+        pl.col("naive").dt.replace_time_zone(
+            timezone,
+            ambiguous=pl.when(pl.col("fold")).then(pl.lit("latest")).otherwise(pl.lit("earliest")),
+            non_existent="raise",
+        )
+    ).to_series()
+    return zoned.scatter(pos, resolved).dt.convert_time_zone("UTC")
+
+
+def parse_timestamps(
+    raw: pl.Series,
+    fmt: str,
+    timezone: str,
+    *,
+    groups: pl.Series | None = None,
+    lines: pl.Series | None = None,
+    tags: pl.Series | None = None,
+) -> pl.Series:
+    """Timestamps of an export (text, epoch numbers or typed) → Datetime(ns, UTC).
+
+    Every non-null element must be readable; nulls stay null (the caller decides about them).
+
+    Parameters
+    ----------
+    raw : Series
+        The export's timestamp column in file order.
+    fmt : str
+        ``export.timestamp_format``: ``"iso8601"``, ``"epoch_ms"`` or a strftime pattern.
+    timezone : str
+        ``plant.timezone``, for timestamps without an offset.
+    groups, lines, tags
+        See :func:`localize`.
+
+    Raises
+    ------
+    IngestError
+        Naming the first line whose timestamp cannot be read, or a local time that does not exist.
+    """
+    dtype = raw.dtype
+    if isinstance(dtype, pl.Datetime):
+        if dtype.time_zone is not None:
+            return raw.dt.convert_time_zone("UTC").cast(UTC_NS)
+        return localize(raw, timezone, groups=groups, lines=lines, tags=tags)
+    if dtype == pl.Date:
+        return localize(raw.cast(pl.Datetime("ns")), timezone, groups=groups, lines=lines, tags=tags)
+    if dtype.is_numeric():
+        if fmt != "epoch_ms":
+            raise IngestError(f"timestamps are numbers, but export.timestamp_format is {fmt!r} (expected 'epoch_ms' for numbers)")
+        return _epoch_ms(raw)
+    if dtype not in (pl.String, pl.Categorical) and not isinstance(dtype, pl.Enum):
+        raise IngestError(f"timestamp column has type {dtype}, expected text, epoch milliseconds or a datetime")
+    text = raw.cast(pl.String)
+    present = text.is_not_null()
+    if fmt == "epoch_ms":
+        stripped = text.str.strip_chars()
+        out = _epoch_ms(stripped.cast(pl.Int64, strict=False))
+        missing = out.is_null() & present
+        if missing.any():
+            exact = stripped.cast(pl.Decimal(38, 6), strict=False) * 1_000_000
+            out = pl.select(pl.coalesce(out, exact.cast(pl.Int64).cast(UTC_NS))).to_series()
+        ok = out.is_not_null() | ~present
+        if not ok.all():
+            raise _first_failure(text, ok, lines, fmt, tags)
+        return out
+    if fmt == "iso8601":
+        first = text.drop_nulls()
+        candidates = _iso_formats(first[0]) if len(first) else []
+    else:
+        zoned = any(d in fmt for d in _ZONED_DIRECTIVES)
+        candidates = [(fmt, zoned)]
+    return _parse_text(text, candidates, fmt, timezone, groups=groups, lines=lines, tags=tags)
+
+
+def _epoch_ms(values: pl.Series) -> pl.Series:
+    if values.dtype.is_integer():
+        ns = values.cast(pl.Int64) * 1_000_000
+    else:
+        ns = (values.cast(pl.Float64) * 1e6).round(0).cast(pl.Int64)
+    return ns.cast(UTC_NS)
+
+
+def _parse_text(
+    text: pl.Series,
+    candidates: list[tuple[str, bool]],
+    fmt: str,
+    timezone: str,
+    *,
+    groups: pl.Series | None,
+    lines: pl.Series | None,
+    tags: pl.Series | None,
+) -> pl.Series:
+    """Try the candidate formats in turn on the rows still unread; local ones are localised."""
+    n = len(text)
+    todo = text.is_not_null().arg_true()
+    zoned_out: pl.Series | None = None
+    naive_out: pl.Series | None = None
+    for pattern, zoned in candidates:
+        if len(todo) == 0:
+            break
+        whole = len(todo) == n
+        sub = text if whole else text.gather(todo)
+        parsed = sub.str.to_datetime(pattern, time_unit="ns", strict=False)
+        if zoned:
+            parsed = parsed.dt.convert_time_zone("UTC") if parsed.dtype.time_zone else parsed.dt.replace_time_zone("UTC")
+        elif parsed.dtype.time_zone:
+            parsed = parsed.dt.replace_time_zone(None)
+        ok = parsed.is_not_null()
+        n_ok = int(ok.sum())
+        if n_ok:
+            if whole and n_ok == n:
+                placed = parsed
+            else:
+                placed = pl.Series(text.name, [None] * n, dtype=parsed.dtype).scatter(todo.filter(ok), parsed.filter(ok))
+            if zoned:
+                zoned_out = placed if zoned_out is None else pl.select(pl.coalesce(zoned_out, placed)).to_series()
+            else:
+                naive_out = placed if naive_out is None else pl.select(pl.coalesce(naive_out, placed)).to_series()
+        todo = todo.filter(~ok)
+    if len(todo):
+        ok = pl.Series([True] * n).scatter(todo, False)
+        raise _first_failure(text, ok, lines, fmt, tags)
+    if naive_out is not None:
+        local = localize(naive_out, timezone, groups=groups, lines=lines, tags=tags)
+        return local if zoned_out is None else pl.select(pl.coalesce(zoned_out, local)).to_series()
+    if zoned_out is None:
+        return pl.Series(text.name, [None] * n, dtype=UTC_NS)
+    return zoned_out.cast(UTC_NS)
