@@ -86,11 +86,22 @@ def lake_frame(t_s, ps, pr, p1, p2, x, xc, *, valve_id: str = "V1", start: datet
 
 @dataclass(frozen=True)
 class EdgeTruth:
+    """α_e A_e(u) = alpha_e · slope_e · max(u + shift_e, 0): sharp, leak-free edges."""
+
     alpha: dict
-    slope: dict  # A_e(u) = slope_e * max(u, 0)
+    slope: dict
+    shift: dict | None = None
 
     def area(self, edge: str, u) -> np.ndarray:
-        return self.alpha[edge] * self.slope[edge] * np.maximum(np.asarray(u), 0.0)
+        d = 0.0 if self.shift is None else self.shift[edge]
+        return self.alpha[edge] * self.slope[edge] * np.maximum(np.asarray(u) + d, 0.0)
+
+    def changed(self, alpha_factor: float, shift_m: float) -> EdgeTruth:
+        return EdgeTruth(
+            alpha={e: a * alpha_factor for e, a in self.alpha.items()},
+            slope=self.slope,
+            shift={e: shift_m for e in self.alpha},
+        )
 
 
 TRUTH = EdgeTruth(
