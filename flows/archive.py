@@ -660,12 +660,12 @@ def write_archive(
     toml_path.write_bytes(tomli_w.dumps(plant_config_to_dict(config)).encode())
 
     # Columns: every configured tag, valve by valve, signal by signal.
-    cols: list[tuple[int, str, float]] = []  # (run index, signal, factor SI → unit)
+    cols: list[tuple[int, str, float]] = []  # (run index, signal, si_factor of the tag's unit)
     tags, decimals = [], []
     for i, r in enumerate(runs):
         for s in SIGNALS:
             if s in r.spec.tags:
-                cols.append((i, s, 1.0 / r.spec.si_factor(s)))
+                cols.append((i, s, r.spec.si_factor(s)))
                 tags.append(r.spec.tags[s].tag)
                 decimals.append(_tag_decimals(r.spec, s, r.params.sensors))
     columns = ExportColumns(tuple(tags), tuple(decimals))
@@ -703,7 +703,7 @@ def write_archive(
                             m = simulate_batch(params, [(runs[i], int(slot_starts[k])) for i, k in call], plan, seed)
                             for w, (i, k) in enumerate(call):
                                 for j, s, factor in cols_of[i]:
-                                    np.multiply(m[s][w], factor, out=values[k, :, j])
+                                    np.divide(m[s][w], factor, out=values[k, :, j])
                     t1 = time.perf_counter()
                     rows_per_chunk = max(1, CHUNK_ROWS // len(cols)) if config.export.layout == "long" else n_samp
                     for w, s0 in enumerate(slot_starts):

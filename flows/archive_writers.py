@@ -67,10 +67,15 @@ class ExportColumns:
             raise ValueError("tags must be unique")
 
     def round(self, values: np.ndarray) -> np.ndarray:
-        """``values`` (n, n_tags) rounded column by column, in place; returns it."""
+        """``values`` (n, n_tags) rounded column by column (half to even, :func:`numpy.round`),
+        in place, with -0.0 made 0.0; returns it."""
         for d in sorted({d for d in self.decimals if d is not None}):
             cols = [i for i, di in enumerate(self.decimals) if di == d]
-            values[:, cols] = np.round(values[:, cols], d)
+            if len(cols) == values.shape[1]:
+                np.round(values, d, out=values)
+            else:
+                values[:, cols] = np.round(values[:, cols], d)
+        values += 0.0
         return values
 
 
