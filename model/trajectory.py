@@ -164,17 +164,22 @@ def reference_trajectory(rng: np.random.Generator, duration_s: float, sample_rat
         v_rng = traj.v_extend_m_s if direction > 0 else traj.v_retract_m_s
         v_peak = float(rng.uniform(*v_rng))
         target = X + direction * dist
-        mask = t >= t_now
+        k0 = int(math.ceil(t_now * sample_rate_hz - 1e-9))
         if traj.profile == "cosine":
             t_ramp = float(rng.uniform(*traj.ramp_s))
-            p, v, T_m = cosine_move(t[mask], t_now, X, target, v_peak, t_ramp)
+            T_m = cosine_move(0.0, 0.0, X, target, v_peak, t_ramp)[2]
+            k1 = min(n, int(math.ceil((t_now + T_m) * sample_rate_hz)) + 1)
+            p, v, _ = cosine_move(t[k0:k1], t_now, X, target, v_peak, t_ramp)
         elif traj.profile == "minimum_jerk":
             T_m = 1.875 * dist / v_peak
-            p, v = minimum_jerk(t[mask], t_now, T_m, X, target)
+            k1 = min(n, int(math.ceil((t_now + T_m) * sample_rate_hz)) + 1)
+            p, v = minimum_jerk(t[k0:k1], t_now, T_m, X, target)
         else:
             raise ValueError(f"unknown move profile {traj.profile!r}")
-        pos[mask] = p
-        vel[mask] = v
+        pos[k0:k1] = p
+        vel[k0:k1] = v
+        pos[k1:] = target
+        vel[k1:] = 0.0
         X = target
         t_now += T_m + float(rng.uniform(*traj.dwell_s))
         direction = -direction
