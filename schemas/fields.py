@@ -214,3 +214,58 @@ INGEST_RUN_FIELDS: tuple[Field, ...] = (
 RAW_ROW_SCHEMA = pandera_schema(RAW_ROW_FIELDS, "raw_rows")
 QUARANTINE_SCHEMA = pandera_schema(QUARANTINE_FIELDS, "quarantine")
 GAP_SCHEMA = pandera_schema(GAP_FIELDS, "ingest_gaps")
+
+# --- monitoring (steps 2–6) ----------------------------------------------------------------
+
+EDGE_FIT_FIELDS: tuple[Field, ...] = (
+    Field("valve_id", pl.Utf8, "", "Valve identifier."),
+    Field("edge", pl.Utf8, "", "Control edge.", isin=EDGES),
+    Field("window_start", UTC_US, "", "First sample of the monitoring window (UTC)."),
+    Field("window_end", UTC_US, "", "Last sample of the monitoring window (UTC)."),
+    Field("operating_hours", pl.Float64, "h", "Calendar hours since commissioning at window_start."),
+    Field("n_points", pl.Int32, "", "Opening-area points used by the fit.", ge=0),
+    Field("alpha_hat", pl.Float64, "", "Relative change of α against the baseline (1 = unchanged).", nullable=True),
+    Field("x_hat_mm", pl.Float64, "mm", "Change of underlap in the edge's opening coordinate; > 0 = more open.", nullable=True),
+    Field("x_hat_pct", pl.Float64, "%", "x_hat_mm in % of x_max.", nullable=True),
+    Field("e_mm2", pl.Float64, "mm²", "Normalised error of Eq. 8 (RMS residual).", nullable=True),
+    Field("status", pl.Utf8, "", "ok, or why the window gave no estimate."),
+    Field("alpha_ci_low", pl.Float64, "", "Lower bound of the 95 % confidence interval of alpha_hat.", nullable=True),
+    Field("alpha_ci_high", pl.Float64, "", "Upper bound of the 95 % confidence interval of alpha_hat.", nullable=True),
+    Field("x_hat_ci_low_mm", pl.Float64, "mm", "Lower bound of the 95 % confidence interval of x_hat_mm.", nullable=True),
+    Field("x_hat_ci_high_mm", pl.Float64, "mm", "Upper bound of the 95 % confidence interval of x_hat_mm.", nullable=True),
+    Field("u_min_mm", pl.Float64, "mm", "Smallest opening coordinate among the points.", nullable=True),
+    Field("u_max_mm", pl.Float64, "mm", "Largest opening coordinate among the points.", nullable=True),
+    Field("baseline_version", pl.Int32, "", "Version of the baseline characteristic fitted against.", nullable=True),
+    Field("monitored_at", UTC_US, "", "When this row was computed."),
+)
+"""One row per valve, edge and monitoring window (table ``edge_fits``, interfaces.md)."""
+
+BASELINE_FIELDS: tuple[Field, ...] = (
+    Field("valve_id", pl.Utf8, "", "Valve identifier."),
+    Field("edge", pl.Utf8, "", "Control edge.", isin=EDGES),
+    Field("version", pl.Int32, "", "Version per valve and edge, 1, 2, … (a new definition adds one).", ge=1),
+    Field("source", pl.Utf8, "", "nominal (α_nominal·A(u), Eq. 3) or commissioning (step 4a fit).", isin=("nominal", "commissioning")),
+    Field("definition", pl.Utf8, "", "What the baseline was built from (design data, window); a change makes a new version."),
+    Field("knots_u_mm", pl.List(pl.Float64), "mm", "Knots of the piecewise-linear characteristic in the opening coordinate."),
+    Field("values_mm2", pl.List(pl.Float64), "mm²", "α·A at the knots."),
+    Field("n_points", pl.Int32, "", "Points of the commissioning fit (0 for nominal).", ge=0),
+    Field("plausible", pl.Boolean, "", "Step 5a: value and shape agree with the nominal characteristic."),
+    Field("plausibility_reasons", pl.Utf8, "", "Failed checks of step 5a, '; '-separated (empty when plausible)."),
+    Field("alpha_vs_nominal", pl.Float64, "", "Scale of the baseline against the nominal characteristic.", nullable=True),
+    Field("x_vs_nominal_mm", pl.Float64, "mm", "Shift of the baseline against the nominal characteristic.", nullable=True),
+    Field("created_at", UTC_US, "", "When this version was stored."),
+)
+"""Versioned baseline characteristics per valve and edge (table ``baselines``)."""
+
+SELECTION_FIELDS: tuple[Field, ...] = (
+    Field("valve_id", pl.Utf8, "", "Valve identifier."),
+    Field("edge", pl.Utf8, "", "Control edge.", isin=EDGES),
+    Field("window_start", UTC_US, "", "First sample of the window (UTC)."),
+    Field("window_end", UTC_US, "", "Last sample of the window (UTC)."),
+    Field("rule", pl.Utf8, "", "Step-3 rule: no_derivative, standstill, pressure_peak, spool_range, small_dp."),
+    Field("n_samples", pl.Int64, "", "Samples in the window.", ge=0),
+    Field("n_flagged", pl.Int64, "", "Samples the rule flags on its own.", ge=0),
+    Field("n_removed", pl.Int64, "", "Samples the rule removes that no earlier rule removed.", ge=0),
+    Field("n_selected", pl.Int64, "", "Samples left for the edge after all rules.", ge=0),
+)
+"""What each step-3 rule removed, per window and edge (table ``selection_stats``)."""
