@@ -356,7 +356,7 @@ def fit_arrays(
     *,
     x_bound_m: float | np.ndarray = 1.5e-3,
     min_points: int | np.ndarray = 500,
-    min_coverage_m: float | np.ndarray = 0.5e-3,
+    min_coverage_m: float | np.ndarray = 0.25e-3,
     ci_level: float = 0.95,
     n_grid: int = 41,
     sub_max: int = 256,

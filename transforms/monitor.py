@@ -99,11 +99,15 @@ def _valve_slices(lake: pl.DataFrame) -> tuple[pl.DataFrame, list[tuple[str, int
 def monitor_points(
     lake: pl.DataFrame,
     params: Mapping[str, MonitorParams] | MonitorParams,
+    *,
+    leakage: Mapping[str, Mapping[str, Characteristic]] | None = None,
 ) -> MonitorResult:
     """Steps 2–3 and Eq. 7 for a lake frame of one or more valves (no fit; ``fits`` is empty).
 
     Use it for the commissioning window, whose points feed step 4a
-    (:func:`transforms.characteristic.fit_characteristic`).
+    (:func:`transforms.characteristic.fit_characteristic`). ``leakage[valve][edge]``: nominal
+    α·A per edge; when given, Eq. 7 subtracts the closed edge's flow
+    (:func:`transforms.points.area_expr`) for that valve.
     """
     missing = [c for c in LAKE_COLUMNS if c not in lake.columns]
     if missing:
@@ -116,7 +120,10 @@ def monitor_points(
         stats.append(selection_stats(framed))
         windows.append(window_table(framed))
         points.append(
-            opening_area_points(framed, p, selected={e: pl.col(selected_column(e)) for e in EDGES})
+            opening_area_points(
+                framed, p, selected={e: pl.col(selected_column(e)) for e in EDGES},
+                leakage=None if leakage is None else leakage.get(valve_id),
+            )
         )
     if not slices:  # no rows: empty frames with the right schemas
         p = params if isinstance(params, MonitorParams) else next(iter(params.values()), None)
@@ -138,14 +145,17 @@ def monitor(
     lake: pl.DataFrame,
     params: Mapping[str, MonitorParams] | MonitorParams,
     baselines: Mapping[str, Mapping[str, Characteristic]],
+    *,
+    leakage: Mapping[str, Mapping[str, Characteristic]] | None = None,
 ) -> MonitorResult:
     """Steps 2–4b: lake rows of one or more valves → points, selection statistics and fits.
 
     ``params``: one :class:`MonitorParams` per valve (or one for all); ``baselines[valve][edge]``:
     Â per edge (the commissioning fit or the nominal characteristic). A window/edge without a
-    usable population still gets a fit row with its status.
+    usable population still gets a fit row with its status. ``leakage``: as in
+    :func:`monitor_points` (the baselines must have been built the same way).
     """
-    res = monitor_points(lake, params)
+    res = monitor_points(lake, params, leakage=leakage)
     valves = res.windows["valve_id"].unique().to_list()
     pmap = {v: _params_for(params, v) for v in valves}
     fits = fit_windows(res.points, baselines, pmap, windows=res.windows)

@@ -55,16 +55,23 @@ Spool margin 1 mm above the largest underlap of the opposite side (model.md).
     like 1/|u|: within 0.1 mm of the underlap the plain formula is off by 20–100 %, beyond 1 mm
     by at most a few per cent.
 
-|Δp| across the edge ≥ 10 bar.
-    A ∝ 1/sqrt|Δp|: a pressure error δ gives a relative area error δ/(2|Δp|). With σ ≈ 0.14 bar
-    for the difference of two raw sensors (less after smoothing) that is ≤ 0.7 % per point, and a
-    sensor offset of 0.5 bar biases by ≤ 2.5 %. Near Δp = 0 even the flow direction is unknown.
+|Δp| across the edge ≥ 2 bar.
+    A ∝ 1/sqrt|Δp|: a pressure error δ gives a relative area error δ/(2|Δp|). The smoothed
+    chamber pressure (0.33 × 0.05 bar) against the raw supply/return sensor (0.05 bar) leaves
+    σ ≈ 0.05 bar, 1.3 % per point at 2 bar (random, it averages out); a 0.1 bar sensor offset
+    biases by 2.5 % at 2 bar and 0.6 % at 8 bar. The bound must stay well below the drops a fault
+    produces: the paper's broken edge 1r (α ×2.5, +0.41 mm) is so open that p1 − p_r falls to
+    8–10 bar while it carries the retracting flow (simulated with model/), so a 10 bar bound
+    would throw away exactly the points that show the fault. Near Δp = 0 even the flow
+    direction is unknown.
 
-At least 500 points and 0.5 mm of u-coverage for a fit.
+At least 500 points and 0.25 mm of u-coverage for a fit.
     Points are correlated over the 21-sample stencil, so 500 points are about 25 independent
-    derivative estimates. α̂ and x̂ are separated by the slope of Â over u; with the usable range
-    [underlap + 1 mm, x_max] ≈ 2.5 mm, a population covering less than 0.5 mm (20 % of it) cannot
-    tell a scale from a shift.
+    derivative estimates. α̂ and x̂ are separated by the slope of Â over u. The usable range
+    is [underlap + 1 mm, x_max] ≈ 2.5 mm, but a too-open edge needs little spool stroke: on the
+    simulated broken edge 1r of Table 2 the points cover only 1.04–1.45 mm, and still give
+    α̂ = 2.50 ± 0.01, x̂ = 0.41 ± 0.006 mm (truth 2.5, 0.413 mm). A population narrower than
+    0.25 mm (10 % of the usable range) is reported as ``too_little_coverage``.
 
 Fit search |x̂| ≤ 1.5 mm (43 % of x_max).
     The paper's broken edge is at +0.41 mm (11.8 % x_max), its worn edge at +0.13 mm; the
@@ -126,11 +133,11 @@ class MonitorParams:
     peak_dpdt_pa_s: float = 2e9
     compressibility_ratio_max: float = 0.5
     spool_margin_m: float = 1e-3
-    min_dp_pa: float = 1e6
+    min_dp_pa: float = 2e5
 
     # step 4a / 4b
     min_points: int = 500
-    min_coverage_m: float = 0.5e-3
+    min_coverage_m: float = 0.25e-3
     x_hat_bound_m: float = 1.5e-3
     ci_level: float = 0.95
     max_knots: int = 12

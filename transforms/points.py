@@ -10,6 +10,16 @@ as carrying no flow:
 
 Each point is reported at the edge's opening coordinate u = +x (s1, 2r) or u = −x (1r, s2).
 Which samples become points is step 3 (:mod:`transforms.selection`); here only the formulas.
+
+Optionally (model.md's alternative to a wide spool margin) the flow through the nominally closed
+edge o of the same port is subtracted, using a given characteristic α_o·A_o (e.g. the nominal
+one) at that edge's own opening coordinate u_o = −u:
+
+    α_e A_e(x) = [ sqrt(ρ/2) N / β − α_o A_o(−u) sign(Δp_o) sqrt|Δp_o| ] / (sign(Δp_e) sqrt|Δp_e|)
+
+with N the numerator above. On simulated states this removes the few per cent of leakage bias
+left at 1 mm from closing (worst on s2). A baseline and the windows fitted against it must be
+computed the same way (both with or both without the correction).
 """
 
 from __future__ import annotations
@@ -20,14 +30,17 @@ from math import sqrt
 
 import polars as pl
 
+from transforms.characteristic import Characteristic
 from transforms.params import EDGES, MonitorParams
 
 __all__ = [
     "EDGE_PORT",
     "EDGE_SIGN",
+    "OPPOSITE_EDGE",
     "POINT_COLUMNS",
     "Signals",
     "area_expr",
+    "characteristic_expr",
     "edge_dp_expr",
     "opening_area_points",
     "opening_coordinate_expr",
@@ -37,6 +50,8 @@ __all__ = [
 EDGE_PORT: dict[str, int] = {"s1": 1, "1r": 1, "s2": 2, "2r": 2}
 EDGE_SIGN: dict[str, int] = {"s1": +1, "1r": -1, "s2": -1, "2r": +1}
 """u = EDGE_SIGN[edge] · x."""
+OPPOSITE_EDGE: dict[str, str] = {"s1": "1r", "1r": "s1", "s2": "2r", "2r": "s2"}
+"""The other edge of the same port (closed when ``edge`` is open)."""
 
 POINT_COLUMNS = ("valve_id", "window_id", "window_start", "timestamp_utc", "edge", "u_m", "area_m2")
 
@@ -98,15 +113,37 @@ def opening_coordinate_expr(edge: str, signals: Signals = DEFAULT_SIGNALS) -> pl
     return x if EDGE_SIGN[edge] > 0 else -x
 
 
-def area_expr(edge: str, params: MonitorParams, signals: Signals = DEFAULT_SIGNALS) -> pl.Expr:
+def characteristic_expr(characteristic: Characteristic, u: pl.Expr) -> pl.Expr:
+    """A piecewise-linear characteristic evaluated on an expression (numpy inside a batch)."""
+    return u.map_batches(
+        lambda s: pl.Series(characteristic.evaluate(s.to_numpy()), dtype=pl.Float64),
+        return_dtype=pl.Float64,
+    )
+
+
+def area_expr(
+    edge: str,
+    params: MonitorParams,
+    signals: Signals = DEFAULT_SIGNALS,
+    *,
+    leakage: Characteristic | None = None,
+) -> pl.Expr:
     """α·A of ``edge`` by Eq. 7 (or its sibling), exactly as model.md writes it.
 
+    ``leakage``: α·A of the *other* edge of the same port (:data:`OPPOSITE_EDGE`) in its own
+    opening coordinate; when given, that edge's flow is subtracted (module docstring).
     Infinite/NaN where Δp = 0; step 3 removes such samples (minimum |Δp|).
     """
     _check_edge(edge)
     dp = edge_dp_expr(edge, signals)
     num = port_numerator_expr(EDGE_PORT[edge], params, signals)
-    return (sqrt(params.density_kg_m3 / 2.0) * num) / (params.bulk_modulus_pa * dp.sign() * dp.abs().sqrt())
+    denom = params.bulk_modulus_pa * dp.sign() * dp.abs().sqrt()
+    if leakage is None:
+        return (sqrt(params.density_kg_m3 / 2.0) * num) / denom
+    other = OPPOSITE_EDGE[edge]
+    dpo = edge_dp_expr(other, signals)
+    leak = characteristic_expr(leakage, opening_coordinate_expr(other, signals)) * dpo.sign() * dpo.abs().sqrt()
+    return (sqrt(params.density_kg_m3 / 2.0) * num / params.bulk_modulus_pa - leak) / (dp.sign() * dp.abs().sqrt())
 
 
 def opening_area_points(
@@ -116,13 +153,15 @@ def opening_area_points(
     selected: Mapping[str, pl.Expr] | None = None,
     signals: Signals = DEFAULT_SIGNALS,
     edges: tuple[str, ...] = EDGES,
+    leakage: Mapping[str, Characteristic] | None = None,
 ) -> pl.DataFrame | pl.LazyFrame:
     """Long frame of points ``valve_id, window_id, window_start, timestamp_utc, edge, u_m, area_m2``.
 
     ``selected[edge]`` is a boolean expression choosing the rows that become the edge's points
     (from :func:`transforms.selection.selected_expr`); without it every row with a derivative
     becomes a point of every edge. Rows are grouped by edge (in :data:`EDGES` order), in time
-    order within an edge.
+    order within an edge. ``leakage[edge]``: α·A of each edge for the closed-edge correction
+    (:func:`area_expr`); edge e uses ``leakage[OPPOSITE_EDGE[e]]``.
     """
     parts = []
     for edge in edges:
@@ -135,7 +174,10 @@ def opening_area_points(
                 pl.col("timestamp_utc"),
                 pl.lit(edge, dtype=pl.Utf8).alias("edge"),
                 opening_coordinate_expr(edge, signals).alias("u_m"),
-                area_expr(edge, params, signals).alias("area_m2"),
+                area_expr(
+                    edge, params, signals,
+                    leakage=None if leakage is None else leakage[OPPOSITE_EDGE[edge]],
+                ).alias("area_m2"),
             )
         )
     return pl.concat(parts, how="vertical")

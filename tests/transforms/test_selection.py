@@ -53,8 +53,8 @@ def test_standstill_peaks_small_dp_and_missing():
         v_cyl_m_s=[0.05, 0.004, -0.004, 0.05, 0.05, 0.05, 0.05, 0.05, 0.05],
         dp1_dt_pa_s=[0.0, 0.0, 0.0, 3e9, 0.0, 0.0, 0.0, 0.0, None],
         dp2_dt_pa_s=[0.0, 0.0, 0.0, 0.0, -3e9, 0.0, 0.0, 0.0, 0.0],
-        p1_smooth_pa=[60e5, 60e5, 60e5, 60e5, 60e5, sv.PS - 5e5, 60e5, 60e5, 60e5],
-        p2_smooth_pa=[140e5, 140e5, 140e5, 140e5, 140e5, 140e5, sv.PR + 5e5, 140e5, 140e5],
+        p1_smooth_pa=[60e5, 60e5, 60e5, 60e5, 60e5, sv.PS - 1e5, 60e5, 60e5, 60e5],
+        p2_smooth_pa=[140e5, 140e5, 140e5, 140e5, 140e5, 140e5, sv.PR + 1e5, 140e5, 140e5],
     )
     # row 7: compressibility flow on port 1 larger than half the displacement flow
     rows = rows.with_columns(

@@ -103,15 +103,12 @@ def process_export(df: pl.DataFrame, config: PlantConfig, *, first_line: int = 2
     t_all = acc["timestamp_utc"].to_physical().to_numpy()
     v_all = acc["value_si"].to_numpy()
     line_all = acc["line"].to_numpy()
-    order = np.argsort(tag_id, kind="stable")
-    sorted_ids = tag_id[order]
-    present_ids = np.unique(sorted_ids)
-    bounds = np.searchsorted(sorted_ids, np.r_[present_ids, np.iinfo(np.int32).max])
+    present_ids = np.flatnonzero(np.bincount(tag_id, minlength=len(tags.tags))) if len(tag_id) else []
 
     gridded: dict[str, dict] = {}
     gap_frames = []
-    for j, tid in enumerate(present_ids):
-        sel = order[bounds[j] : bounds[j + 1]]
+    for tid in present_ids:
+        sel = np.flatnonzero(tag_id == tid) if len(present_ids) > 1 else slice(None)
         tag, valve_id, signal = tags.tags[tid], tags.valve_ids[tid], tags.signals[tid]
         series = prepare_tag(t_all[sel], v_all[sel], line_all[sel], export.duplicate_rule, tag)
         counts.duplicates += series.duplicates

@@ -47,7 +47,7 @@ def assemble_valve(valve_id: str, signals: dict[str, Gridded]) -> pl.DataFrame:
     for s, col in SIGNAL_COLUMN.items():
         g = signals.get(s)
         if g is None:
-            data[col] = pl.Series(col, [None] * len(t), dtype=pl.Float64)
+            data[col] = pl.repeat(None, len(t), dtype=pl.Float64, eager=True).alias(col)
             continue
         if len(g.t_us) == len(t) and np.array_equal(g.t_us, t):
             data[col] = g.values

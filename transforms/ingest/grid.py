@@ -157,8 +157,7 @@ def to_grid(t_ns: np.ndarray, values: np.ndarray, grid: Grid) -> Gridded:
     d = np.diff(t_ns)
     breaks = np.flatnonzero(d > grid.max_gap_ns)
     gap_start, gap_end = t_ns[breaks], t_ns[breaks + 1]
-    on_grid = t_ns % P == 0
-    if on_grid.all() and np.all((d == P) | (d > grid.max_gap_ns)):
+    if t_ns[0] % P == 0 and (np.array_equal(d, np.full_like(d, P)) or (np.all(t_ns % P == 0) and np.all((d == P) | (d > grid.max_gap_ns)))):
         # exactly gridded and nothing missing inside a segment: the samples are the grid
         return Gridded(t_ns // NS_PER_US, values, gap_start, gap_end)
     seg_first = np.r_[0, breaks + 1]

@@ -80,14 +80,14 @@ def _require_columns(df: pl.DataFrame, wanted: dict[str, str]) -> None:
             raise IngestError(f"missing column {name!r} (export.{key}); the file's columns are {found}")
 
 
-def _value_checks(col: pl.Series, decimal: str) -> tuple[pl.Series, pl.Series, pl.Series, pl.Series]:
-    """Numeric values and three masks: missing, non-numeric, non-finite."""
+def _value_checks(col: pl.Series, decimal: str) -> tuple[pl.Series, pl.Series | None, pl.Series | None, pl.Series | None]:
+    """Numeric values and three masks: missing, non-numeric, non-finite (None: no such value)."""
     if col.dtype == pl.Null:
         col = col.cast(pl.Float64)
     if col.dtype.is_numeric() or col.dtype == pl.Boolean:
         values = col.cast(pl.Float64)
-        missing = values.is_null()
-        non_numeric = pl.Series(np.zeros(len(col), dtype=bool))
+        missing = values.is_null() if values.null_count() else None
+        non_numeric = None
     else:
         text = col.cast(pl.String).str.strip_chars()
         if decimal == ",":
@@ -96,6 +96,8 @@ def _value_checks(col: pl.Series, decimal: str) -> tuple[pl.Series, pl.Series, p
         missing = text.is_null() | (text.str.len_bytes() == 0)
         non_numeric = values.is_null() & ~missing
     non_finite = ~values.is_finite().fill_null(True)
+    if not non_finite.any():
+        non_finite = None
     return values, missing, non_numeric, non_finite
 
 
@@ -113,7 +115,7 @@ def _quarantine_frame(
             "tag": tag.cast(pl.String),
             "timestamp_raw": _raw_text(ts_raw),
             "value_raw": _raw_text(value_raw),
-            "quality": pl.Series([None] * n, dtype=pl.String) if quality is None else _raw_text(quality),
+            "quality": pl.repeat(None, n, dtype=pl.String, eager=True) if quality is None else _raw_text(quality),
             "reason": reason,
         }
     )
@@ -135,13 +137,18 @@ def _reason(missing_tag, bad_quality, missing, non_numeric, non_finite) -> pl.Ex
 def _drop_blank(df: pl.DataFrame, first_line: int) -> tuple[pl.DataFrame, pl.Series]:
     """Drop all-null rows (blank lines); the line number of every remaining row."""
     lines = pl.int_range(first_line, first_line + df.height, dtype=pl.Int64, eager=True)
-    if df.width == 0 or df.height == 0:
+    if df.width == 0 or df.height == 0 or not any(df[c].null_count() for c in df.columns):
         return df, lines
     blank = df.select(pl.all_horizontal(pl.all().is_null())).to_series()
     if blank.any():
         keep = ~blank
         return df.filter(keep), lines.filter(keep)
     return df, lines
+
+
+def _tag_ids(tag_s: pl.Series, tags: TagTable) -> pl.Series:
+    """Tag id of each row (null for a missing or unknown tag), via an Enum of the plant's tags."""
+    return tag_s.cast(pl.Enum(tags.tags), strict=False).to_physical().cast(pl.Int32)
 
 
 def long_samples(df: pl.DataFrame, export: ExportSpec, timezone: str, tags: TagTable, *, first_line: int = 2) -> Samples:
@@ -167,10 +174,11 @@ def long_samples(df: pl.DataFrame, export: ExportSpec, timezone: str, tags: TagT
     _require_columns(df, wanted)
     df, lines = _drop_blank(df.select(list(wanted.values())), first_line)
     n = df.height
-    tag_s = df[export.tag_column].cast(pl.String)
-    tag_id = tag_s.replace_strict(tags.ids, default=None, return_dtype=pl.Int32)
-    unknown = tag_id.is_null() & tag_s.is_not_null()
-    if unknown.any():
+    tag_s = df[export.tag_column]
+    tag_s = tag_s if tag_s.dtype == pl.String else tag_s.cast(pl.String)
+    tag_id = _tag_ids(tag_s, tags)
+    unknown = tag_id.is_null() & tag_s.is_not_null() if tag_id.null_count() else None
+    if unknown is not None and unknown.any():
         i = int(unknown.arg_true()[0])
         raise IngestError(f"unknown tag {tag_s[i]!r}: no valve of the plant configuration has it", line=int(lines[i]))
     ts_raw = df[export.timestamp_column]
@@ -179,14 +187,17 @@ def long_samples(df: pl.DataFrame, export: ExportSpec, timezone: str, tags: TagT
         i = int(ts.is_null().arg_true()[0])
         raise IngestError("missing timestamp", line=int(lines[i]), tag=tag_s[i])
     values, missing, non_numeric, non_finite = _value_checks(df[export.value_column], export.decimal)
-    missing_tag = tag_s.is_null()
+    missing_tag = tag_s.is_null() if tag_s.null_count() else None
     bad_quality = None
     if export.quality_column:
         bad_quality = ~df[export.quality_column].cast(pl.String).is_in(list(export.good_quality)).fill_null(False)
     masks = (missing_tag, bad_quality, missing, non_numeric, non_finite)
-    rejected = pl.select(pl.any_horizontal([pl.lit(m) for m in masks if m is not None])).to_series()
-    tags_present = frozenset(tag_s.drop_nulls().unique().to_list())
-    if rejected.any():
+    used = [m for m in masks if m is not None]
+    rejected = pl.select(pl.any_horizontal([pl.lit(m) for m in used])).to_series() if used else None
+    ids = tag_id.drop_nulls().to_numpy()
+    counts = np.bincount(ids, minlength=len(tags.tags)) if len(ids) else np.zeros(len(tags.tags), dtype=np.int64)
+    tags_present = frozenset(tags.tags[i] for i in np.flatnonzero(counts))
+    if rejected is not None and rejected.any():
         sub = rejected.arg_true()
         reason = pl.select(_reason(*(None if m is None else m.gather(sub) for m in masks))).to_series()
         quarantine = _quarantine_frame(
@@ -253,14 +264,15 @@ def wide_samples(df: pl.DataFrame, export: ExportSpec, timezone: str, tags: TagT
     present_tags = []
     for c in tag_columns:
         values, missing, non_numeric, non_finite = _value_checks(df[c], export.decimal)
-        present = ~missing
+        present = pl.Series(np.ones(n, dtype=bool)) if missing is None else ~missing
         n_present = int(present.sum())
         if n_present == 0:
             continue
         present_tags.append(c)
         samples_in += n_present
         masks = (None, None if bad_quality is None else bad_quality & present, None, non_numeric, non_finite)
-        rejected = pl.select(pl.any_horizontal([pl.lit(m) for m in masks if m is not None])).to_series()
+        used = [m for m in masks if m is not None]
+        rejected = pl.select(pl.any_horizontal([pl.lit(m) for m in used])).to_series() if used else pl.Series(np.zeros(n, dtype=bool))
         if rejected.any():
             sub = rejected.arg_true()
             quarantined.append(

@@ -236,7 +236,7 @@ def _parse_text(
             if whole and n_ok == n:
                 placed = parsed
             else:
-                placed = pl.Series(text.name, [None] * n, dtype=parsed.dtype).scatter(todo.filter(ok), parsed.filter(ok))
+                placed = pl.repeat(None, n, dtype=parsed.dtype, eager=True).alias(text.name).scatter(todo.filter(ok), parsed.filter(ok))
             if zoned:
                 zoned_out = placed if zoned_out is None else pl.select(pl.coalesce(zoned_out, placed)).to_series()
             else:
@@ -249,5 +249,5 @@ def _parse_text(
         local = localize(naive_out, timezone, groups=groups, lines=lines, tags=tags)
         return local if zoned_out is None else pl.select(pl.coalesce(zoned_out, local)).to_series()
     if zoned_out is None:
-        return pl.Series(text.name, [None] * n, dtype=UTC_NS)
+        return pl.repeat(None, n, dtype=UTC_NS, eager=True).alias(text.name)
     return zoned_out.cast(UTC_NS)
