@@ -24,12 +24,12 @@ with it or how windows are batched.
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 import math
 import os
 import re
 import shutil
 import time
+from collections import deque
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from datetime import date, datetime, timedelta, timezone
@@ -40,6 +40,7 @@ import polars as pl
 import pyarrow.parquet as pq
 import tomli_w
 
+from flows.archive_sim import default_workers, run_ordered, simulate_measured, valve_key, window_rng  # noqa: F401 (window_rng: API)
 from flows.archive_writers import ExportColumns, decimals_for_step, export_suffix, open_day_writer
 from flows.config import load_plant_config
 from flows.errors import ValvemonError
@@ -55,9 +56,6 @@ from model.params import (
     ValveCondition,
     ValveGeometry,
 )
-from model.sensors import measure
-from model.simulate import simulate_inputs
-from model.trajectory import window_inputs
 from schemas.fields import SIGNAL_KIND, SIGNALS
 from schemas.plant_config import ConfigError, ExportSpec, PlantConfig, ValveSpec, parse_plant_config, plant_config_to_dict
 from schemas.units import si_factor
@@ -71,7 +69,7 @@ TAG_SUFFIX: dict[str, str] = {"ps": "PS", "pr": "PR", "p1": "P1", "p2": "P2", "x
 DEFAULT_COMMISSIONED = datetime(2025, 1, 1, tzinfo=timezone.utc)
 """Commissioning instant of the valves of a generated plant."""
 
-BATCH_SAMPLES = 1_000_000
+BATCH_SAMPLES = 500_000
 """Samples per simulator call (windows x samples per window), which bounds the memory."""
 
 CHUNK_ROWS = 4_000_000
@@ -119,19 +117,9 @@ def parse_scenario(spec: str, *, scatter_seed: int | None = None, x_max_m: float
     return mcond.broken_edge(edge, from_hours=from_h, underlap_increase_m=0.118 * x_max_m, scatter_seed=scatter_seed)
 
 
-def _valve_key(valve_id: str) -> int:
-    """A stable 64-bit number for a valve id (seeds must not depend on the valve's position)."""
-    return int.from_bytes(hashlib.sha256(valve_id.encode()).digest()[:8], "little")
-
-
 def scatter_seed(seed: int, valve_id: str) -> int:
-    """Seed of a valve's manufacturing scatter."""
-    return int(np.random.SeedSequence([int(seed), _valve_key(valve_id), 1]).generate_state(1, np.uint64)[0])
-
-
-def window_rng(seed: int, valve_id: str, window_start_us: int) -> np.random.Generator:
-    """The generator of one window of one valve: inputs first, then sensor noise."""
-    return np.random.default_rng([int(seed), _valve_key(valve_id), 2, int(window_start_us)])
+    """Seed of a valve's manufacturing scatter (from the seed and the valve id)."""
+    return int(np.random.SeedSequence([int(seed), valve_key(valve_id), 1]).generate_state(1, np.uint64)[0])
 
 
 def resolve_scenarios(config: PlantConfig, default: str | None, per_valve: dict[str, str]) -> dict[str, str]:
@@ -407,6 +395,8 @@ class ValveRun:
     scenario: mcond.Scenario
     commissioning: ValveCondition
     """As manufactured: the design condition with the valve's scatter, no wear, not broken."""
+    seed: int
+    """The archive's seed (windows are seeded with it, the valve id and their start)."""
 
     def hours(self, starts_us: np.ndarray) -> np.ndarray:
         """Operating hours (calendar time since commissioning) at ``starts_us``. [h]"""
@@ -425,7 +415,7 @@ def make_valve_runs(config: PlantConfig, scenarios: dict[str, str], seed: int) -
         ss = scatter_seed(seed, v.id)
         scen = parse_scenario(scenarios[v.id], scatter_seed=ss, x_max_m=v.design.x_max_m)
         commissioning = mcond.manufactured(params.nominal_condition, ss, scen.underlap_scatter_m, scen.alpha_scatter_rel)
-        runs.append(ValveRun(v, params, scenarios[v.id], scen, commissioning))
+        runs.append(ValveRun(v, params, scenarios[v.id], scen, commissioning, seed))
     return runs
 
 
@@ -495,54 +485,6 @@ def truth_frame(runs: Sequence[ValveRun], starts_us: np.ndarray, window_us: int)
     return df.with_columns(pl.col("window_start", "window_end").cast(pl.Datetime("us", "UTC"))).cast(TRUTH_SCHEMA)  # type: ignore[arg-type]
 
 
-# --- simulation ------------------------------------------------------------------------------
-
-
-def simulate_batch(params: PlantParams, windows: Sequence[tuple[ValveRun, int]], plan: ArchivePlan, seed: int) -> dict[str, np.ndarray]:
-    """Measured signals (SI) of a batch of windows of valves that share ``params``:
-    signal → (n_windows, n_samples).
-
-    ``windows`` holds (valve, window start [µs UTC]) pairs. One simulator call for the batch;
-    each window's condition follows its valve's scenario at the window's operating hours, and
-    its inputs and sensor noise come from :func:`window_rng` (seed, valve, window start)."""
-    conditions, rngs = [], []
-    for run, start in windows:
-        xu, al = run.conditions(np.array([start], dtype=np.int64))
-        conditions.append(ValveCondition(tuple(xu[0]), tuple(al[0]), run.params.nominal_condition.x_l_fraction))
-        rngs.append(window_rng(seed, run.spec.id, int(start)))
-    inputs = [window_inputs(params, plan.window_s, g) for g in rngs]
-    result = simulate_inputs(params, conditions, inputs)
-    return measure_windows(result, params.sensors, rngs)
-
-
-def measure_windows(result, sensors: SensorParams, rngs: Sequence[np.random.Generator]) -> dict[str, np.ndarray]:
-    """Sensor readings of every window of ``result``, each with its own generator."""
-    out = {s: np.empty((result.n_windows, result.n_samples)) for s in SIGNALS}
-    for w, g in enumerate(rngs):
-        m = measure(_window_of(result, w), sensors, g)
-        for s in SIGNALS:
-            out[s][w] = _signal(m, s)[0]
-    return out
-
-
-def _window_of(result, w: int):
-    """Window ``w`` of a batch result, as a batch of one."""
-    kw = {}
-    for f in dataclasses.fields(result):
-        val = getattr(result, f.name)
-        if isinstance(val, np.ndarray) and val.ndim == 2:
-            kw[f.name] = val[w : w + 1]
-        elif f.name == "conditions":
-            kw[f.name] = (val[w],)
-        else:
-            kw[f.name] = val
-    return dataclasses.replace(result, **kw)
-
-
-def _signal(m, signal: str) -> np.ndarray:
-    return getattr(m, signal)
-
-
 # --- the archive -----------------------------------------------------------------------------
 
 
@@ -559,12 +501,14 @@ class ArchiveSummary:
     bytes: int = 0
     valve_seconds: float = 0.0
     simulate_s: float = 0.0
+    """Time spent simulating, or (with workers) waiting for the simulation. [s]"""
     write_s: float = 0.0
+    """Time spent converting, formatting and writing. [s]"""
     wall_s: float = 0.0
 
 
 ProgressCallback = Callable[[int, float], None]
-"""Called after every batch with (windows just simulated, valve-seconds just simulated)."""
+"""Called after every simulator call with (windows just simulated, valve-seconds just simulated)."""
 
 
 def archive_paths(out: Path) -> tuple[Path, Path, Path]:
@@ -612,6 +556,53 @@ def prepare_out_dir(out: Path, overwrite: bool) -> None:
     exports.mkdir(parents=True, exist_ok=True)
 
 
+@dataclass(frozen=True)
+class _Call:
+    """One simulator call of the pipeline and where its windows go."""
+
+    day: date
+    day_starts: np.ndarray
+    slot_starts: np.ndarray
+    items: tuple[tuple[int, int], ...]
+    """(valve run index, slot index within ``slot_starts``) of each window."""
+    first_of_group: bool
+    last_of_group: bool
+
+
+def _calls(plan: ArchivePlan, runs: Sequence[ValveRun], batch_samples: int) -> Iterator[tuple[_Call, tuple]]:
+    """The simulator calls of an archive in file order, each with its task (function, arguments).
+
+    Day by day, the day's window slots in groups (as many slots as fit ``batch_samples`` with
+    every valve), within a group the valves that share simulator parameters together, split
+    into calls of at most ``batch_samples`` samples."""
+    n_samp = plan.n_samples
+    slots_per_group = max(1, batch_samples // (n_samp * len(runs)))
+    windows_per_call = max(1, batch_samples // n_samp)
+    groups: dict[PlantParams, list[int]] = {}
+    for i, r in enumerate(runs):
+        groups.setdefault(r.params, []).append(i)
+    for day, starts in plan.days():
+        hours_cache = {}
+        for b in range(0, starts.size, slots_per_group):
+            slot_starts = starts[b : b + slots_per_group]
+            calls = []
+            for params, members in groups.items():
+                for i in members:
+                    if i not in hours_cache:
+                        hours_cache[i] = runs[i].conditions(starts)
+                items = [(i, k) for i in members for k in range(slot_starts.size)]
+                for c in range(0, len(items), windows_per_call):
+                    chunk = tuple(items[c : c + windows_per_call])
+                    x_l = params.nominal_condition.x_l_fraction
+                    conditions = [
+                        ValveCondition(tuple(hours_cache[i][0][b + k]), tuple(hours_cache[i][1][b + k]), x_l) for i, k in chunk
+                    ]
+                    windows = [(runs[i].spec.id, int(slot_starts[k])) for i, k in chunk]
+                    calls.append((chunk, (simulate_measured, (params, conditions, windows, plan.window_s, runs[chunk[0][0]].seed))))
+            for n, (chunk, task) in enumerate(calls):
+                yield _Call(day, starts, slot_starts, chunk, n == 0, n == len(calls) - 1), task
+
+
 def write_archive(
     config: PlantConfig,
     out: Path,
@@ -622,6 +613,7 @@ def write_archive(
     file_format: str = "csv",
     gzip: bool = False,
     overwrite: bool = False,
+    workers: int = 0,
     progress: ProgressCallback | None = None,
     batch_samples: int = BATCH_SAMPLES,
 ) -> ArchiveSummary:
@@ -645,8 +637,11 @@ def write_archive(
         Compress CSV files (``.csv.gz``).
     overwrite : bool
         Replace an archive already in ``out``.
+    workers : int
+        Simulator worker processes; 0 simulates in this process. The archive is the same
+        either way.
     progress : callable, optional
-        Called after every simulated batch (:data:`ProgressCallback`).
+        Called after every simulator call (:data:`ProgressCallback`).
     batch_samples : int
         Samples per simulator call (bounds the memory).
     """
@@ -660,67 +655,78 @@ def write_archive(
     toml_path.write_bytes(tomli_w.dumps(plant_config_to_dict(config)).encode())
 
     # Columns: every configured tag, valve by valve, signal by signal.
-    cols: list[tuple[int, str, float]] = []  # (run index, signal, si_factor of the tag's unit)
     tags, decimals = [], []
+    cols_of: dict[int, list[tuple[int, str, float]]] = {}  # run → (column, signal, si_factor of the unit)
     for i, r in enumerate(runs):
         for s in SIGNALS:
             if s in r.spec.tags:
-                cols.append((i, s, r.spec.si_factor(s)))
+                cols_of.setdefault(i, []).append((len(tags), s, r.spec.si_factor(s)))
                 tags.append(r.spec.tags[s].tag)
                 decimals.append(_tag_decimals(r.spec, s, r.params.sensors))
     columns = ExportColumns(tuple(tags), tuple(decimals))
-    groups: dict[PlantParams, list[int]] = {}
-    for i, r in enumerate(runs):
-        groups.setdefault(r.params, []).append(i)
 
     n_samp, period = plan.n_samples, plan.period_us
     rel_us = np.arange(n_samp, dtype=np.int64) * period
-    slots_per_batch = max(1, batch_samples // (n_samp * len(runs)))
-    windows_per_call = max(1, batch_samples // n_samp)
-    cols_of: dict[int, list[tuple[int, str, float]]] = {}
-    for j, (i, s, factor) in enumerate(cols):
-        cols_of.setdefault(i, []).append((j, s, factor))
+    rows_per_chunk = max(1, CHUNK_ROWS // len(tags)) if config.export.layout == "long" else n_samp
     summary = ArchiveSummary(out=out)
     suffix = export_suffix(file_format, gzip)
     truth_writer: pq.ParquetWriter | None = None
+    writer = None
+    day: date | None = None
+    partial = path = None
+    values = np.empty(0)
+    metas: deque[_Call] = deque()
+
+    def tasks():
+        for meta, task in _calls(plan, runs, batch_samples):
+            metas.append(meta)
+            yield task
+
+    def finish_day():
+        writer.close()
+        os.replace(partial, path)
+        summary.files.append(path)
+        summary.bytes += path.stat().st_size
+
     try:
-        for day, starts in plan.days():
-            truth = truth_frame(runs, starts, n_samp * period).to_arrow()
-            if truth_writer is None:
-                truth_writer = pq.ParquetWriter(truth_path, truth.schema, compression="zstd")
-            truth_writer.write_table(truth)
-            path = exports / f"{config.name}_{day.isoformat()}{suffix}"
-            partial = path.with_name(path.name + ".partial")
-            with open_day_writer(partial, config.export, columns, config.timezone, file_format, gzip) as writer:
-                for b in range(0, starts.size, slots_per_batch):
-                    slot_starts = starts[b : b + slots_per_batch]
-                    t0 = time.perf_counter()
-                    values = np.empty((slot_starts.size, n_samp, len(cols)))
-                    for params, members in groups.items():
-                        items = [(i, k) for i in members for k in range(slot_starts.size)]
-                        for c in range(0, len(items), windows_per_call):
-                            call = items[c : c + windows_per_call]
-                            m = simulate_batch(params, [(runs[i], int(slot_starts[k])) for i, k in call], plan, seed)
-                            for w, (i, k) in enumerate(call):
-                                for j, s, factor in cols_of[i]:
-                                    np.divide(m[s][w], factor, out=values[k, :, j])
-                    t1 = time.perf_counter()
-                    rows_per_chunk = max(1, CHUNK_ROWS // len(cols)) if config.export.layout == "long" else n_samp
-                    for w, s0 in enumerate(slot_starts):
-                        for a in range(0, n_samp, rows_per_chunk):
-                            summary.rows += writer.write(s0 + rel_us[a : a + rows_per_chunk], values[w, a : a + rows_per_chunk])
-                    t2 = time.perf_counter()
-                    summary.simulate_s += t1 - t0
-                    summary.write_s += t2 - t1
-                    nw = slot_starts.size * len(runs)
-                    summary.windows += nw
-                    summary.valve_seconds += nw * plan.window_s
-                    if progress is not None:
-                        progress(nw, nw * plan.window_s)
-            os.replace(partial, path)
-            summary.files.append(path)
-            summary.bytes += path.stat().st_size
+        t0 = time.perf_counter()
+        for m in run_ordered(tasks(), workers):
+            call = metas.popleft()
+            t1 = time.perf_counter()
+            summary.simulate_s += t1 - t0
+            if call.day != day:
+                if writer is not None:
+                    finish_day()
+                day = call.day
+                truth = truth_frame(runs, call.day_starts, n_samp * period).to_arrow()
+                if truth_writer is None:
+                    truth_writer = pq.ParquetWriter(truth_path, truth.schema, compression="zstd")
+                truth_writer.write_table(truth)
+                path = exports / f"{config.name}_{day.isoformat()}{suffix}"
+                partial = path.with_name(path.name + ".partial")
+                writer = open_day_writer(partial, config.export, columns, config.timezone, file_format, gzip)
+            if call.first_of_group:
+                values = np.empty((call.slot_starts.size, n_samp, len(tags)))
+            for w, (i, k) in enumerate(call.items):
+                for j, s, factor in cols_of[i]:
+                    np.divide(m[s][w], factor, out=values[k, :, j])
+            del m
+            if call.last_of_group:
+                for k, s0 in enumerate(call.slot_starts):
+                    for a in range(0, n_samp, rows_per_chunk):
+                        summary.rows += writer.write(s0 + rel_us[a : a + rows_per_chunk], values[k, a : a + rows_per_chunk])
+            summary.windows += len(call.items)
+            summary.valve_seconds += len(call.items) * plan.window_s
+            t0 = time.perf_counter()
+            summary.write_s += t0 - t1
+            if progress is not None:
+                progress(len(call.items), len(call.items) * plan.window_s)
+        if writer is not None:
+            finish_day()
+            writer = None
     finally:
+        if writer is not None:
+            writer.close()
         if truth_writer is not None:
             truth_writer.close()
     summary.wall_s = time.perf_counter() - t_wall
@@ -753,6 +759,11 @@ class SimulateRequest:
     layout: str | None = None
     gzip: bool = False
     overwrite: bool = False
+    workers: int | None = None
+
+
+AUTO_WORKERS_VALVE_SECONDS = 2_000.0
+"""Archives of at least this many valve-seconds use worker processes by default."""
 
 
 def plan_request(req: SimulateRequest) -> tuple[PlantConfig, ArchivePlan, dict[str, str], str]:
@@ -774,6 +785,8 @@ def plan_request(req: SimulateRequest) -> tuple[PlantConfig, ArchivePlan, dict[s
         raise ValvemonError("--gzip: only for CSV formats (Parquet files are zstd-compressed)")
     if req.seed < 0:
         raise ValvemonError(f"--seed: {req.seed} must be >= 0")
+    if req.workers is not None and not 0 <= req.workers <= 256:
+        raise ValvemonError(f"--workers: {req.workers} is not between 0 and 256")
     default, per_valve = parse_scenario_options(req.scenarios)
     if req.config_path is not None:
         for opt, val in (("--n-valves", req.n_valves), ("--plant", req.plant), ("--commissioned", req.commissioned)):
@@ -820,6 +833,9 @@ def run_simulate(req: SimulateRequest, *, show_progress: bool = True) -> Archive
     check_archive(config, plan, file_format)
     check_out_dir(req.out, req.overwrite)
     total = plan.n_slots() * len(config.valves)
+    workers = req.workers
+    if workers is None:
+        workers = default_workers() if total * plan.window_s >= AUTO_WORKERS_VALVE_SECONDS else 0
     progress = Progress(
         TextColumn("[bold]simulate[/] {task.description}"),
         BarColumn(),
@@ -850,5 +866,6 @@ def run_simulate(req: SimulateRequest, *, show_progress: bool = True) -> Archive
             file_format=file_format,
             gzip=req.gzip,
             overwrite=req.overwrite,
+            workers=workers,
             progress=on_batch,
         )

@@ -37,6 +37,13 @@ ISO8601_FORMAT = "%Y-%m-%dT%H:%M:%S%.6fZ"
 
 PARQUET_COMPRESSION = "zstd"
 
+GZIP_LEVEL = 3
+"""Gzip level of ``.csv.gz`` exports: as fast as writing plain CSV with polars, and within
+10 % of level 6's size on archive data (docs/simulate.md)."""
+
+CSV_BATCH_ROWS = 16_384
+"""Rows polars formats per batch when writing CSV."""
+
 
 def decimals_for_step(step: float, noise_std: float = 0.0) -> int | None:
     """Decimals that keep a signal's resolution: the smallest d with 10^-d <= resolution / 10.
@@ -77,6 +84,13 @@ class ExportColumns:
                 values[:, cols] = np.round(values[:, cols], d)
         values += 0.0
         return values
+
+
+def _repeated(strings, codes: np.ndarray, decode: bool) -> pl.Series:
+    """A string column given as distinct values and int32 codes: categorical (cheap to build and
+    to write as CSV), or plain strings when ``decode`` (Parquet files get String columns)."""
+    arr = pa.DictionaryArray.from_arrays(pa.array(codes), pa.array(strings, pa.string()) if isinstance(strings, (list, tuple)) else strings)
+    return pl.from_arrow(arr.dictionary_decode() if decode else arr)  # type: ignore[return-value]
 
 
 def export_suffix(file_format: str, gzip: bool) -> str:
@@ -137,19 +151,20 @@ class DayWriter:
             raise ValueError("one time stamp per chunk row")
         self.columns.round(values)
         if e.layout == "long":
-            codes = np.tile(np.arange(k, dtype=np.int32), n)
-            tag = pa.DictionaryArray.from_arrays(pa.array(codes), pa.array(self.columns.tags, pa.string()))
-            if for_parquet:
-                tag_series = pl.from_arrow(tag.dictionary_decode()).alias(e.tag_column)
+            tag = _repeated(self.columns.tags, np.tile(np.arange(k, dtype=np.int32), n), decode=for_parquet)
+            if for_parquet or e.timestamp_format == "epoch_ms":
+                time_col = self._time_series(timestamps_us, k, for_parquet)
             else:
-                tag_series = pl.from_arrow(tag).alias(e.tag_column)
+                # each time stamp is formatted once and repeated for the k tags
+                text = self._time_series(timestamps_us, 1, False).dt.to_string(self._csv_datetime_format())
+                time_col = _repeated(text.to_arrow(), np.repeat(np.arange(n, dtype=np.int32), k), decode=False)
             cols = [
-                self._time_series(timestamps_us, k, for_parquet),
-                tag_series,
+                time_col.alias(e.timestamp_column),
+                tag.alias(e.tag_column),
                 pl.Series(e.value_column, values.reshape(-1), dtype=pl.Float64),
             ]
             if e.quality_column is not None:
-                cols.append(pl.repeat(e.good_quality[0], n * k, dtype=pl.String, eager=True).alias(e.quality_column))
+                cols.append(_repeated([e.good_quality[0]], np.zeros(n * k, np.int32), decode=for_parquet).alias(e.quality_column))
             return pl.DataFrame(cols)
         cols = [self._time_series(timestamps_us, 1, for_parquet)]
         cols += [pl.Series(tag, np.ascontiguousarray(values[:, i]), dtype=pl.Float64) for i, tag in enumerate(self.columns.tags)]
@@ -191,6 +206,8 @@ class CsvDayWriter(DayWriter):
             decimal_comma=self.export.decimal == ",",
             datetime_format=self._csv_datetime_format(),
             compression="gzip" if self.gzip else "uncompressed",
+            compression_level=GZIP_LEVEL if self.gzip else None,
+            batch_size=CSV_BATCH_ROWS,
         )
         self.rows += df.height
         return df.height

@@ -63,6 +63,7 @@ def simulate(
     layout: Annotated[Optional[str], typer.Option("--layout", help="Layout of a generated plant's Parquet files: long | wide. \\[default: long]")] = None,
     gzip: Annotated[bool, typer.Option("--gzip", help="Compress CSV files (.csv.gz).")] = False,
     overwrite: Annotated[bool, typer.Option("--overwrite", help="Replace an archive already in --out.")] = False,
+    workers: Annotated[Optional[int], typer.Option("--workers", help="Simulator processes beside the writer (0: simulate in-process). \\[default: CPUs - 1, at most 8, for archives of 2000 valve-s or more; else 0]")] = None,
     quiet: Annotated[bool, typer.Option("--quiet", help="No progress bar.")] = False,
     warehouse: Warehouse = None,
 ) -> None:
@@ -72,7 +73,7 @@ def simulate(
     request = SimulateRequest(
         out=out, config_path=config, n_valves=n_valves, plant=plant, commissioned=commissioned, start=start, end=end,
         days=days, hours=hours, windows_per_day=windows_per_day, window_s=window_s, scenarios=tuple(scenario or ()),
-        seed=seed, format=fmt, layout=layout, gzip=gzip, overwrite=overwrite,
+        seed=seed, format=fmt, layout=layout, gzip=gzip, overwrite=overwrite, workers=workers,
     )  # fmt: skip
     summary = run_simulate(request, show_progress=not quiet)
     typer.echo(
@@ -107,7 +108,18 @@ def ingest(
 @app.command()
 def monitor(config: Config, valves: Valves = None, start: From = None, end: To = None, warehouse: Warehouse = None) -> None:
     """Lake to opening-area points and fits."""
-    _not_yet("monitor", 4)
+    import flows.monitor as monitor_flows
+    from flows.config import warehouse_dir
+    from flows.ingest import quiet_prefect_console
+
+    quiet_prefect_console()
+    reports = monitor_flows.monitor_flow(
+        config_path=str(config), warehouse=str(warehouse_dir(warehouse)), valve_ids=valves, start=start, end=end
+    )
+    for r in reports:
+        statuses = ", ".join(f"{s} {n}" for s, n in sorted(r.status_counts.items()))
+        baseline = r.baseline_source + ("" if r.baseline_plausible else " (IMPLAUSIBLE: step 5a failed)")
+        typer.echo(f"{r.valve_id}: {r.windows} windows, {r.rows_read} rows, fits {statuses or 'none'}; baseline {baseline}")
 
 
 @app.command()

@@ -66,3 +66,11 @@ def test_same_seed_same_bytes_other_seed_other_data(tmp_path, file_format, gz):
         if n.parts[0] == "exports" or n.name == "truth.parquet":  # the seed changes data and scatter
             assert (tmp_path / "a" / n).read_bytes() != (tmp_path / "c" / n).read_bytes(), n
     assert (tmp_path / "a" / "plant.toml").read_bytes() == (tmp_path / "c" / "plant.toml").read_bytes()
+
+
+def test_worker_processes_write_the_same_archive(tmp_path, long_gz):
+    """Windows are seeded by (seed, valve, start): batching and processes do not matter."""
+    make_archive(tmp_path, gzip=True, workers=2, batch_samples=1500)  # one window per call
+    for f in sorted((long_gz[0] / "exports").iterdir()):
+        assert (tmp_path / "exports" / f.name).read_bytes() == f.read_bytes(), f.name
+    assert (tmp_path / "truth.parquet").read_bytes() == (long_gz[0] / "truth.parquet").read_bytes()
