@@ -64,6 +64,8 @@ from .trajectory import WindowInputs, supply_pressure_kernel, window_inputs
 
 #: Default regularisation band of the orifice law in the simulator. [Pa]
 DEFAULT_REG_BAND_PA = 1.0e4
+#: A pressure beyond this multiple of the supply level counts as divergence.
+P_LIMIT_FACTOR = 20.0
 #: Default number of RK4 steps per sample (0.5 ms at 1 kHz; see the module docstring).
 DEFAULT_SUBSTEPS = 2
 
@@ -267,9 +269,10 @@ def _event_step(s, t0, h, x_ref, F_l, sup, ecs, alpha, P):
 @njit(cache=True)
 def _simulate_kernel(X_ref, v_ref, F_l, supply, ecs_all, alpha_all, state0, integ0,
                      ff_grid, ff_table, ff_weight, kp, ki_t0, aw_t0, x_lim, P, fs, n_sub,
-                     out):
+                     p_limit, out):
     """Integrate every window; ``out`` (13, W, N) receives x, v, X, vX, p1, p2, ps, pr,
-    x_ref, F_l, dp1, dp2, t. Returns the index of the first window that diverged, or -1."""
+    x_ref, F_l, dp1, dp2, t. Returns the index of the first window that diverged (a pressure
+    beyond +-p_limit, |v_X| > 1000 m/s, |x| > 1 m or NaN), or -1."""
     n_win, n_samp = X_ref.shape
     P = params_tuple(P)
     T0 = 1.0 / fs
@@ -329,8 +332,9 @@ def _simulate_kernel(X_ref, v_ref, F_l, supply, ecs_all, alpha_all, state0, inte
                 else:
                     s = _event_step(s, tj, h, x_ref, fl, sup, ecs, alpha, P)
                 ps_t = ps_1
-            if not (math.isfinite(s[4]) and math.isfinite(s[5]) and math.isfinite(s[3])
-                    and math.isfinite(s[0])):
+            # divergence: non-finite or absurd states (RK4 beyond its stability limit)
+            if not (abs(s[4]) < p_limit and abs(s[5]) < p_limit and abs(s[3]) < 1.0e3
+                    and abs(s[0]) < 1.0):
                 return w
     return -1
 
@@ -497,6 +501,10 @@ def simulate_inputs(params: PlantParams, conditions: Sequence[ValveCondition],
     for w, (cond, inp) in enumerate(zip(conditions, inputs)):
         if inp.X_ref_m.size != n_samp:
             raise ValueError("all windows must have the same number of samples")
+        if not (np.all(np.isfinite(inp.X_ref_m)) and np.all(np.isfinite(inp.v_ref_m_s))
+                and np.all(np.isfinite(inp.F_l_n))
+                and np.all(np.isfinite(inp.supply.as_array()))):
+            raise ValueError(f"window {w}: inputs must be finite")
         X_ref[w], v_ref[w], F_l[w] = inp.X_ref_m, inp.v_ref_m_s, inp.F_l_n
         supply[w] = inp.supply.as_array()
         ecs[w] = valve_edge_constants(params.geometry, cond)
@@ -515,7 +523,7 @@ def simulate_inputs(params: PlantParams, conditions: Sequence[ValveCondition],
                            ff_grid, ff_table, ffw, c.kp_m_per_m,
                            c.kp_m_per_m * c.sample_time_s / c.ti_s, c.sample_time_s / c.tt_s,
                            params.x_limit_m, pack_params(params, reg_band_pa), fs, int(substeps),
-                           out)
+                           P_LIMIT_FACTOR * float(np.max(supply[:, 0])), out)
     if bad >= 0:
         raise FloatingPointError(f"simulation diverged in window {bad}; reduce the step "
                                  "(more substeps) or check the inputs")
