@@ -44,6 +44,8 @@ def duckdb_type(dtype: pl.DataType) -> str:
     """DuckDB column type of a registry dtype."""
     if isinstance(dtype, pl.Datetime):
         return "TIMESTAMPTZ" if dtype.time_zone else "TIMESTAMP"
+    if isinstance(dtype, pl.List):
+        return f"{duckdb_type(dtype.inner)}[]"
     simple = {
         pl.String: "VARCHAR",
         pl.Int64: "BIGINT",
