@@ -31,7 +31,7 @@ def stribeck_kernel(v_X, direction, d_v, d_c, d_s, v0):
     it locates a zero crossing of v_X (a smooth continuation across v_X = 0)."""
     r2 = (v_X / v0) * (v_X / v0)
     f = d_c
-    if r2 < 50.0:  # exp(-50) ~ 2e-22: beyond, the Stribeck term is exactly negligible
+    if r2 < 36.0:  # beyond, (d_s - d_c) exp(-r2) < 1e-12 N: below the rounding of F_R
         f += (d_s - d_c) * math.exp(-r2)
     return d_v * v_X + f * direction
 
