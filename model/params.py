@@ -101,7 +101,9 @@ class ValveCondition:
     ----------
     underlap_m : tuple of 4 float
         Underlap x_u of each edge in :data:`EDGES` order, in the edge's opening coordinate
-        (> 0: the edge is open at x = 0). [m]
+        (> 0: the edge is open at x = 0). [m] Default 0.04 mm on every edge: the plant
+        configuration's example value, within model.md's "a few hundredths of a millimetre up to
+        about 0.1 mm" and about 1 % of x_max.
     alpha : tuple of 4 float
         Contraction coefficient of each edge, Eq. 2. [-] Nominal 0.675 (the plant
         configuration's ``contraction_coefficient``; typical of sharp-edged spool orifices,

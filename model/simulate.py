@@ -39,6 +39,11 @@ sample (0.5 ms) are within ~1e-4 bar in p1, p2 and ~0.03 um in X, 1 step (1 ms) 
 order (errors of bars at 0.25 ms). 0.5 ms also keeps RK4 stable for the stiffest states seen
 (spool: lambda = -1/T; chambers: beta A1 v_X / (2 V1 dp) for small pressure drops).
 
+Model limits (as in the paper's model): no cavitation, relief valves or end stops. With the
+paper's broken edge 1r the head-side pressure can dip a few bar below p_r during fast
+gravity-driven extension (down to ~p_r - 8 bar in the test windows); a healthy or worn valve
+stays well inside [p_r, p_s]. The default trajectories keep X 40 mm away from the end stops.
+
 The recorded ``dp1_dt`` and ``dp2_dt`` are the right-hand side (with the regularised law) at
 the recorded state, i.e. the exact derivatives of the simulated pressures.
 """
