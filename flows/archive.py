@@ -498,6 +498,8 @@ class ArchiveSummary:
     """Valve windows simulated."""
     rows: int = 0
     """Export rows written (long: sample x tag; wide: samples)."""
+    values: int = 0
+    """Values written (samples x tags)."""
     bytes: int = 0
     valve_seconds: float = 0.0
     simulate_s: float = 0.0
@@ -714,7 +716,9 @@ def write_archive(
             if call.last_of_group:
                 for k, s0 in enumerate(call.slot_starts):
                     for a in range(0, n_samp, rows_per_chunk):
-                        summary.rows += writer.write(s0 + rel_us[a : a + rows_per_chunk], values[k, a : a + rows_per_chunk])
+                        chunk = values[k, a : a + rows_per_chunk]
+                        summary.rows += writer.write(s0 + rel_us[a : a + rows_per_chunk], chunk)
+                        summary.values += chunk.size
             summary.windows += len(call.items)
             summary.valve_seconds += len(call.items) * plan.window_s
             t0 = time.perf_counter()
