@@ -226,10 +226,39 @@ class ParquetDayWriter(DayWriter):
         self._writer: pq.ParquetWriter | None = None
         self._closed = False
 
+    def _table(self, timestamps_us: np.ndarray, values: np.ndarray) -> pa.Table:
+        """The chunk as an Arrow table (built directly: no polars round trip for the big columns)."""
+        e = self.export
+        n, k = values.shape
+        if k != len(self.columns.tags) or timestamps_us.shape != (n,):
+            return self._frame(timestamps_us, values, for_parquet=True).to_arrow()  # raises the shape error
+        self.columns.round(values)
+        rep = k if e.layout == "long" else 1
+        if e.timestamp_format == "iso8601":
+            time_col = pa.array(np.repeat(timestamps_us, rep), pa.timestamp("us", tz="UTC"))
+        elif e.timestamp_format == "epoch_ms":
+            time_col = pa.array(np.repeat(timestamps_us // 1000, rep), pa.int64())
+        else:
+            text = self._time_series(timestamps_us, 1, for_parquet=True).to_arrow()
+            time_col = text.take(pa.array(np.repeat(np.arange(n, dtype=np.int32), rep)))
+        cols: dict[str, pa.Array] = {e.timestamp_column: time_col}
+        if e.layout == "long":
+            codes = pa.array(np.tile(np.arange(k, dtype=np.int32), n))
+            cols[e.tag_column] = pa.DictionaryArray.from_arrays(codes, pa.array(self.columns.tags, pa.string())).dictionary_decode()
+            cols[e.value_column] = pa.array(values.reshape(-1))
+            m = n * k
+        else:
+            for i, tag in enumerate(self.columns.tags):
+                cols[tag] = pa.array(np.ascontiguousarray(values[:, i]))
+            m = n
+        if e.quality_column is not None:
+            cols[e.quality_column] = pa.DictionaryArray.from_arrays(pa.array(np.zeros(m, np.int32)), pa.array([e.good_quality[0]], pa.string())).dictionary_decode()
+        return pa.table(cols)
+
     def write(self, timestamps_us: np.ndarray, values: np.ndarray) -> int:
         if self._closed:
             raise ValueError(f"{self.path}: writer is closed")
-        table = self._frame(timestamps_us, values, for_parquet=True).to_arrow()
+        table = self._table(timestamps_us, values)
         if self._writer is None:
             self._writer = pq.ParquetWriter(self.path, table.schema, compression=PARQUET_COMPRESSION)
         self._writer.write_table(table)

@@ -99,3 +99,16 @@ def test_chunk_shape_is_checked(tmp_path):
     with open_day_writer(tmp_path / "x.csv", LONG, COLUMNS, "UTC", "csv") as w:
         with pytest.raises(ValueError, match="columns"):
             w.write(np.arange(3, dtype=np.int64), np.zeros((3, 3)))
+
+
+@pytest.mark.parametrize("fmt, dtype, first", [("epoch_ms", pl.Int64, T0 // 1000), ("%d.%m.%Y %H:%M:%S%.3f", pl.String, "30.03.2025 01:59:59.998")])
+def test_parquet_time_formats(tmp_path, fmt, dtype, first):
+    spec = dataclasses.replace(LONG, timestamp_format=fmt)
+    with open_day_writer(tmp_path / "l.parquet", spec, COLUMNS, "Europe/Vienna", "parquet") as w:
+        w.write(*_chunk())
+    p = pl.read_parquet(tmp_path / "l.parquet")
+    assert p.schema["timestamp"] == dtype and p.height == 8
+    assert p["timestamp"].to_list()[:3] == [first, first, p["timestamp"][2]]
+    if dtype == pl.String:
+        assert p["timestamp"][4] == "30.03.2025 03:00:00.000"
+    assert p["quality"].unique().to_list() == ["Good"]
