@@ -209,6 +209,7 @@ def _event_step(s, t0, h, x_ref, F_l, sup, ecs, alpha, P):
         if rem <= 0.0:
             return s
         new = _rk4_at(s, mode, t, rem, x_ref, F_l, sup, ecs, alpha, P)
+        target = 0.0
         if mode == 0.0:
             F1 = _F_R(new, F_l, P)
             if abs(F1) <= d_s:
@@ -224,10 +225,7 @@ def _event_step(s, t0, h, x_ref, F_l, sup, ecs, alpha, P):
                 s = _with_vX(new, 0.0)
                 if abs(_F_R(s, F_l, P)) <= d_s:
                     return s
-                mode = _mode_of(s, F_l, P)
-                t += rem
-                rem = 0.0
-                continue
+                return s
             ga = s[3]
             gb = new[3]
         # Regula falsi (Illinois) for the event time theta * rem in [0, 1].
