@@ -105,3 +105,46 @@ def test_archive_timestamps_are_window_grid(long_parquet):
     assert df.schema["timestamp"] == pl.Datetime("us", "UTC")
     assert df["timestamp"].min() == datetime(2025, 1, 1, 12, tzinfo=timezone.utc)
     assert df["timestamp"].dt.date().unique().to_list() == [datetime(2025, 1, 1).date()]
+
+
+def test_configured_units_layout_and_separators(tmp_path):
+    """A plant with psi, Pa, %, m and um tags, no x_ref, wide layout, ';' and ',' and epoch_ms."""
+    import tomllib
+    from datetime import timedelta
+
+    from flows.archive import ArchivePlan, resolve_scenarios, write_archive
+    from flows.config import load_plant_config
+    from schemas.plant_config import parse_plant_config
+
+    with open("tests/fixtures/plant_example.toml", "rb") as fh:
+        raw = tomllib.load(fh)
+    raw["export"] = {"layout": "wide", "timestamp_column": "t_ms", "timestamp_format": "epoch_ms", "separator": ";", "decimal": ","}
+    tags = raw["valves"][0]["tags"]
+    del tags["x_ref"]
+    units = {"ps": "psi", "pr": "Pa", "p1": "MPa", "p2": "kPa", "x_spool": "%", "x_cyl": "um"}
+    for s, u in units.items():
+        tags[s]["unit"] = u
+    config = parse_plant_config(raw)
+    start = config.valves[0].commissioned + timedelta(days=3)
+    plan = ArchivePlan(start, start + timedelta(hours=1), 24, 0.5)
+    write_archive(config, tmp_path, plan, resolve_scenarios(config, "broken_edge", {}), seed=2)
+    assert load_plant_config(tmp_path / "plant.toml").valves[0].tags == config.valves[0].tags
+    (f,) = (tmp_path / "exports").iterdir()
+    assert f.name == "MILL1_2025-03-04.csv"
+    text = f.read_text()
+    assert text.splitlines()[0] == "t_ms;" + ";".join(config.valves[0].tags[s].tag for s in units)
+    df = pl.read_csv(f, separator=";", decimal_comma=True)
+    assert df["t_ms"].to_list() == [int(start.timestamp() * 1000) + k for k in range(500)]
+    truth = pl.read_parquet(tmp_path / "truth.parquet")
+    valve = config.valves[0]
+    params = plant_params_for_valve(valve, config.export)
+    cond = ValveCondition(tuple(truth["underlap_m"]), tuple(truth["alpha"]), params.nominal_condition.x_l_fraction)
+    start_us = int(start.timestamp()) * 1_000_000
+    rng = window_rng(2, "V017", start_us)
+    m = measure(simulate_inputs(params, [cond], [window_inputs(params, 0.5, rng)]), params.sensors, rng)
+    for s, u in units.items():
+        f_si = si_factor(u, SIGNAL_KIND[s], valve.design.x_max_m)
+        ch = getattr(params.sensors, s)
+        d = decimals_for_step(ch.step / f_si, ch.noise_std / f_si)
+        np.testing.assert_array_equal(df[valve.tags[s].tag].to_numpy(), np.round(getattr(m, s)[0] / f_si, d), err_msg=s)
+    assert truth["edge"].to_list() == list(EDGES) and truth["broken"].to_list() == [False, True, False, False]
