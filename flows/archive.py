@@ -48,7 +48,6 @@ from model import condition as mcond
 from model.params import (
     EDGES,
     TABLE1,
-    CylinderParams,
     FluidParams,
     PlantParams,
     SensorChannel,
@@ -584,20 +583,20 @@ def _calls(plan: ArchivePlan, runs: Sequence[ValveRun], batch_samples: int) -> I
     for i, r in enumerate(runs):
         groups.setdefault(r.params, []).append(i)
     for day, starts in plan.days():
-        hours_cache = {}
+        cond_cache = {}
         for b in range(0, starts.size, slots_per_group):
             slot_starts = starts[b : b + slots_per_group]
             calls = []
             for params, members in groups.items():
                 for i in members:
-                    if i not in hours_cache:
-                        hours_cache[i] = runs[i].conditions(starts)
+                    if i not in cond_cache:
+                        cond_cache[i] = runs[i].conditions(starts)
                 items = [(i, k) for i in members for k in range(slot_starts.size)]
                 for c in range(0, len(items), windows_per_call):
                     chunk = tuple(items[c : c + windows_per_call])
                     x_l = params.nominal_condition.x_l_fraction
                     conditions = [
-                        ValveCondition(tuple(hours_cache[i][0][b + k]), tuple(hours_cache[i][1][b + k]), x_l) for i, k in chunk
+                        ValveCondition(tuple(cond_cache[i][0][b + k]), tuple(cond_cache[i][1][b + k]), x_l) for i, k in chunk
                     ]
                     windows = [(runs[i].spec.id, int(slot_starts[k])) for i, k in chunk]
                     calls.append((chunk, (simulate_measured, (params, conditions, windows, plan.window_s, runs[chunk[0][0]].seed))))
