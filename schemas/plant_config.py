@@ -14,13 +14,16 @@ Keys the project adds to the specification (all optional, documented in the READ
   values keeps the ``"last"`` row in file order, or ``"first"``, or is an ``"error"``.
 - ``[valves] baseline_window = { start = ..., end = ... }`` (spec) and ``[valves] scenario``
   (written by ``valvemon simulate`` for the record; ignored by monitoring).
+- ``[valve_types.NAME.bounds]``: the condition bounds of step 5b (:class:`ConditionBounds`,
+  every key optional with a documented default); a valve may override single keys in its own
+  ``[valves.bounds]`` table.
 """
 
 from __future__ import annotations
 
 import math
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields, replace
 from datetime import datetime, timezone
 from typing import Any, Callable
 from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
@@ -58,6 +61,68 @@ class ExportSpec:
     max_gap_s: float = 0.005
     duplicate_rule: str = "last"
 
+@dataclass(frozen=True)
+class ConditionBounds:
+    """Step 5b: when an edge is faulty or worn, and how its remaining life is extrapolated.
+
+    Units are those of the ``edge_fits`` columns the bounds are compared with (α̂ relative,
+    x̂ in % of x_max, e in mm²). The paper gives no thresholds (Sec. 4 and 5.2: they are to be
+    found empirically per valve category), so the defaults are set from its own numbers:
+
+    - **fault** (one window is enough): the paper's faulty edge 1r (Table 2: α̂ 2.53,
+      x̂ 11.8 % x_max, e 1.13 mm²) lies beyond all three fault bounds; its normal valve
+      (0.98, 0.23 %, 0.10 mm²) and the worn edge after 16,700 h (Table 3: 1.17, 3.7 %,
+      0.18 mm²) lie well inside them.
+    - **wear** (the long-term level, not one window): above Table 3's 16,700 h state, whose
+      "operational performance is flawless" (α̂ 1.17 → bound 1.30, x̂ 3.7 % → bound 6 %),
+      e above the 0.10–0.32 mm² seen on sound valves → 0.50 mm². Lower bounds catch the
+      opposite drift (silting, a clogged edge): α̂ 0.80, x̂ −5 %.
+    - **change detection** (a significant departure from the edge's own recent trend): a robust
+      z-score of each window against the median and MAD (×1.4826) of the previous
+      ``change_history_windows`` ok windows; |z| > ``change_z`` alarms. The scale is never taken
+      below the ``*_sigma_floor`` values (ordinary window-to-window scatter of a sound edge), so
+      a quiet history does not turn a normal wobble into an alarm. z = 6 keeps the false-alarm
+      rate of Gaussian scatter below 1e-8 per window and parameter.
+    - **trend / remaining life**: ordinary least squares of each parameter over operating hours
+      on the ok, alarm-free windows of the last ``trend_span_hours``; at least
+      ``trend_min_fits`` windows spanning ``trend_min_span_hours``, otherwise "unknown".
+    - **Eq. 9** at standstill: the residual (p1−pr)/(ps−p1) − (ps−p2)/(p2−pr) is compared
+      with the value the valve's design gives at rest (``eq9_expected``; Table 1: −0.17, not 0,
+      see model.md); a deviation beyond ``eq9_tolerance`` fails the check (broken edge 1r:
+      −1.1 … −1.8 over the sticking band and 190–210 bar; healthy −0.164 … −0.171; worn after
+      16,700 h −0.08).
+    """
+
+    alpha_fault_low: float = 0.50
+    alpha_fault_high: float = 1.80
+    alpha_wear_low: float = 0.80
+    alpha_wear_high: float = 1.30
+    x_hat_pct_fault_low: float = -10.0
+    x_hat_pct_fault_high: float = 10.0
+    x_hat_pct_wear_low: float = -5.0
+    x_hat_pct_wear_high: float = 6.0
+    e_mm2_fault_high: float = 0.80
+    e_mm2_wear_high: float = 0.50
+    change_z: float = 6.0
+    change_history_windows: int = 24
+    change_min_history: int = 8
+    alpha_sigma_floor: float = 0.02
+    x_hat_pct_sigma_floor: float = 0.30
+    e_mm2_sigma_floor: float = 0.03
+    fault_hold_hours: float = 24.0
+    trend_min_fits: int = 10
+    trend_min_span_hours: float = 24.0
+    trend_span_hours: float = 5000.0
+    eq9_tolerance: float = 0.5
+    eq9_expected: float | None = None
+    """None: the residual of the design's rest state (computed by the report from Eq. 3/4)."""
+
+
+BOUND_KEYS: tuple[str, ...] = tuple(f.name for f in fields(ConditionBounds))
+"""Keys of a ``bounds`` table, in the order they are written."""
+
+_INT_BOUNDS = {"change_history_windows", "change_min_history", "trend_min_fits"}
+
 
 @dataclass(frozen=True)
 class ValveDesign:
@@ -71,6 +136,8 @@ class ValveDesign:
     underlap_m: tuple[float, float, float, float]
     """Underlap per edge in the order s1, 1r, s2, 2r. [m]"""
     contraction_coefficient: float
+    bounds: ConditionBounds = field(default_factory=ConditionBounds)
+    """Condition bounds of step 5b (``[valve_types.NAME.bounds]``)."""
 
     def taper_angle_rad(self, edge: str) -> float:
         """Taper angle of an edge: port 1 for s1 and 1r, port 2 for s2 and 2r. [rad]"""
@@ -230,7 +297,7 @@ def _parse_export(raw: Any) -> ExportSpec:
 
 _DESIGN_KEYS = {
     "x_max_mm", "bore_radius_mm", "spool_radius_mm", "taper_angle_port1_deg",
-    "taper_angle_port2_deg", "underlap_mm", "contraction_coefficient",
+    "taper_angle_port2_deg", "underlap_mm", "contraction_coefficient", "bounds",
 }  # fmt: skip
 
 
@@ -244,6 +311,48 @@ def _parse_underlaps(raw: Any, key: str, base: tuple[float, ...] | None) -> tupl
         elif values[i] is None:
             raise ConfigError(f"{key}.{edge}: missing required key")
     return tuple(values)  # type: ignore[return-value]
+
+
+def _parse_bounds(raw: Any, key: str, base: ConditionBounds) -> ConditionBounds:
+    """A ``bounds`` table: each key optional, ``base`` supplies the rest; checked for order."""
+    t = _table(raw, key)
+    _no_unknown(t, set(BOUND_KEYS), key)
+    kw: dict[str, Any] = {}
+    for name in BOUND_KEYS:
+        if name not in t:
+            continue
+        k = f"{key}.{name}"
+        v = t[name]
+        if name in _INT_BOUNDS:
+            if isinstance(v, bool) or not isinstance(v, int):
+                raise ConfigError(f"{k}: expected an integer, got {v!r}")
+            kw[name] = int(_number(v, k, 2, 100_000))
+        elif name.endswith("sigma_floor") or name.startswith(("e_mm2_", "trend_", "fault_", "change_", "eq9_tol")):
+            kw[name] = _number(v, k, 0, 1e7, open_lo=True)
+        elif name.startswith("alpha_"):
+            kw[name] = _number(v, k, 0, 100, open_lo=True)
+        else:
+            kw[name] = _number(v, k, -100, 100)  # x_hat_pct_* and eq9_expected
+    b = replace(base, **kw)
+    for p in ("alpha", "x_hat_pct"):
+        order = [f"{p}_fault_low", f"{p}_wear_low", f"{p}_wear_high", f"{p}_fault_high"]
+        values = [getattr(b, n) for n in order]
+        for lo_name, hi_name, lo, hi in zip(order, order[1:], values, values[1:]):
+            if not (lo < hi if lo_name.endswith("wear_low") else lo <= hi):
+                raise ConfigError(f"{key}.{hi_name}: {hi:g} must be {'>' if lo_name.endswith('wear_low') else '>='} {lo_name} = {lo:g}")
+    if b.e_mm2_wear_high > b.e_mm2_fault_high:
+        raise ConfigError(f"{key}.e_mm2_fault_high: {b.e_mm2_fault_high:g} must be >= e_mm2_wear_high = {b.e_mm2_wear_high:g}")
+    for p, unchanged in (("alpha", 1.0), ("x_hat_pct", 0.0)):
+        for side, bad in (("low", getattr(b, f"{p}_wear_low") >= unchanged), ("high", getattr(b, f"{p}_wear_high") <= unchanged)):
+            if bad:
+                raise ConfigError(f"{key}.{p}_wear_{side}: the wear bounds of {p} must enclose {unchanged:g} (unchanged)")
+    if b.change_min_history > b.change_history_windows:
+        raise ConfigError(f"{key}.change_min_history: {b.change_min_history} must be <= change_history_windows = {b.change_history_windows}")
+    if b.trend_min_fits < 3:
+        raise ConfigError(f"{key}.trend_min_fits: {b.trend_min_fits} must be >= 3 (a line and its scatter)")
+    if b.trend_min_span_hours > b.trend_span_hours:
+        raise ConfigError(f"{key}.trend_min_span_hours: {b.trend_min_span_hours:g} must be <= trend_span_hours = {b.trend_span_hours:g}")
+    return b
 
 
 def _parse_design(t: dict, key: str, base: ValveDesign | None) -> ValveDesign:
@@ -274,7 +383,9 @@ def _parse_design(t: dict, key: str, base: ValveDesign | None) -> ValveDesign:
         if abs(u) >= x_max:
             raise ConfigError(f"{key}.underlap_mm.{edge}: an underlap of {u * 1e3:g} mm is not smaller than the stroke x_max = {x_max * 1e3:g} mm")
     alpha = get("contraction_coefficient", 0, 1.5, 1.0, b and b.contraction_coefficient)
-    return ValveDesign(x_max, bore, spool, phi1, phi2, underlaps, alpha)
+    base_bounds = b.bounds if b is not None else ConditionBounds()
+    bounds = _parse_bounds(t["bounds"], f"{key}.bounds", base_bounds) if "bounds" in t else base_bounds
+    return ValveDesign(x_max, bore, spool, phi1, phi2, underlaps, alpha, bounds)
 
 
 _VALVE_KEYS = {
@@ -419,7 +530,7 @@ def _r(x: float) -> float:
     return float(f"{x:.12g}")
 
 
-def _design_dict(d: ValveDesign, keys: frozenset[str] | set[str]) -> dict:
+def _design_dict(d: ValveDesign, keys: frozenset[str] | set[str], base_bounds: ConditionBounds | None = None) -> dict:
     full: dict[str, Callable[[], Any]] = {
         "x_max_mm": lambda: _r(d.x_max_m * 1e3),
         "bore_radius_mm": lambda: _r(d.bore_radius_m * 1e3),
@@ -428,8 +539,18 @@ def _design_dict(d: ValveDesign, keys: frozenset[str] | set[str]) -> dict:
         "taper_angle_port2_deg": lambda: _r(math.degrees(d.taper_angle_port2_rad)),
         "underlap_mm": lambda: {e: _r(u * 1e3) for e, u in zip(EDGES, d.underlap_m)},
         "contraction_coefficient": lambda: d.contraction_coefficient,
+        "bounds": lambda: bounds_to_dict(d.bounds, base_bounds),
     }
-    return {k: full[k]() for k in full if k in keys}
+    out = {k: full[k]() for k in full if k in keys}
+    if base_bounds is None and not out.get("bounds", True):
+        del out["bounds"]  # a type's bounds all at their defaults
+    return out
+
+
+def bounds_to_dict(bounds: ConditionBounds, base: ConditionBounds | None = None) -> dict:
+    """The keys of ``bounds`` that differ from ``base`` (default: the documented defaults)."""
+    base = base if base is not None else ConditionBounds()
+    return {k: getattr(bounds, k) for k in BOUND_KEYS if getattr(bounds, k) != getattr(base, k) and getattr(bounds, k) is not None}
 
 
 def _iso(t: datetime) -> str:
@@ -454,7 +575,7 @@ def plant_config_to_dict(config: PlantConfig) -> dict:
     valves = []
     for v in config.valves:
         d: dict[str, Any] = {"id": v.id, "type": v.type, "commissioned": _iso(v.commissioned)}
-        d |= _design_dict(v.design, v.overrides)
+        d |= _design_dict(v.design, v.overrides, config.valve_types[v.type].bounds)
         d |= {
             "piston_diameter_mm": _r(v.piston_diameter_m * 1e3),
             "rod_diameter_mm": _r(v.rod_diameter_m * 1e3),

@@ -121,3 +121,75 @@ def test_file_errors_name_the_file(tmp_path):
         load_plant_config(bad)
     with pytest.raises(ConfigError, match="missing.toml: no such configuration file"):
         load_plant_config(tmp_path / "missing.toml")
+
+
+# --- [valve_types.NAME.bounds] and [valves.bounds] ------------------------------------------
+
+
+def test_bounds_default_when_absent(raw):
+    from schemas.plant_config import ConditionBounds
+
+    cfg = parse_plant_config(raw)
+    b = cfg.valve("V017").design.bounds
+    assert b == ConditionBounds()
+    # the paper's faulty edge (Table 2) is beyond every fault bound; its normal valve and the
+    # worn edge after 16,700 h (Table 3) are inside every wear bound
+    assert 2.53 > b.alpha_fault_high and 11.8 > b.x_hat_pct_fault_high and 1.13 > b.e_mm2_fault_high
+    for alpha, x_pct, e in ((0.98, 0.23, 0.10), (1.17, 3.7, 0.18), (1.04, 0.1, 0.32)):
+        assert b.alpha_wear_low < alpha < b.alpha_wear_high
+        assert b.x_hat_pct_wear_low < x_pct < b.x_hat_pct_wear_high
+        assert e < b.e_mm2_wear_high
+
+
+def test_bounds_per_type_and_valve_override(raw, tmp_path):
+    raw["valve_types"]["servo_4w"]["bounds"] = {"alpha_wear_high": 1.25, "change_z": 5, "trend_min_fits": 6, "eq9_expected": -0.2}
+    raw["valves"][0]["bounds"] = {"x_hat_pct_wear_high": 5.0}
+    cfg = parse_plant_config(raw)
+    b = cfg.valve("V017").design.bounds
+    assert (b.alpha_wear_high, b.change_z, b.trend_min_fits, b.x_hat_pct_wear_high, b.eq9_expected) == (1.25, 5.0, 6, 5.0, -0.2)
+    assert cfg.valve_types["servo_4w"].bounds.x_hat_pct_wear_high == 6.0
+    path = tmp_path / "plant.toml"
+    written = plant_config_to_dict(cfg)
+    assert written["valves"][0]["bounds"] == {"x_hat_pct_wear_high": 5.0}
+    assert written["valve_types"]["servo_4w"]["bounds"]["alpha_wear_high"] == 1.25
+    path.write_bytes(tomli_w.dumps(written).encode())
+    assert load_plant_config(path) == cfg
+
+
+def test_bounds_round_trip_keeps_an_override_equal_to_its_type(raw, tmp_path):
+    raw["valves"][0]["bounds"] = {"alpha_wear_high": 1.30}  # same as the default
+    cfg = parse_plant_config(raw)
+    path = tmp_path / "plant.toml"
+    path.write_bytes(tomli_w.dumps(plant_config_to_dict(cfg)).encode())
+    assert load_plant_config(path) == cfg
+
+
+@pytest.mark.parametrize(
+    "bounds, message",
+    [
+        ({"colour": 1}, "valve_types.servo_4w.bounds.colour: unknown key"),
+        ({"alpha_wear_high": 2.0}, "valve_types.servo_4w.bounds.alpha_fault_high: 1.8 must be >= alpha_wear_high = 2"),
+        ({"alpha_wear_low": 1.1}, "valve_types.servo_4w.bounds.alpha_wear_low: the wear bounds of alpha must enclose 1"),
+        ({"x_hat_pct_wear_high": -1.0}, "valve_types.servo_4w.bounds.x_hat_pct_wear_high: the wear bounds of x_hat_pct must enclose 0"),
+        ({"x_hat_pct_wear_high": -6.0}, "valve_types.servo_4w.bounds.x_hat_pct_wear_high: -6 must be > x_hat_pct_wear_low = -5"),
+        ({"e_mm2_wear_high": 0.9}, "valve_types.servo_4w.bounds.e_mm2_fault_high: 0.8 must be >= e_mm2_wear_high"),
+        ({"change_history_windows": 4.5}, "valve_types.servo_4w.bounds.change_history_windows: expected an integer"),
+        ({"change_min_history": 30}, "change_min_history: 30 must be <= change_history_windows = 24"),
+        ({"e_mm2_sigma_floor": -0.1}, "valve_types.servo_4w.bounds.e_mm2_sigma_floor: -0.1 must be > 0"),
+        ({"x_hat_pct_sigma_floor": 0}, "x_hat_pct_sigma_floor: 0 must be > 0"),
+        ({"trend_min_span_hours": 9000.0}, "trend_min_span_hours: 9000 must be <= trend_span_hours"),
+        ({"change_z": "six"}, "valve_types.servo_4w.bounds.change_z: expected a finite number"),
+        ("strict", "valve_types.servo_4w.bounds: expected a table"),
+    ],
+)
+def test_broken_bounds_name_the_key(raw, bounds, message):
+    raw["valve_types"]["servo_4w"]["bounds"] = bounds
+    with pytest.raises(ConfigError) as err:
+        parse_plant_config(raw)
+    assert message in str(err.value)
+
+
+def test_valve_bounds_errors_name_the_valve(raw):
+    raw["valves"][0]["bounds"] = {"alpha_fault_low": 0.9}
+    with pytest.raises(ConfigError, match=r"valves\[0\]\.bounds\.alpha_wear_low: 0\.8 must be >= alpha_fault_low = 0\.9"):
+        parse_plant_config(raw)
