@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import os
 import platform
+import resource
 import shutil
 import tempfile
 import sys
@@ -22,6 +23,15 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from flows.archive import SimulateRequest, run_simulate
 from flows.archive_sim import default_workers
+
+def cpu_seconds() -> float:
+    """User + system CPU time of this process and its finished children (the workers). [s]"""
+    t = 0.0
+    for who in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN):
+        r = resource.getrusage(who)
+        t += r.ru_utime + r.ru_stime
+    return t
+
 
 CASES = [
     ("long CSV.gz", "long", True, None),
@@ -44,8 +54,8 @@ def main() -> None:
         run_simulate(SimulateRequest(out=scratch / "warm", n_valves=1, hours="0:1", window_s=1.0, overwrite=True, workers=0), show_progress=False)
         print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f} at start")
         print()
-        print("| writer | command | valve windows | valve-s / wall s | rows | rows / wall s | values / wall s | rows / s writing | simulate s | write s | MB | wall s |")
-        print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+        print("| writer | command | valve windows | valve-s / wall s | valve-s / CPU s | rows | rows / wall s | values / wall s | rows / s writing | simulate s | write s | MB | wall s | CPU s |")
+        print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
         for label, fmt, gz, workers in CASES:
             workers = args.workers if workers is None else workers
             out = scratch / fmt
@@ -55,13 +65,13 @@ def main() -> None:
             cmd = f"valvemon simulate --out DIR --n-valves {args.valves} --hours 0:{args.hours:g} --format {fmt}" + (" --gzip" if gz else "")
             if workers is not None:
                 cmd += f" --workers {workers}"
-            t = time.perf_counter()
+            t, c = time.perf_counter(), cpu_seconds()
             s = run_simulate(req, show_progress=False)
-            wall = time.perf_counter() - t
+            wall, cpu = time.perf_counter() - t, cpu_seconds() - c
             print(
-                f"| {label} | `{cmd}` | {s.windows:,} | {s.valve_seconds / wall:,.0f} | {s.rows:,} | {s.rows / wall / 1e6:,.3g} M "
+                f"| {label} | `{cmd}` | {s.windows:,} | {s.valve_seconds / wall:,.0f} | {s.valve_seconds / cpu:,.0f} | {s.rows:,} | {s.rows / wall / 1e6:,.3g} M "
                 f"| {s.values / wall / 1e6:,.2f} M | {s.rows / s.write_s / 1e6:,.3g} M | {s.simulate_s:,.1f} | {s.write_s:,.1f} "
-                f"| {s.bytes / 1e6:,.0f} | {wall:,.1f} |"
+                f"| {s.bytes / 1e6:,.0f} | {wall:,.1f} | {cpu:,.1f} |"
             )
             shutil.rmtree(out)
         w = args.workers if args.workers is not None else default_workers()
