@@ -1,0 +1,213 @@
+"""The ``sql/`` views: found, ordered by their dependencies, created in the warehouse database;
+and the read-only snapshot that readers query.
+
+Views
+-----
+One view per file, ``sql/<layer>/<name>.sql`` → view ``<name>``; layers ``staging`` (reads only
+tables), ``core`` (staging and core) and ``report`` (anything). A view depends on every other
+view whose name appears in its SQL as a word (comments stripped); :func:`ordered_views` sorts
+them so each is created after what it reads, and rejects cycles and layer violations.
+:func:`create_views` runs ``CREATE OR REPLACE VIEW`` for all of them, in one transaction.
+
+Readers and the writer
+----------------------
+DuckDB lets one process hold a database file read-write, and then no other process may open it
+at all (not even read-only); a read-only connection in turn keeps every writer out. So readers
+never touch the live ``valvemon.duckdb``: every ``valvemon report`` ends by publishing a
+consistent copy, ``WAREHOUSE/snapshot/valvemon.duckdb`` (:func:`publish_snapshot`): the
+writer, inside its own short-lived read-write connection, copies the whole database into a
+temporary file with ``COPY FROM DATABASE`` (one transaction, so the copy is consistent), closes
+it, then ``os.replace``-s it over the snapshot. Readers (``valvemon query``, the DuckDB CLI with
+``-readonly``, BI tools) open the snapshot read-only (:func:`connect_snapshot`): a reader that
+has the old file open keeps reading the old file (the rename does not touch it), the next one
+gets the new file, and the writer never waits for a reader nor a reader for the writer.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import time
+import uuid
+from dataclasses import dataclass
+from pathlib import Path
+
+import duckdb
+
+from flows.errors import ValvemonError
+from flows.warehouse_db import DB_NAME, create_table_sql, db_path
+from schemas.report_fields import CONDITION_BOUNDS_FIELDS, STANDSTILL_FIELDS
+
+SQL_DIR = Path(__file__).resolve().parents[1] / "sql"
+"""The repository's ``sql/`` folder."""
+
+LAYERS: tuple[str, ...] = ("staging", "core", "report")
+"""Layers in dependency order; a view may read views of its own layer and the layers before."""
+
+SNAPSHOT_DIR = "snapshot"
+"""Folder of the published read-only copy of the database inside the warehouse."""
+
+REPORT_TABLES = {"condition_bounds": CONDITION_BOUNDS_FIELDS, "standstill_checks": STANDSTILL_FIELDS}
+"""Tables the report writes (besides the monitor's), created empty if missing so the views bind."""
+
+
+@dataclass(frozen=True)
+class ViewFile:
+    """One view: its name, layer, SQL and the views it reads."""
+
+    name: str
+    layer: str
+    path: Path
+    sql: str
+    depends_on: tuple[str, ...]
+
+
+def _strip_comments(sql: str) -> str:
+    sql = re.sub(r"/\*.*?\*/", " ", sql, flags=re.S)
+    return re.sub(r"--[^\n]*", " ", sql)
+
+
+def discover_views(sql_dir: Path = SQL_DIR) -> dict[str, ViewFile]:
+    """All ``sql/<layer>/*.sql`` files as :class:`ViewFile`, with their dependencies."""
+    if not sql_dir.is_dir():
+        raise ValvemonError(f"{sql_dir}: the view folder is missing")
+    found: dict[str, tuple[str, Path, str]] = {}
+    for layer in LAYERS:
+        for path in sorted((sql_dir / layer).glob("*.sql")):
+            name = path.stem
+            if not re.fullmatch(r"[a-z_][a-z0-9_]*", name):
+                raise ValvemonError(f"{path}: a view file name must be a lower-case SQL identifier")
+            if name in found:
+                raise ValvemonError(f"{path}: view {name!r} is also defined in {found[name][1]}")
+            found[name] = (layer, path, path.read_text())
+    views = {}
+    for name, (layer, path, sql) in found.items():
+        body = _strip_comments(sql).lower()
+        deps = tuple(sorted(o for o in found if o != name and re.search(rf"\b{o}\b", body)))
+        views[name] = ViewFile(name, layer, path, sql.strip().rstrip(";"), deps)
+    return views
+
+
+def ordered_views(views: dict[str, ViewFile]) -> list[ViewFile]:
+    """Views in creation order (each after what it reads); layer violations and cycles raise."""
+    rank = {layer: i for i, layer in enumerate(LAYERS)}
+    for v in views.values():
+        for d in v.depends_on:
+            if rank[views[d].layer] > rank[v.layer]:
+                raise ValvemonError(f"{v.path}: a {v.layer} view may not read the {views[d].layer} view {d!r}")
+            if v.layer == "staging" and views[d].layer == "staging":
+                pass  # staging views may build on each other (e.g. long form of a staged table)
+    done: list[ViewFile] = []
+    state: dict[str, int] = {}
+
+    def visit(name: str, chain: tuple[str, ...]) -> None:
+        if state.get(name) == 2:
+            return
+        if state.get(name) == 1:
+            raise ValvemonError(f"views depend on each other in a cycle: {' -> '.join(chain + (name,))}")
+        state[name] = 1
+        for d in views[name].depends_on:
+            visit(d, chain + (name,))
+        state[name] = 2
+        done.append(views[name])
+
+    for name in sorted(views, key=lambda n: (rank[views[n].layer], n)):
+        visit(name, ())
+    return done
+
+
+def ensure_report_tables(con: duckdb.DuckDBPyConnection) -> None:
+    """Create ``condition_bounds`` and ``standstill_checks`` (and the monitor's tables) if missing."""
+    from flows.monitor import ensure_monitor_tables
+
+    ensure_monitor_tables(con)
+    for name, fields in REPORT_TABLES.items():
+        con.execute(create_table_sql(name, fields))
+    con.execute("CREATE UNIQUE INDEX IF NOT EXISTS standstill_checks_key ON standstill_checks (valve_id, window_start)")
+
+
+def create_views(con: duckdb.DuckDBPyConnection, sql_dir: Path = SQL_DIR) -> list[str]:
+    """``CREATE OR REPLACE VIEW`` every view of ``sql_dir`` in dependency order, in one transaction.
+
+    The tables the views read must exist (:func:`ensure_report_tables`). Returns the view names
+    in the order they were created.
+    """
+    views = ordered_views(discover_views(sql_dir))
+    con.execute("BEGIN TRANSACTION")
+    try:
+        for v in views:
+            try:
+                con.execute(f"CREATE OR REPLACE VIEW {v.name} AS\n{v.sql}")
+            except duckdb.Error as exc:
+                raise ValvemonError(f"{v.path}: {str(exc).splitlines()[0]}") from None
+        con.execute("COMMIT")
+    except BaseException:
+        con.execute("ROLLBACK")
+        raise
+    return [v.name for v in views]
+
+
+def snapshot_path(warehouse: str | Path) -> Path:
+    """``WAREHOUSE/snapshot/valvemon.duckdb``, the copy readers open."""
+    return Path(warehouse) / SNAPSHOT_DIR / DB_NAME
+
+
+def publish_snapshot(con: duckdb.DuckDBPyConnection, warehouse: str | Path) -> Path:
+    """Copy the database of the open read-write connection ``con`` to the snapshot, atomically.
+
+    The copy is made by DuckDB in one transaction (tables with their rows, then the views), into
+    a hidden temporary file beside the snapshot, which then replaces the snapshot by
+    ``os.replace``; a reader holding the previous snapshot keeps reading it undisturbed.
+    """
+    target = snapshot_path(warehouse)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    for stale in target.parent.glob(f".{DB_NAME}.*.tmp*"):
+        stale.unlink(missing_ok=True)
+    tmp = target.parent / f".{DB_NAME}.{uuid.uuid4().hex}.tmp"
+    alias = f"snap_{uuid.uuid4().hex[:8]}"
+    main = con.sql("SELECT current_database()").fetchone()[0]
+    try:
+        con.execute(f"ATTACH '{tmp}' AS {alias}")
+        try:
+            con.execute(f"COPY FROM DATABASE {main} TO {alias}")
+        finally:
+            con.execute(f"DETACH {alias}")
+        with open(tmp, "rb+") as fh:
+            os.fsync(fh.fileno())
+        os.replace(tmp, target)
+        fd = os.open(target.parent, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        Path(f"{tmp}.wal").unlink(missing_ok=True)
+        raise
+    return target
+
+
+def connect_snapshot(warehouse: str | Path, *, live: bool = False, wait_s: float = 10.0) -> duckdb.DuckDBPyConnection:
+    """A read-only connection for readers: the published snapshot, or the live file if ``live``.
+
+    The snapshot never waits: no process ever opens it read-write. ``live=True`` opens
+    ``valvemon.duckdb`` itself read-only, retrying for ``wait_s`` while a writer holds it (and
+    keeping writers out while open): for when the snapshot is not recent enough.
+    """
+    path = db_path(warehouse) if live else snapshot_path(warehouse)
+    if not path.exists():
+        hint = "" if live else " (`valvemon report` publishes it; --live reads the live database)"
+        raise ValvemonError(f"{path}: no such database{hint}")
+    deadline = time.monotonic() + wait_s
+    delay = 0.05
+    while True:
+        try:
+            con = duckdb.connect(str(path), read_only=True)
+            break
+        except duckdb.IOException as exc:
+            if not live or "lock" not in str(exc).lower() or time.monotonic() > deadline:
+                raise ValvemonError(f"{path}: cannot open the database: {str(exc).splitlines()[0]}") from None
+            time.sleep(delay)
+            delay = min(delay * 2, 1.0)
+    con.execute("SET TimeZone = 'UTC'")
+    return con

@@ -1,0 +1,183 @@
+-- valve_condition: the latest verdict per valve and edge (interfaces.md).
+-- One row per configured valve (stg_condition_bounds) and edge s1, 1r, s2, 2r.
+--
+-- state:
+--   faulty   an alarm (fault bound or significant departure from the recent trend, see
+--            window_alarms) in the last fault_hold_hours before the edge's latest ok window;
+--   worn     otherwise, the long-term level of a parameter (parameter_trends.level, median of
+--            the latest alarm-free windows) lies beyond a wear bound;
+--   unknown  otherwise, fewer than trend_min_fits ok, alarm-free windows in the trend span
+--            (or no fits at all);
+--   healthy  otherwise.
+-- remaining_hours (+ _low, _high, 95 % interval): for a healthy edge the soonest predicted
+-- crossing of a wear bound by a parameter's trend (parameter_trends); 0 for a worn edge; null
+-- for faulty and unknown edges and where no trend heads significantly toward a bound.
+-- The Eq. 9 standstill check (standstill_indicator) is a valve-wide quick indicator: its
+-- result is appended to the reason and given in eq9_ok, it does not change an edge's state.
+with
+
+valves as (
+    select distinct valve_id, fault_hold_hours, trend_min_fits from stg_condition_bounds
+),
+
+edges as (
+    select * from (values ('s1', 1), ('1r', 2), ('s2', 3), ('2r', 4)) as e(edge, edge_order)
+),
+
+grid as (
+    select valves.*, edges.edge, edges.edge_order from valves cross join edges
+),
+
+fits as (
+    select * from stg_edge_fits
+),
+
+windows as (
+    select
+        valve_id, edge,
+        count(*) as n_windows,
+        count(*) filter (where is_ok) as n_ok_windows,
+        max(window_start) as last_window_start,
+        arg_max(status, window_start) as last_status,
+        max(window_start) filter (where is_ok) as last_ok_window_start,
+        max(operating_hours) filter (where is_ok) as operating_hours,
+        arg_max(alpha_hat, window_start) filter (where is_ok) as alpha_hat,
+        arg_max(x_hat_pct, window_start) filter (where is_ok) as x_hat_pct,
+        arg_max(e_mm2, window_start) filter (where is_ok) as e_mm2
+    from fits
+    group by valve_id, edge
+),
+
+recent_alarms as (
+    select
+        window_alarms.valve_id, window_alarms.edge,
+        count(*) as n_recent_alarms,
+        arg_max(window_alarms.reason, window_alarms.window_start) as last_alarm_reason,
+        max(window_alarms.window_start) as last_alarm_start
+    from window_alarms
+    join windows using (valve_id, edge)
+    join valves using (valve_id)
+    where window_alarms.is_alarm
+        and window_alarms.operating_hours >= windows.operating_hours - valves.fault_hold_hours
+    group by window_alarms.valve_id, window_alarms.edge
+),
+
+trends as (
+    select * from parameter_trends
+),
+
+levels as (
+    select
+        valve_id, edge,
+        max(n_fits) as n_trend_fits,
+        max(level) filter (where parameter = 'alpha_hat') as alpha_level,
+        max(level) filter (where parameter = 'x_hat_pct') as x_hat_pct_level,
+        max(level) filter (where parameter = 'e_mm2') as e_mm2_level,
+        string_agg(
+            printf('%s level %.3g %s wear bound %.3g', parameter, level,
+                   case when side = 'high' then 'above' else 'below' end, bound),
+            '; ' order by parameter, side) filter (where level_beyond_bound) as wear_reason
+    from trends
+    group by valve_id, edge
+),
+
+soonest as (
+    select
+        valve_id, edge,
+        arg_min(parameter, remaining_hours) as limiting_parameter,
+        arg_min(side, remaining_hours) as limiting_side,
+        arg_min(bound, remaining_hours) as limiting_bound,
+        min(remaining_hours) as remaining_hours,
+        arg_min(remaining_hours_low, remaining_hours) as remaining_hours_low,
+        arg_min(remaining_hours_high, remaining_hours) as remaining_hours_high,
+        arg_min(end_of_life_hours, remaining_hours) as end_of_life_hours
+    from trends
+    where crossing_status = 'predicted'
+    group by valve_id, edge
+),
+
+standstill as (
+    select * from standstill_indicator
+),
+
+judged as (
+    select
+        grid.valve_id,
+        grid.edge,
+        grid.edge_order,
+        case
+            when coalesce(recent_alarms.n_recent_alarms, 0) > 0 then 'faulty'
+            when levels.wear_reason is not null then 'worn'
+            when coalesce(levels.n_trend_fits, 0) < grid.trend_min_fits then 'unknown'
+            else 'healthy'
+        end as state,
+        grid.trend_min_fits,
+        windows.*  exclude (valve_id, edge),
+        recent_alarms.* exclude (valve_id, edge),
+        levels.* exclude (valve_id, edge),
+        soonest.* exclude (valve_id, edge),
+        standstill.eq9_ok,
+        standstill.eq9_residual,
+        standstill.eq9_expected,
+        standstill.eq9_tolerance
+    from grid
+    left join windows using (valve_id, edge)
+    left join recent_alarms using (valve_id, edge)
+    left join levels using (valve_id, edge)
+    left join soonest using (valve_id, edge)
+    left join standstill using (valve_id)
+),
+
+final as (
+    select
+        valve_id,
+        edge,
+        state,
+        case state
+            when 'faulty' then printf('fault: %s (%d alarm window(s) since %s)', last_alarm_reason,
+                                      n_recent_alarms, strftime(last_alarm_start, '%Y-%m-%d %H:%M UTC'))
+            when 'worn' then 'worn: ' || wear_reason
+            when 'unknown' then
+                case
+                    when n_windows is null then 'no fits yet'
+                    when n_ok_windows = 0 then printf('no ok fit in %d window(s); last status %s', n_windows, last_status)
+                    else printf('too little data: %d ok alarm-free window(s) in the trend span, %d needed',
+                                coalesce(n_trend_fits, 0), trend_min_fits)
+                end
+            else
+                case
+                    when remaining_hours is not null then
+                        printf('healthy; %s trend reaches its %s wear bound %.3g in about %.0f h (95 %%: %.0f to %.0f h)',
+                               limiting_parameter, limiting_side, limiting_bound, remaining_hours,
+                               remaining_hours_low, remaining_hours_high)
+                    else 'healthy; no significant trend toward a wear bound'
+                end
+        end
+        || case
+            when eq9_ok = false then printf('; Eq. 9 standstill check fails (residual %.2f, expected %.2f ± %.2f)',
+                                            eq9_residual, eq9_expected, eq9_tolerance)
+            else ''
+        end as reason,
+        case state when 'healthy' then remaining_hours when 'worn' then 0.0 end as remaining_hours,
+        case state when 'healthy' then remaining_hours_low when 'worn' then 0.0 end as remaining_hours_low,
+        case state when 'healthy' then remaining_hours_high when 'worn' then 0.0 end as remaining_hours_high,
+        case state when 'healthy' then limiting_parameter end as limiting_parameter,
+        case state when 'healthy' then end_of_life_hours end as end_of_life_hours,
+        operating_hours,
+        last_window_start,
+        last_ok_window_start,
+        alpha_hat,
+        x_hat_pct,
+        e_mm2,
+        alpha_level,
+        x_hat_pct_level,
+        e_mm2_level,
+        coalesce(n_windows, 0) as n_windows,
+        coalesce(n_ok_windows, 0) as n_ok_windows,
+        coalesce(n_recent_alarms, 0) as n_recent_alarms,
+        eq9_ok,
+        edge_order
+    from judged
+)
+
+select * from final order by valve_id, edge_order

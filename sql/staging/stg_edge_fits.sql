@@ -1,0 +1,40 @@
+-- stg_edge_fits: the fits of edge_fits against each valve's and edge's current baseline.
+-- One row per valve, edge and monitoring window. A window fitted against an older baseline
+-- version (design data or commissioning window changed since) is left out: its α̂ and x̂ are
+-- relative to another characteristic. is_ok marks windows that gave all three estimates.
+with
+
+fits as (
+    select * from edge_fits
+),
+
+current_baseline as (
+    select valve_id, edge, max(baseline_version) as baseline_version
+    from fits
+    group by valve_id, edge
+),
+
+final as (
+    select
+        fits.valve_id,
+        fits.edge,
+        fits.window_start,
+        fits.window_end,
+        fits.operating_hours,
+        fits.n_points,
+        fits.alpha_hat,
+        fits.x_hat_mm,
+        fits.x_hat_pct,
+        fits.e_mm2,
+        fits.status,
+        fits.baseline_version,
+        (fits.status = 'ok'
+            and isfinite(fits.alpha_hat) and isfinite(fits.x_hat_pct) and isfinite(fits.e_mm2)) as is_ok
+    from fits
+    join current_baseline
+        on fits.valve_id = current_baseline.valve_id
+        and fits.edge = current_baseline.edge
+        and fits.baseline_version is not distinct from current_baseline.baseline_version
+)
+
+select * from final
