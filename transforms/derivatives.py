@@ -3,8 +3,9 @@
 A Savitzky–Golay filter of length L = 2h + 1 and order p is a fixed weighted sum over the
 centred stencil (scipy's ``savgol_coeffs``), so over a uniform grid it is a weighted
 ``rolling_sum`` of the whole column. The stencil is never laid across a window boundary or an
-irregular step: rows with fewer than h samples of the same uniform run on either side
-(``run_index < h`` or ``run_remaining < h``, from :mod:`transforms.windows`) get null. The result
+irregular step: a row gets null unless its stencil [i − h, i + h] holds no ``run_start``
+(:mod:`transforms.windows`) after its first sample, i.e. unless it has h samples of the same
+uniform run on either side (two running sums of ``run_start``, O(n)). The result
 is exact for polynomials in time of degree ≤ p (for odd p the centred derivative is even exact
 for degree p + 1, its weights being those of order p + 1).
 
@@ -58,9 +59,11 @@ def savgol_weights(window: int, order: int, deriv: int = 0) -> np.ndarray:
 
 
 def savgol_valid(window: int) -> pl.Expr:
-    """True where the centred stencil of ``window`` samples lies inside one uniform run."""
+    """True where the centred stencil of ``window`` samples lies inside one uniform run:
+    no run start in rows (i − h, i] nor in (i, i + h], and i + h within the frame."""
     h = window // 2
-    return (pl.col("run_index") >= h) & (pl.col("run_remaining") >= h)
+    starts = pl.col("run_start").cast(pl.Int32).rolling_sum(h, min_samples=1)  # starts in (i − h, i]
+    return ((starts == 0) & (starts.shift(-h) == 0)).fill_null(False)
 
 
 def savgol_exprs(
@@ -72,29 +75,36 @@ def savgol_exprs(
     smooth_name: str | None,
     deriv_name: str | None,
     valid: pl.Expr | None = None,
+    mask: bool = True,
+    nulls: bool = True,
 ) -> list[pl.Expr]:
     """Expressions for the smoothed value and/or the first time derivative of ``column``.
 
     ``valid`` (default :func:`savgol_valid`) masks rows whose stencil would leave the run.
+    ``mask=False`` returns the plain weighted sums over the whole column (null only in the first
+    and last h rows): for callers that apply the validity themselves (the monitor's compiled
+    path, which gets it from :func:`transforms.windows.window_arrays`).
+
+    Missing input values (null or NaN) make every stencil that touches them null (with
+    ``mask=False``: NaN). ``nulls=False`` promises an input without nulls and skips the
+    null → NaN pass that polars' weighted ``rolling_sum`` needs.
     """
     if sample_period_s <= 0:
         raise ValueError("sample_period_s must be > 0")
-    if valid is None:
+    if valid is None and mask:
         valid = savgol_valid(window)
     col = pl.col(column)
+    if nulls:  # polars' weighted rolling_sum rejects nulls; NaN propagates through the stencil
+        col = col.fill_null(float("nan"))
     out: list[pl.Expr] = []
     if smooth_name is not None:
         w0 = list(_weights(window, order, 0))
-        out.append(
-            pl.when(valid).then(col.rolling_sum(window, weights=w0, center=True)).alias(smooth_name)
-        )
+        e = col.rolling_sum(window, weights=w0, center=True)
+        out.append((pl.when(valid).then(e.fill_nan(None)) if mask else e).alias(smooth_name))
     if deriv_name is not None:
         w1 = list(_weights(window, order, 1))
-        out.append(
-            pl.when(valid)
-            .then(col.rolling_sum(window, weights=w1, center=True) * (1.0 / sample_period_s))
-            .alias(deriv_name)
-        )
+        e = col.rolling_sum(window, weights=w1, center=True) * (1.0 / sample_period_s)
+        out.append((pl.when(valid).then(e.fill_nan(None)) if mask else e).alias(deriv_name))
     return out
 
 
@@ -106,8 +116,11 @@ def add_savgol(
     sample_period_s: float,
     outputs: Mapping[str, tuple[str | None, str | None]] = DEFAULT_OUTPUTS,
 ) -> pl.DataFrame | pl.LazyFrame:
-    """Add smoothed values and derivatives to a frame carrying ``run_index``/``run_remaining``."""
-    valid = savgol_valid(window)
+    """Add smoothed values and derivatives to a frame carrying ``run_start``.
+
+    The stencil validity is computed once (column ``_sg_valid``, dropped again) rather than per
+    output: polars does not share the rolling sums of repeated sub-expressions."""
+    valid = pl.col("_sg_valid")
     exprs: list[pl.Expr] = []
     for column, (smooth_name, deriv_name) in outputs.items():
         exprs += savgol_exprs(
@@ -119,4 +132,4 @@ def add_savgol(
             deriv_name=deriv_name,
             valid=valid,
         )
-    return framed.with_columns(exprs)
+    return framed.with_columns(savgol_valid(window).alias("_sg_valid")).with_columns(exprs).drop("_sg_valid")

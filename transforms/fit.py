@@ -7,10 +7,11 @@ For a population (one window, one edge) of N points (u_i, A_i),
 For fixed x̂ the best α̂ is closed-form, α̂(x̂) = Σ A_i Â_i / Σ Â_i², so the fit is a 1-D search
 on the profile cost f(x̂) = Σ A_i² − (Σ A_i Â_i)² / Σ Â_i² (variable projection):
 
-1. a coarse grid of x̂ over [−x_bound, x_bound] on an evenly strided subsample (≤ 256 points; 41 grid points) of
+1. a coarse grid of x̂ over [−x_bound, x_bound] on an evenly strided subsample (≤ 128 points; 31 grid points, 0.1 mm apart) of
    the population finds the basin of the global minimum;
 2. a safeguarded Newton iteration on the full population (bisection whenever Newton would leave
-   the bracket or f″ ≤ 0) converges to |Δx̂| < 1 nm. The derivatives are analytic for a
+   the bracket or f″ ≤ 0) converges to |Δx̂| < 1 nm (should it end on a bracket edge, the
+   bracket moves on by a grid step). The derivatives are analytic for a
    piecewise-linear Â (Â″ = 0 between knots): with S_a = Σ A Â, S_b = Σ Â², S_ad = Σ A Â',
    S_bd = Σ Â Â', S_dd = Σ Â'², α = S_a/S_b,
 
@@ -18,7 +19,9 @@ on the profile cost f(x̂) = Σ A_i² − (Σ A_i Â_i)² / Σ Â_i² (variable 
        f'' = −2 α' S_ad + 4 α α' S_bd + 2 α² S_dd,   α' = (S_ad − 2 α S_bd) / S_b.
 
 The whole batch (every window and edge of every valve) runs in one compiled (numba) kernel,
-one pass over a population's points per iteration (about 10 passes in all).
+one pass over a population's points per iteration (about 5 full passes in all, plus the grid);
+during the Newton passes each point remembers its knot segment, so evaluating Â costs a few
+nanoseconds whatever the number of knots.
 
 Confidence intervals come from the Jacobian J = [Â(u_i + x̂), α̂ Â'(u_i + x̂)] at the optimum:
 cov = σ² (JᵀJ)⁻¹ with σ² = Σ r² / (N − 2) and Student's t with N − 2 degrees of freedom. The
@@ -52,6 +55,7 @@ __all__ = [
     "STATUSES",
     "eq8_cost_gradient",
     "fit_arrays",
+    "fit_groups",
     "fit_windows",
     "profile_cost",
 ]
@@ -97,38 +101,43 @@ _OK, _DEGENERATE, _AT_BOUND, _NOT_CONVERGED, _SKIPPED = 0, 1, 2, 3, 4
 # --------------------------------------------------------------------------------------------
 
 
-@numba.njit(cache=True, inline="always")
-def _segment(kn, k0, k1, tab, toff, tlo, tinv, tn, t):
-    """Index j in [k0, k1 − 2] of the knot segment holding t (end segments extrapolate).
-
-    A uniform bucket table (``tn`` buckets from ``tlo``, width 1/``tinv``) gives the segment of
-    each bucket's left edge; a short forward walk finishes the search (O(1) for any knot count).
-    """
-    if t <= kn[k0]:
-        return k0
-    if t >= kn[k1 - 1]:
-        return k1 - 2
-    b = int((t - tlo) * tinv)
-    if b >= tn:
-        b = tn - 1
-    j = tab[toff + b]
-    while j < k1 - 2 and t >= kn[j + 1]:
-        j += 1
-    return j
-
-
 @numba.njit(cache=True)
-def _sums(u, a, s, e, stride, kn, kv, ks, k0, k1, tb, x):
-    """One pass: S_a, S_b, S_ad, S_bd, S_dd (and S_aa) at shift x over points s, s+stride, … < e."""
+def _sums(u, a, jc, s, e, stride, kn, kv, ks, k0, k1, tab, toff, tlo, tinv, tn, x, mode):
+    """One pass over points s, s+stride, … < e at shift x:
+    S_a = Σ A Â, S_b = Σ Â², S_ad = Σ A Â', S_bd = Σ Â Â', S_dd = Σ Â'².
+
+    Segment search: ``mode`` 0 = bucket table (large jumps of x: the coarse grid), 1 = bucket
+    table and remember the segment of each point in ``jc``, 2 = walk from the remembered segment
+    (the Newton steps barely move x, so the walk is 0–1 steps and branch-predictable).
+    """
     sa = 0.0
     sb = 0.0
     sad = 0.0
     sbd = 0.0
     sdd = 0.0
-    saa = 0.0
     for i in range(s, e, stride):
         t = u[i] + x
-        j = _segment(kn, k0, k1, tb[0], tb[1], tb[2], tb[3], tb[4], t)
+        if mode == 2:
+            j = jc[i]
+            while j > k0 and t < kn[j]:
+                j -= 1
+            while j < k1 - 2 and t >= kn[j + 1]:
+                j += 1
+            jc[i] = j
+        else:
+            if t <= kn[k0]:
+                j = k0
+            elif t >= kn[k1 - 1]:
+                j = k1 - 2
+            else:
+                b = int((t - tlo) * tinv)
+                if b >= tn:
+                    b = tn - 1
+                j = tab[toff + b]
+                while j < k1 - 2 and t >= kn[j + 1]:
+                    j += 1
+            if mode == 1:
+                jc[i] = j
         d = ks[j]
         h = kv[j] + d * (t - kn[j])
         ai = a[i]
@@ -137,14 +146,14 @@ def _sums(u, a, s, e, stride, kn, kv, ks, k0, k1, tb, x):
         sad += ai * d
         sbd += h * d
         sdd += d * d
-        saa += ai * ai
-    return sa, sb, sad, sbd, sdd, saa
+    return sa, sb, sad, sbd, sdd
 
 
 @numba.njit(cache=True)
-def _profile(u, a, s, e, stride, kn, kv, ks, k0, k1, tb, x):
-    """Profile cost f(x) = Σ A² − S_a²/S_b (α ≥ 0), its derivatives, and α(x)."""
-    sa, sb, sad, sbd, sdd, saa = _sums(u, a, s, e, stride, kn, kv, ks, k0, k1, tb, x)
+def _profile(u, a, jc, s, e, stride, kn, kv, ks, k0, k1, tab, toff, tlo, tinv, tn, x, mode, saa):
+    """Profile cost f(x) = Σ A² − S_a²/S_b (α ≥ 0), f', f'' and α(x); ``good`` False where
+    Â vanishes or α ≤ 0 at the points."""
+    sa, sb, sad, sbd, sdd = _sums(u, a, jc, s, e, stride, kn, kv, ks, k0, k1, tab, toff, tlo, tinv, tn, x, mode)
     if sb <= 0.0 or sa <= 0.0:
         return saa, 0.0, 0.0, 0.0, False
     al = sa / sb
@@ -156,54 +165,14 @@ def _profile(u, a, s, e, stride, kn, kv, ks, k0, k1, tb, x):
 
 
 @numba.njit(cache=True)
-def _fit_one(u, a, s, e, kn, kv, ks, k0, k1, tb, xb, n_grid, sub_max, xtol, maxiter):
-    n = e - s
-    stride = max(1, n // sub_max)
-    # 1. coarse grid on a strided subsample
-    best_g = 0
-    best_f = np.inf
-    step = 2.0 * xb / (n_grid - 1)
-    for g in range(n_grid):
-        xg = -xb + g * step
-        f, fp, fpp, al, good = _profile(u, a, s, e, stride, kn, kv, ks, k0, k1, tb, xg)
-        if good and f < best_f:
-            best_f = f
-            best_g = g
-    if not np.isfinite(best_f):
-        return 0.0, 0.0, _DEGENERATE, 0
-    x = -xb + best_g * step
-    lo = max(-xb, x - step)
-    hi = min(xb, x + step)
-    # 2. make sure [lo, hi] brackets a sign change of f' on the full data (expand if not)
-    passes = 0
-    for _ in range(4 * n_grid):
-        flo, fplo, _a, _b, glo = _profile(u, a, s, e, 1, kn, kv, ks, k0, k1, tb, lo)
-        passes += 1
-        if glo and fplo >= 0.0 and lo > -xb:
-            hi = lo
-            lo = max(-xb, lo - step)
-            continue
-        break
-    for _ in range(4 * n_grid):
-        fhi, fphi, _a, _b, ghi = _profile(u, a, s, e, 1, kn, kv, ks, k0, k1, tb, hi)
-        passes += 1
-        if ghi and fphi <= 0.0 and hi < xb:
-            lo = hi
-            hi = min(xb, hi + step)
-            continue
-        break
-    if glo and fplo >= 0.0 and lo <= -xb:
-        return -xb, 0.0, _AT_BOUND, passes
-    if ghi and fphi <= 0.0 and hi >= xb:
-        return xb, 0.0, _AT_BOUND, passes
-    if x < lo or x > hi:
-        x = 0.5 * (lo + hi)
-    # 3. safeguarded Newton on f'
+def _newton(u, a, jc, s, e, kn, kv, ks, k0, k1, tab, toff, tlo, tinv, tn, x, lo, hi, saa, first_mode, xtol, maxiter):
+    """Safeguarded Newton on f' within [lo, hi] from x; returns (x, code, passes)."""
+    mode = first_mode
     for it in range(maxiter):
-        f, fp, fpp, al, good = _profile(u, a, s, e, 1, kn, kv, ks, k0, k1, tb, x)
-        passes += 1
+        f, fp, fpp, al, good = _profile(u, a, jc, s, e, 1, kn, kv, ks, k0, k1, tab, toff, tlo, tinv, tn, x, mode, saa)
+        mode = 2
         if not good:
-            return x, 0.0, _DEGENERATE, passes
+            return x, _DEGENERATE, it + 1
         if fp < 0.0:
             lo = x
         else:
@@ -215,9 +184,61 @@ def _fit_one(u, a, s, e, kn, kv, ks, k0, k1, tb, xb, n_grid, sub_max, xtol, maxi
         else:
             xn = 0.5 * (lo + hi)
         if abs(xn - x) < xtol or hi - lo < xtol:
-            return xn, 0.0, _OK, passes
+            return xn, _OK, it + 1
         x = xn
-    return x, 0.0, _NOT_CONVERGED, passes
+    return x, _NOT_CONVERGED, maxiter
+
+
+@numba.njit(cache=True)
+def _fit_one(u, a, jc, s, e, kn, kv, ks, k0, k1, tab, toff, tlo, tinv, tn, xb, n_grid, sub_max, xtol, maxiter):
+    n = e - s
+    stride = max(1, n // sub_max)
+    saa = 0.0
+    saa_sub = 0.0
+    for i in range(s, e):
+        saa += a[i] * a[i]
+    for i in range(s, e, stride):
+        saa_sub += a[i] * a[i]
+    # 1. coarse grid on a strided subsample
+    best_g = -1
+    best_f = np.inf
+    step = 2.0 * xb / (n_grid - 1)
+    for g in range(n_grid):
+        xg = -xb + g * step
+        f, fp, fpp, al, good = _profile(u, a, jc, s, e, stride, kn, kv, ks, k0, k1, tab, toff, tlo, tinv, tn, xg, 0, saa_sub)
+        if good and f < best_f:
+            best_f = f
+            best_g = g
+    if best_g < 0:
+        return 0.0, _DEGENERATE, 0
+    x0 = -xb + best_g * step
+    lo = max(-xb, x0 - step)
+    hi = min(xb, x0 + step)
+    # 2. Newton on the full population inside the grid bracket; if it ends on a bracket edge that
+    #    is not the search bound, the minimum lies beyond: move the bracket and go on
+    passes = 0
+    mode = 1
+    x = x0
+    for _expand in range(2 * n_grid):
+        x, code, p = _newton(u, a, jc, s, e, kn, kv, ks, k0, k1, tab, toff, tlo, tinv, tn, x, lo, hi, saa, mode, xtol, maxiter)
+        passes += p
+        mode = 2
+        if code != _OK:
+            return x, code, passes
+        if x - lo < 2.0 * xtol and lo > -xb:
+            hi = lo
+            lo = max(-xb, lo - step)
+            x = 0.5 * (lo + hi)
+            continue
+        if hi - x < 2.0 * xtol and hi < xb:
+            lo = hi
+            hi = min(xb, hi + step)
+            x = 0.5 * (lo + hi)
+            continue
+        if x - lo < 2.0 * xtol or hi - x < 2.0 * xtol:
+            return x, _AT_BOUND, passes
+        return x, _OK, passes
+    return x, _NOT_CONVERGED, passes
 
 
 @numba.njit(cache=True)
@@ -232,6 +253,7 @@ def _fit_groups(u, a, offsets, kstart, kend, kn, kv, ks, tab, tstart, tlo, tinv,
     rho = np.full(g_n, np.nan)
     code = np.full(g_n, _SKIPPED, dtype=np.int8)
     iters = np.zeros(g_n, dtype=np.int32)
+    jc = np.zeros(u.shape[0], dtype=np.int64)
     for g in range(g_n):
         if not active[g]:
             continue
@@ -239,14 +261,14 @@ def _fit_groups(u, a, offsets, kstart, kend, kn, kv, ks, tab, tstart, tlo, tinv,
         e = offsets[g + 1]
         k0 = kstart[g]
         k1 = kend[g]
-        tb = (tab, tstart[g], tlo[g], tinv[g], tn[g])
-        x, _unused, c, p = _fit_one(u, a, s, e, kn, kv, ks, k0, k1, tb, xbound[g], n_grid, sub_max, xtol, maxiter)
+        toff, tlo_g, tinv_g, tn_g = tstart[g], tlo[g], tinv[g], tn[g]
+        x, c, p = _fit_one(u, a, jc, s, e, kn, kv, ks, k0, k1, tab, toff, tlo_g, tinv_g, tn_g, xbound[g], n_grid, sub_max, xtol, maxiter)
         iters[g] = p
         code[g] = c
         if c == _DEGENERATE:
             continue
         # final pass at the optimum: α̂, residual sums, JᵀJ pieces, lag-1 autocorrelation
-        sa, sb, sad, sbd, sdd_, saa = _sums(u, a, s, e, 1, kn, kv, ks, k0, k1, tb, x)
+        sa, sb, sad, sbd, sdd_ = _sums(u, a, jc, s, e, 1, kn, kv, ks, k0, k1, tab, toff, tlo_g, tinv_g, tn_g, x, 2)
         if sb <= 0.0 or sa <= 0.0:
             code[g] = _DEGENERATE
             continue
@@ -255,9 +277,8 @@ def _fit_groups(u, a, offsets, kstart, kend, kn, kv, ks, tab, tstart, tlo, tinv,
         r11 = 0.0
         prev = 0.0
         for i in range(s, e):
-            t = u[i] + x
-            j = _segment(kn, k0, k1, tb[0], tb[1], tb[2], tb[3], tb[4], t)
-            r = a[i] - al * (kv[j] + ks[j] * (t - kn[j]))
+            j = jc[i]
+            r = a[i] - al * (kv[j] + ks[j] * (u[i] + x - kn[j]))
             r2 += r * r
             if i > s:
                 r11 += r * prev
@@ -358,8 +379,8 @@ def fit_arrays(
     min_points: int | np.ndarray = 500,
     min_coverage_m: float | np.ndarray = 0.25e-3,
     ci_level: float = 0.95,
-    n_grid: int = 41,
-    sub_max: int = 256,
+    n_grid: int = 31,
+    sub_max: int = 128,
     xtol_m: float = 1e-9,
     maxiter: int = 60,
 ) -> dict[str, np.ndarray]:
@@ -455,8 +476,10 @@ def profile_cost(u: np.ndarray, area: np.ndarray, characteristic: Characteristic
     area = np.ascontiguousarray(area, dtype=np.float64)
     pk = _Packed([characteristic])
     tb = (pk.tab, int(pk.tstart[0]), float(pk.tlo[0]), float(pk.tinv[0]), int(pk.tn[0]))
+    saa = float(area @ area)
+    jc = np.zeros(u.shape[0], dtype=np.int64)
     f, fp, fpp, al, _good = _profile(
-        u, area, 0, u.shape[0], 1, pk.kn, pk.kv, pk.ks, int(pk.kstart[0]), int(pk.kend[0]), tb, float(x_hat)
+        u, area, jc, 0, u.shape[0], 1, pk.kn, pk.kv, pk.ks, int(pk.kstart[0]), int(pk.kend[0]), *tb, float(x_hat), 0, saa
     )
     return f, fp, fpp, al
 
@@ -529,67 +552,49 @@ def fit_windows(
     windows = windows.select("valve_id", "window_id", "window_start", "window_end")
     all_groups = windows.join(pl.DataFrame({"edge": list(edges)}), how="cross")
 
-    # populations with points and one without points per missing (window, edge)
+    # every population with points, in the order of `points`, then the (window, edge) pairs
+    # without points (empty populations: status no_points)
     runs = runs.with_row_index("_run")
-    groups = all_groups.join(
-        runs.select("valve_id", "window_id", "edge", "_run"), on=["valve_id", "window_id", "edge"], how="left"
-    )
-    extra = runs.join(all_groups.select("valve_id", "window_id", "edge"), on=["valve_id", "window_id", "edge"], how="anti")
-    if extra.height:
-        groups = pl.concat(
-            [groups, extra.with_columns(pl.lit(None, dtype=windows.schema["window_end"]).alias("window_end"))
-             .select(groups.columns)],
-            how="vertical",
-        )
+    with_points = runs.join(
+        all_groups.select("valve_id", "window_id", "edge", "window_end"), on=["valve_id", "window_id", "edge"], how="left"
+    ).sort("_run")
+    without = all_groups.join(runs.select("valve_id", "window_id", "edge"), on=["valve_id", "window_id", "edge"], how="anti")
+    cols = ["valve_id", "window_id", "window_start", "window_end", "edge"]
+    groups = pl.concat([with_points.select(cols), without.select(cols)], how="vertical")
+    offs = np.concatenate([offsets, np.full(without.height, offsets[-1], dtype=np.int64)])
+    return fit_groups(groups, points["u_m"].to_numpy(), points["area_m2"].to_numpy(), offs, baselines, params)
 
-    run_idx = groups["_run"].to_numpy()
-    has_run = ~groups["_run"].is_null().to_numpy()
-    run_idx = np.where(has_run, np.nan_to_num(run_idx, nan=0), 0).astype(np.int64)
-    # offsets per reported group: populations that have points keep their run; others are empty
-    n_run = np.diff(offsets)
-    order = np.argsort(np.where(has_run, run_idx, np.iinfo(np.int64).max), kind="stable")
-    # Build a contiguous layout: groups with runs in run order first (the points stay in place).
-    g_n = groups.height
-    sizes = np.where(has_run, n_run[run_idx] if len(n_run) else 0, 0)
-    # groups sorted so that runs appear in the same order as in `points`
-    sizes_sorted = sizes[order]
-    offs = np.concatenate([[0], np.cumsum(sizes_sorted)]).astype(np.int64)
 
+def fit_groups(
+    groups: pl.DataFrame,
+    u: np.ndarray,
+    area: np.ndarray,
+    offsets: np.ndarray,
+    baselines: Mapping[str, Mapping[str, Characteristic]],
+    params: Mapping[str, MonitorParams],
+) -> pl.DataFrame:
+    """Eq. 8 for populations laid out contiguously: ``groups`` (``valve_id, window_id,
+    window_start, window_end, edge``) row g owns the points ``offsets[g]:offsets[g + 1]`` of
+    ``u``/``area``. Returns :data:`FIT_COLUMNS`, sorted by valve, window and edge."""
     valve_ids = groups["valve_id"].to_list()
     edge_ids = groups["edge"].to_list()
-    chars: list[Characteristic | None] = []
-    x_bound = np.empty(g_n)
-    min_pts = np.empty(g_n, dtype=np.int64)
-    min_cov = np.empty(g_n)
-    ci_levels = set()
-    for gi in order:
-        v, e = valve_ids[gi], edge_ids[gi]
-        chars.append(baselines.get(v, {}).get(e))
-    for k, gi in enumerate(order):
-        p = params[valve_ids[gi]]
-        x_bound[k] = p.x_hat_bound_m
-        min_pts[k] = p.min_points
-        min_cov[k] = p.min_coverage_m
-        ci_levels.add(p.ci_level)
-    if len(ci_levels) > 1:
+    g_n = groups.height
+    chars: list[Characteristic | None] = [baselines.get(v, {}).get(e) for v, e in zip(valve_ids, edge_ids, strict=True)]
+    per_valve = {v: params[v] for v in set(valve_ids)}
+    if len({p.ci_level for p in per_valve.values()}) > 1:
         raise ValueError("all valves of one call must share ci_level")
-    ci_level = ci_levels.pop() if ci_levels else 0.95
-
+    ci_level = next(iter(per_valve.values())).ci_level if per_valve else 0.95
     res = fit_arrays(
-        points["u_m"].to_numpy(),
-        points["area_m2"].to_numpy(),
-        offs,
+        u,
+        area,
+        offsets,
         chars,
-        x_bound_m=x_bound,
-        min_points=min_pts,
-        min_coverage_m=min_cov,
+        x_bound_m=np.array([per_valve[v].x_hat_bound_m for v in valve_ids]).reshape(g_n),
+        min_points=np.array([per_valve[v].min_points for v in valve_ids], dtype=np.int64).reshape(g_n),
+        min_coverage_m=np.array([per_valve[v].min_coverage_m for v in valve_ids]).reshape(g_n),
         ci_level=ci_level,
     )
-    inv = np.empty(g_n, dtype=np.int64)
-    inv[order] = np.arange(g_n)
-    out = groups.drop("_run").with_columns(
-        pl.Series(name, np.asarray(col)[inv]) for name, col in res.items()
-    )
+    out = groups.with_columns(pl.Series(name, col) for name, col in res.items())
     edge_rank = {e: i for i, e in enumerate(EDGES)}
     return out.select(FIT_COLUMNS).sort(
         pl.col("valve_id"),

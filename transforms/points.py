@@ -20,6 +20,10 @@ one) at that edge's own opening coordinate u_o = −u:
 with N the numerator above. On simulated states this removes the few per cent of leakage bias
 left at 1 mm from closing (worst on s2). A baseline and the windows fitted against it must be
 computed the same way (both with or both without the correction).
+
+The formulas exist as polars expressions (:func:`area_expr`, :func:`opening_area_points`: the
+reference, usable on any frame) and as one compiled pass over numpy arrays
+(:func:`points_arrays`: what the monitor runs). The tests hold the two equal.
 """
 
 from __future__ import annotations
@@ -28,6 +32,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from math import sqrt
 
+import numba
+import numpy as np
 import polars as pl
 
 from transforms.characteristic import Characteristic
@@ -44,6 +50,7 @@ __all__ = [
     "edge_dp_expr",
     "opening_area_points",
     "opening_coordinate_expr",
+    "points_arrays",
     "port_numerator_expr",
 ]
 
@@ -181,3 +188,103 @@ def opening_area_points(
             )
         )
     return pl.concat(parts, how="vertical")
+
+
+# --------------------------------------------------------------------------------------------
+# compiled path (same formulas; used by transforms.monitor for throughput)
+# --------------------------------------------------------------------------------------------
+
+
+@numba.njit(cache=True, inline="always")
+def _pwl(kn, kv, k0, k1, t):
+    """Piecewise-linear characteristic kn[k0:k1], kv[k0:k1] at t (linear beyond the ends)."""
+    if t <= kn[k0 + 1]:
+        j = k0
+    elif t >= kn[k1 - 2]:
+        j = k1 - 2
+    else:
+        lo = k0 + 1
+        hi = k1 - 2
+        while hi - lo > 1:
+            mid = (lo + hi) >> 1
+            if kn[mid] <= t:
+                lo = mid
+            else:
+                hi = mid
+        j = lo
+    return kv[j] + (kv[j + 1] - kv[j]) / (kn[j + 1] - kn[j]) * (t - kn[j])
+
+
+@numba.njit(cache=True)
+def _points_kernel(codes, n_selected, selected_code, ps, pr, p1, p2, x, xc, dp1, dp2, v, c, lkn, lkv, loff, use_leak):
+    sq, beta, a1, a2, v01, v02 = c[0], c[1], c[2], c[3], c[4], c[5]
+    offsets = np.zeros(5, dtype=np.int64)
+    for e in range(4):
+        offsets[e + 1] = offsets[e] + n_selected[e]
+    idx = np.empty(offsets[4], dtype=np.int64)
+    area = np.empty(offsets[4], dtype=np.float64)
+    cursor = offsets[:4].copy()
+    for i in range(x.shape[0]):
+        for e in range(4):
+            if codes[e, i] != selected_code:
+                continue
+            if e < 2:
+                num = dp1[i] * (v01 + a1 * xc[i]) + (beta * a1) * v[i]
+            else:
+                num = (beta * a2) * v[i] - dp2[i] * (v02 - a2 * xc[i])
+            if e == 0:
+                dp, dpo, other, sign_u = ps[i] - p1[i], pr[i] - p1[i], 1, 1.0
+            elif e == 1:
+                dp, dpo, other, sign_u = pr[i] - p1[i], ps[i] - p1[i], 0, -1.0
+            elif e == 2:
+                dp, dpo, other, sign_u = p2[i] - ps[i], p2[i] - pr[i], 3, -1.0
+            else:
+                dp, dpo, other, sign_u = p2[i] - pr[i], p2[i] - ps[i], 2, 1.0
+            den = np.sign(dp) * np.sqrt(abs(dp))
+            k = cursor[e]
+            if use_leak:
+                leak = _pwl(lkn, lkv, loff[other], loff[other + 1], -sign_u * x[i])
+                area[k] = (sq * num / beta - leak * np.sign(dpo) * np.sqrt(abs(dpo))) / den
+            else:
+                area[k] = (sq * num) / (beta * den)
+            idx[k] = i
+            cursor[e] = k + 1
+    return idx, area, offsets
+
+
+def points_arrays(
+    arrays: dict[str, np.ndarray],
+    codes: np.ndarray,
+    selected_code: int,
+    params: MonitorParams,
+    *,
+    leakage: Mapping[str, Characteristic] | None = None,
+):
+    """Eq. 7 (and its siblings) for the rows whose ``codes[e]`` equal ``selected_code``
+    (:func:`transforms.selection.selection_codes`), in one compiled pass per edge.
+
+    Returns ``(idx, area, offsets)``: row indices and α·A of edge e in
+    ``offsets[e]:offsets[e + 1]`` (edges in :data:`EDGES` order, rows in input order).
+    Same formulas as :func:`area_expr`, same optional closed-edge correction.
+    """
+    s = DEFAULT_SIGNALS
+    n_sel = (codes == selected_code).sum(axis=1).astype(np.int64)
+    c = np.array(
+        [sqrt(params.density_kg_m3 / 2.0), params.bulk_modulus_pa, params.piston_area_m2,
+         params.annulus_area_m2, params.v01_m3, params.v02_m3],
+        dtype=np.float64,
+    )
+    if leakage is not None:
+        chars = [leakage[e] for e in EDGES]
+        lkn = np.concatenate([ch.knots_u_m for ch in chars])
+        lkv = np.concatenate([ch.values_m2 for ch in chars])
+        loff = np.concatenate([[0], np.cumsum([ch.knots_u_m.shape[0] for ch in chars])]).astype(np.int64)
+    else:
+        lkn = lkv = np.zeros(2)
+        loff = np.zeros(5, dtype=np.int64)
+    return _points_kernel(
+        codes, n_sel, int(selected_code),
+        *(np.ascontiguousarray(arrays[k], dtype=np.float64) for k in (
+            s.ps, s.pr, s.p1, s.p2, s.x_spool, s.x_cyl, s.dp1_dt, s.dp2_dt, s.v_cyl)),
+        c, lkn, lkv, loff, leakage is not None,
+    )

@@ -5,22 +5,27 @@ A frame sorted by ``valve_id, timestamp_utc`` gets
 * ``window_id`` (UInt32): ordinal of the window in the frame; a new window starts at the first row,
   at every change of ``valve_id`` and after every time step longer than the gap limit;
 * ``window_start``, ``window_end``: the time stamps of the window's first and last sample;
-* ``run_index``, ``run_remaining`` (Int64): samples since the start and until the end of the
-  *uniform run* that holds the row. A uniform run is a stretch of a window whose steps all lie
-  within ``step_tolerance`` of the sample period; a Savitzky–Golay stencil is valid only where it
-  stays inside one run (:mod:`transforms.derivatives`). Within a healthy window the run is the
-  window itself; a dropped sample, a duplicate or a jitter spike cuts the run but not the window.
+* ``run_start`` (Boolean): True at the first sample of a *uniform run*, a stretch of a window
+  whose steps all lie within ``step_tolerance`` of the sample period. A Savitzky–Golay stencil is
+  valid only where it stays inside one run (:mod:`transforms.derivatives`). Within a healthy
+  window the run is the window itself; a dropped sample, a duplicate or a jitter spike cuts the
+  run but not the window.
 
-Everything is a column expression with forward/backward fills: no group-by, no Python loop.
+Everything is a column expression (diff, cumulative sum, forward/backward fill): no group-by,
+no Python loop. :func:`window_arrays` does the same for one valve in one compiled pass over the
+time stamps, with the Savitzky–Golay validity (what the monitor's fast path uses; the tests hold
+the two equal).
 """
 
 from __future__ import annotations
 
+import numba
+import numpy as np
 import polars as pl
 
-__all__ = ["WINDOW_COLUMNS", "assign_windows", "infer_sample_period_s", "window_table"]
+__all__ = ["WINDOW_COLUMNS", "assign_windows", "infer_sample_period_s", "window_arrays", "window_table"]
 
-WINDOW_COLUMNS = ("window_id", "window_start", "window_end", "run_index", "run_remaining")
+WINDOW_COLUMNS = ("window_id", "window_start", "window_end", "run_start")
 
 
 def infer_sample_period_s(frame: pl.DataFrame | pl.LazyFrame) -> float:
@@ -68,25 +73,19 @@ def assign_windows(
     step = ts.diff().dt.total_microseconds()
     new_valve = (pl.col("valve_id") != pl.col("valve_id").shift(1)).fill_null(True)
     new_window = (new_valve | step.is_null() | (step > gap_us)).alias("_new_window")
-    new_run = (pl.col("_new_window") | (step < lo_us) | (step > hi_us)).alias("_new_run")
-
-    idx = pl.int_range(pl.len(), dtype=pl.Int64)
+    run_start = (pl.col("_new_window") | (step < lo_us) | (step > hi_us)).alias("run_start")
     last_in_window = pl.col("_new_window").shift(-1).fill_null(True)
-    last_in_run = pl.col("_new_run").shift(-1).fill_null(True)
 
-    out = (
+    return (
         frame.with_columns(new_window)
-        .with_columns(new_run)
         .with_columns(
+            run_start,
             (pl.col("_new_window").cum_sum() - 1).cast(pl.UInt32).alias("window_id"),
             pl.when(pl.col("_new_window")).then(ts).forward_fill().alias("window_start"),
             pl.when(last_in_window).then(ts).backward_fill().alias("window_end"),
-            (idx - pl.when(pl.col("_new_run")).then(idx).forward_fill()).alias("run_index"),
-            (pl.when(last_in_run).then(idx).backward_fill() - idx).alias("run_remaining"),
         )
-        .drop("_new_window", "_new_run")
+        .drop("_new_window")
     )
-    return out
 
 
 def window_table(framed: pl.DataFrame | pl.LazyFrame) -> pl.DataFrame:
@@ -103,4 +102,75 @@ def window_table(framed: pl.DataFrame | pl.LazyFrame) -> pl.DataFrame:
         )
         .select("valve_id", "window_id", "window_start", "window_end", "n_samples")
         .collect()
+    )
+
+
+# --------------------------------------------------------------------------------------------
+# compiled path (one valve; used by transforms.monitor for throughput)
+# --------------------------------------------------------------------------------------------
+
+
+@numba.njit(cache=True)
+def _window_kernel(ts_us, lo_us, hi_us, gap_us, h):
+    n = ts_us.shape[0]
+    win = np.empty(n, dtype=np.int64)
+    valid = np.zeros(n, dtype=np.bool_)
+    run_start = np.empty(n, dtype=np.bool_)
+    w = -1
+    for i in range(n):
+        if i == 0:
+            new_w = True
+            new_r = True
+        else:
+            step = ts_us[i] - ts_us[i - 1]
+            new_w = step > gap_us
+            new_r = new_w or step < lo_us or step > hi_us
+        if new_w:
+            w += 1
+        win[i] = w
+        run_start[i] = new_r
+    # valid: no run start in (i − h, i] and none in (i, i + h], i + h < n
+    nxt = n
+    for i in range(n - 1, -1, -1):
+        if nxt - i > h:
+            valid[i] = True
+        if run_start[i]:
+            nxt = i
+    last = 0
+    for i in range(n):
+        if run_start[i]:
+            last = i
+        if i - last < h:
+            valid[i] = False
+    return win, valid, w + 1
+
+
+def window_arrays(
+    timestamp_us: np.ndarray,
+    *,
+    sample_period_s: float,
+    gap_limit_s: float | None = None,
+    step_tolerance: float = 0.1,
+    half_window: int,
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """:func:`assign_windows` and the Savitzky–Golay validity of
+    :func:`transforms.derivatives.savgol_valid` in one compiled pass, for the sorted time stamps
+    (µs since the epoch, int64) of **one valve**.
+
+    Returns ``(window_id, valid, n_windows)``: window ids 0 … n_windows − 1 (int64) and, per row,
+    whether a centred stencil of ``2·half_window + 1`` samples stays inside one uniform run.
+    """
+    if sample_period_s <= 0:
+        raise ValueError("sample_period_s must be > 0")
+    if gap_limit_s is None:
+        gap_limit_s = 3.0 * sample_period_s
+    if gap_limit_s < sample_period_s * (1.0 + step_tolerance):
+        raise ValueError("gap_limit_s must exceed the sample period (plus tolerance)")
+    period_us = sample_period_s * 1e6
+    return _window_kernel(
+        np.ascontiguousarray(timestamp_us, dtype=np.int64),
+        period_us * (1.0 - step_tolerance),
+        period_us * (1.0 + step_tolerance),
+        gap_limit_s * 1e6,
+        int(half_window),
     )

@@ -51,8 +51,8 @@ def test_step_of_exactly_the_gap_limit_stays_in_the_window():
     framed = assign_windows(_frame(t, {"y": np.zeros_like(t)}), sample_period_s=DT, gap_limit_s=0.003)
     assert framed["window_id"].n_unique() == 1
     # ... but the irregular step cuts the uniform run
-    assert framed["run_index"].to_list()[10] == 0
-    assert framed["run_remaining"].to_list()[9] == 0
+    assert framed["run_start"].to_list()[10] is True
+    assert framed["run_start"].sum() == 2
 
 
 def test_infer_sample_period():
@@ -128,3 +128,16 @@ def test_savgol_masks_around_a_dropped_sample():
     assert null[100 - h : 100 + h].all()
     assert not null[h : 100 - h].any() and not null[100 + h : 199 - h].any()
     np.testing.assert_allclose(out["dy"].to_numpy()[~null], 2e5 * t[~null], rtol=1e-9)
+
+
+def test_savgol_missing_value_nulls_its_stencils_only():
+    h = 10
+    t = np.arange(200) * DT
+    y = pl.Series("y", 3e5 * t).scatter(100, None)
+    f = _frame(t, {"y": y.to_numpy()}).with_columns(y)
+    framed = assign_windows(f, sample_period_s=DT)
+    out = add_savgol(framed, window=2 * h + 1, order=3, sample_period_s=DT, outputs={"y": ("ys", "dy")})
+    null = out["dy"].is_null().to_numpy()
+    assert null[100 - h : 100 + h + 1].all() and out["ys"].is_null().to_numpy()[100 - h : 100 + h + 1].all()
+    assert not null[h : 100 - h].any() and not null[100 + h + 1 : 200 - h].any()
+    np.testing.assert_allclose(out["dy"].to_numpy()[~null], 3e5, rtol=1e-9)
