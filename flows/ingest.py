@@ -105,19 +105,31 @@ def _value_columns(columns: list[str], export: ExportSpec) -> list[str]:
     return [c for c in columns if c not in skip]
 
 
-def read_csv_export(data: bytes, export: ExportSpec) -> pl.DataFrame:
+def read_csv_export(data: bytes, export: ExportSpec, tags: TagTable | None = None) -> pl.DataFrame:
     """A CSV export's bytes (decompressed) → frame in file order.
 
-    Value columns are read as Float64 (the fast path); only if some cell is not a number are
-    those columns read again as text, so that quarantine can show what the file says.
+    Value columns are read as Float64 and, in the long layout, the tag column as an Enum of
+    the plant's tags and the quality column as Categorical (the fast path). Only if that fails
+    (a cell that is no number, a tag the plant does not have) are those columns read again as
+    text, so that quarantine and the error message can show what the file says.
     """
     opts = _csv_options(export)
-    header = pl.read_csv(io.BytesIO(data), n_rows=0, **opts).columns
+    header = pl.read_csv(data, n_rows=0, **opts).columns
     values = _value_columns(header, export)
-    df = pl.read_csv(io.BytesIO(data), schema_overrides={c: pl.Float64 for c in values}, ignore_errors=True, **opts)
+    overrides: dict[str, pl.DataType] = {c: pl.Float64 for c in values}
+    if export.layout == "long" and tags is not None and export.tag_column in header:
+        overrides[export.tag_column] = tags.enum
+    if export.quality_column and export.quality_column in header:
+        overrides[export.quality_column] = pl.Categorical()
+    try:
+        return pl.read_csv(data, schema_overrides=overrides, **opts)
+    except pl.exceptions.ComputeError:
+        pass  # a value that is no number, or a tag the plant does not have: the careful path
+    overrides.pop(export.tag_column, None)
+    df = pl.read_csv(data, schema_overrides=overrides, ignore_errors=True, **opts)
     suspicious = [c for c in values if df[c].null_count()]
     if suspicious:
-        text = pl.read_csv(io.BytesIO(data), columns=suspicious, **opts)
+        text = pl.read_csv(data, columns=suspicious, **opts)
         df = df.with_columns([text[c] for c in suspicious])
     return df
 
@@ -133,7 +145,7 @@ class ExportFile:
     size_bytes: int
 
 
-def read_export(path: Path, export: ExportSpec) -> ExportFile:
+def read_export(path: Path, export: ExportSpec, tags: TagTable | None = None) -> ExportFile:
     """Read one export file (CSV, gzip CSV or Parquet) and hash its bytes.
 
     Raises
@@ -164,7 +176,7 @@ def read_export(path: Path, export: ExportSpec) -> ExportFile:
                     raise ValvemonError(f"{path}: empty file inside the gzip (expected a {export.layout} export with a header line)")
             if not data.strip():
                 raise ValvemonError(f"{path}: empty file (expected a {export.layout} export with a header line)")
-            df = read_csv_export(data, export)
+            df = read_csv_export(data, export, tags)
             first_line = 2
     except ValvemonError:
         raise
@@ -228,7 +240,8 @@ def ingest_file(path: str | Path, config: PlantConfig, warehouse: str | Path, ru
     """
     path, warehouse = Path(path), Path(warehouse)
     export = config.export
-    ef = read_export(path, export)
+    tags = tags or TagTable.from_config(config)
+    ef = read_export(path, export, tags)
     report = FileReport(str(path), ef.sha256)
     if not force and ef.sha256 in manifest_hashes(warehouse):
         report.skipped = True

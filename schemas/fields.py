@@ -132,7 +132,7 @@ UTC_NS = pl.Datetime("ns", "UTC")
 
 RAW_ROW_FIELDS: tuple[Field, ...] = (
     Field("line", pl.Int64, "", "Line of the source file (CSV, header = line 1) or row (Parquet, first row = 1).", ge=1),
-    Field("tag", pl.Utf8, "", "Historian tag name as exported."),
+    Field("tag", pl.Categorical, "", "Historian tag name as exported (during ingest an Enum of the plant's tags, which also checks them)."),
     Field("timestamp_utc", UTC_NS, "", "Sample time at the export's full resolution, UTC."),
     Field("value_si", pl.Float64, "", "Sample value converted to the SI unit of the tag's signal (Pa or m).", ge=-1e12, le=1e12),
 )

@@ -60,6 +60,36 @@ class ExportResult:
     counts: ExportCounts
 
 
+def split_by_tag(tag_id: np.ndarray, t_ns: np.ndarray, values: np.ndarray) -> list[tuple[int, np.ndarray, np.ndarray, slice | np.ndarray]]:
+    """Each tag's times and values, in file order: ``(tag id, t_ns, values, row selector)``.
+
+    Two common layouts are split without a gather: rows grouped by tag (PI: one block per
+    tag, slices) and rows interleaved in a fixed tag order (Ignition "tall", archives: one row
+    per tag and instant, one transposing copy). Anything else is grouped by a stable sort.
+    """
+    n = len(tag_id)
+    if n == 0:
+        return []
+    differs = tag_id[1:] != tag_id[:-1]
+    n_blocks = int(np.count_nonzero(differs)) + 1
+    if n_blocks <= 65_536:
+        change = np.flatnonzero(differs) + 1
+        starts = np.r_[0, change]
+        if len(np.unique(tag_id[starts])) == len(starts):  # one contiguous block per tag
+            stops = np.r_[change, n]
+            return [(int(tag_id[a]), t_ns[a:b], values[a:b], slice(int(a), int(b))) for a, b in zip(starts, stops)]
+    first_repeat = tag_id[1 : min(n, 65_537)] == tag_id[0]
+    k = int(np.argmax(first_repeat)) + 1 if first_repeat.any() else n
+    if n % k == 0 and len(np.unique(tag_id[:k])) == k and np.array_equal(tag_id.reshape(-1, k), np.broadcast_to(tag_id[:k], (n // k, k))):
+        t_cols = t_ns.reshape(-1, k).T.copy()
+        v_cols = values.reshape(-1, k).T.copy()
+        return [(int(tag_id[j]), t_cols[j], v_cols[j], slice(j, n, k)) for j in range(k)]
+    order = np.argsort(tag_id, kind="stable")
+    sorted_ids = tag_id[order]
+    bounds = np.r_[0, np.flatnonzero(sorted_ids[1:] != sorted_ids[:-1]) + 1, n]
+    return [(int(sorted_ids[a]), t_ns[order[a:b]], values[order[a:b]], order[a:b]) for a, b in zip(bounds[:-1], bounds[1:])]
+
+
 def tags_by_column(config: PlantConfig, valve_id: str) -> dict[str, str]:
     """Lake column → historian tag of one valve."""
     v = config.valve(valve_id)
@@ -99,21 +129,16 @@ def process_export(df: pl.DataFrame, config: PlantConfig, *, first_line: int = 2
         counts.time_start = acc["timestamp_utc"].min()
         counts.time_end = acc["timestamp_utc"].max()
 
-    tag_id = acc["tag_id"].to_numpy()
+    tag_id = acc["tag"].to_physical().to_numpy()
     t_all = acc["timestamp_utc"].to_physical().to_numpy()
     v_all = acc["value_si"].to_numpy()
     line_all = acc["line"].to_numpy()
-    order = np.argsort(tag_id, kind="stable")
-    sorted_ids = tag_id[order]
-    present_ids = np.unique(sorted_ids)
-    bounds = np.searchsorted(sorted_ids, np.r_[present_ids, np.iinfo(np.int32).max])
 
     gridded: dict[str, dict] = {}
     gap_frames = []
-    for j, tid in enumerate(present_ids):
-        sel = order[bounds[j] : bounds[j + 1]]
+    for tid, t_tag, v_tag, sel in split_by_tag(tag_id, t_all, v_all):
         tag, valve_id, signal = tags.tags[tid], tags.valve_ids[tid], tags.signals[tid]
-        series = prepare_tag(t_all[sel], v_all[sel], line_all[sel], export.duplicate_rule, tag)
+        series = prepare_tag(t_tag, v_tag, lambda sel=sel: line_all[sel], export.duplicate_rule, tag)
         counts.duplicates += series.duplicates
         counts.conflicts += series.conflicts
         counts.accepted += len(series.t_ns)

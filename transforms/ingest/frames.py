@@ -8,14 +8,16 @@ tag has a value and null elsewhere. Columns, dtypes and order come from
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from datetime import date
+from functools import lru_cache
 
 import numpy as np
 import pandera.errors
+import pandera.polars
 import polars as pl
 
-from schemas.fields import RAW_ROW_FIELDS, RAW_ROW_SCHEMA, REQUIRED_SIGNALS, SENSOR_FIELDS, SENSOR_SCHEMA, SIGNAL_COLUMN, polars_schema
+from schemas.fields import RAW_ROW_FIELDS, RAW_ROW_SCHEMA, REQUIRED_SIGNALS, SENSOR_FIELDS, SENSOR_SCHEMA, SIGNAL_COLUMN, pandera_schema, polars_schema
 from transforms.ingest.errors import IngestError
 from transforms.ingest.grid import Gridded
 
@@ -47,7 +49,7 @@ def assemble_valve(valve_id: str, signals: dict[str, Gridded]) -> pl.DataFrame:
     for s, col in SIGNAL_COLUMN.items():
         g = signals.get(s)
         if g is None:
-            data[col] = pl.Series(col, [None] * len(t), dtype=pl.Float64)
+            data[col] = pl.repeat(None, len(t), dtype=pl.Float64, eager=True).alias(col)
             continue
         if len(g.t_us) == len(t) and np.array_equal(g.t_us, t):
             data[col] = g.values
@@ -118,8 +120,15 @@ def validate_sensor_frame(frame: pl.DataFrame, tags_by_column: dict[str, str]) -
         raise IngestError(f"{where}: value {value!r} fails check {check!r} of the sensor frame", tag=tag) from None
 
 
+@lru_cache(maxsize=16)
+def raw_row_schema(tags: tuple[str, ...]) -> pandera.polars.DataFrameSchema:
+    """The raw-row schema of a plant: ``RAW_ROW_FIELDS`` with ``tag`` an Enum of its tags."""
+    fields = tuple(replace(f, dtype=pl.Enum(list(tags))) if f.name == "tag" else f for f in RAW_ROW_FIELDS)
+    return pandera_schema(fields, "raw_rows")
+
+
 def validate_raw_rows(accepted: pl.DataFrame) -> None:
-    """Validate accepted samples with the raw-row pandera schema.
+    """Validate accepted samples with the plant's raw-row pandera schema (:func:`raw_row_schema`).
 
     Raises
     ------
@@ -127,8 +136,10 @@ def validate_raw_rows(accepted: pl.DataFrame) -> None:
         Naming the line, the tag, the time and the failed check.
     """
     frame = accepted.select([f.name for f in RAW_ROW_FIELDS])
+    tag_dtype = frame.schema["tag"]
+    schema = raw_row_schema(tuple(tag_dtype.categories.to_list())) if isinstance(tag_dtype, pl.Enum) else RAW_ROW_SCHEMA
     try:
-        RAW_ROW_SCHEMA.validate(frame, lazy=True)
+        schema.validate(frame, lazy=True)
     except pandera.errors.SchemaErrors as err:
         column, index, check, value = _first_failure(err)
         line = tag = None

@@ -81,21 +81,24 @@ def _iso(t_ns: int) -> str:
     return datetime.fromtimestamp(t_ns // 1_000_000_000, tz=timezone.utc).strftime("%Y-%m-%dT%H:%M:%S") + f".{t_ns % 1_000_000_000:09d}Z"
 
 
-def prepare_tag(t_ns: np.ndarray, values: np.ndarray, lines: np.ndarray, rule: str, tag: str = "") -> TagSeries:
+def prepare_tag(t_ns: np.ndarray, values: np.ndarray, lines, rule: str, tag: str = "") -> TagSeries:
     """Sort one tag's samples by time and resolve samples at the same time (module doc, 1–2).
 
     Parameters
     ----------
-    t_ns, values, lines : ndarray
-        Times (int64 ns, UTC), SI values and source lines, in file order.
+    t_ns, values : ndarray
+        Times (int64 ns, UTC) and SI values, in file order.
+    lines : ndarray or callable
+        Source line of each sample, or a function returning them (called only when needed).
     rule : str
         ``export.duplicate_rule``: ``"last"``, ``"first"`` or ``"error"``.
     tag : str
         The tag's name, for the error message.
     """
+    order = None
     if len(t_ns) > 1 and not np.all(t_ns[1:] >= t_ns[:-1]):
         order = np.argsort(t_ns, kind="stable")
-        t_ns, values, lines = t_ns[order], values[order], lines[order]
+        t_ns, values = t_ns[order], values[order]
     if len(t_ns) < 2:
         return TagSeries(t_ns, values, 0, 0)
     same = t_ns[1:] == t_ns[:-1]
@@ -117,6 +120,8 @@ def prepare_tag(t_ns: np.ndarray, values: np.ndarray, lines: np.ndarray, rule: s
     distinct_per_run = np.bincount(rv[~dup_sorted], minlength=len(starts))
     conflicts = int(np.maximum(distinct_per_run - 1, 0).sum())
     if conflicts and rule == "error":
+        lines = np.asarray(lines() if callable(lines) else lines)
+        lines = lines if order is None else lines[order]
         bad_run = int(np.flatnonzero(distinct_per_run > 1)[0])
         members = np.flatnonzero(run == bad_run)
         shown = ", ".join(f"line {lines[m]} = {values[m]!r}" for m in members[:4])
@@ -157,8 +162,7 @@ def to_grid(t_ns: np.ndarray, values: np.ndarray, grid: Grid) -> Gridded:
     d = np.diff(t_ns)
     breaks = np.flatnonzero(d > grid.max_gap_ns)
     gap_start, gap_end = t_ns[breaks], t_ns[breaks + 1]
-    on_grid = t_ns % P == 0
-    if on_grid.all() and np.all((d == P) | (d > grid.max_gap_ns)):
+    if t_ns[0] % P == 0 and (np.array_equal(d, np.full_like(d, P)) or (np.all(t_ns % P == 0) and np.all((d == P) | (d > grid.max_gap_ns)))):
         # exactly gridded and nothing missing inside a segment: the samples are the grid
         return Gridded(t_ns // NS_PER_US, values, gap_start, gap_end)
     seg_first = np.r_[0, breaks + 1]

@@ -53,6 +53,11 @@ class TagTable:
         return cls(tags, valves, signals, np.asarray(factors, dtype=np.float64))
 
     @property
+    def enum(self) -> pl.Enum:
+        """The tags as a polars Enum: its physical code is the tag id."""
+        return pl.Enum(list(self.tags))
+
+    @property
     def ids(self) -> dict[str, int]:
         return {t: i for i, t in enumerate(self.tags)}
 
@@ -62,7 +67,7 @@ class Samples:
     """What one export holds, before it is put on the lake's grid."""
 
     accepted: pl.DataFrame
-    """``line, tag, tag_id, timestamp_utc (ns, UTC), value_si``, file order."""
+    """``line, tag (Enum of the plant's tags), timestamp_utc (ns, UTC), value_si``, file order."""
     quarantine: pl.DataFrame
     """``line, tag, timestamp_raw, value_raw, quality, reason`` (:data:`QUARANTINE_COLUMNS`)."""
     rows_in: int
@@ -80,14 +85,14 @@ def _require_columns(df: pl.DataFrame, wanted: dict[str, str]) -> None:
             raise IngestError(f"missing column {name!r} (export.{key}); the file's columns are {found}")
 
 
-def _value_checks(col: pl.Series, decimal: str) -> tuple[pl.Series, pl.Series, pl.Series, pl.Series]:
-    """Numeric values and three masks: missing, non-numeric, non-finite."""
+def _value_checks(col: pl.Series, decimal: str) -> tuple[pl.Series, pl.Series | None, pl.Series | None, pl.Series | None]:
+    """Numeric values and three masks: missing, non-numeric, non-finite (None: no such value)."""
     if col.dtype == pl.Null:
         col = col.cast(pl.Float64)
     if col.dtype.is_numeric() or col.dtype == pl.Boolean:
         values = col.cast(pl.Float64)
-        missing = values.is_null()
-        non_numeric = pl.Series(np.zeros(len(col), dtype=bool))
+        missing = values.is_null() if values.null_count() else None
+        non_numeric = None
     else:
         text = col.cast(pl.String).str.strip_chars()
         if decimal == ",":
@@ -96,11 +101,22 @@ def _value_checks(col: pl.Series, decimal: str) -> tuple[pl.Series, pl.Series, p
         missing = text.is_null() | (text.str.len_bytes() == 0)
         non_numeric = values.is_null() & ~missing
     non_finite = ~values.is_finite().fill_null(True)
+    if not non_finite.any():
+        non_finite = None
     return values, missing, non_numeric, non_finite
 
 
-def _raw_text(col: pl.Series) -> pl.Series:
-    return col.cast(pl.String) if col.dtype != pl.String else col
+def _text(col: pl.Series) -> pl.Series:
+    return col if col.dtype == pl.String else col.cast(pl.String)
+
+
+def _bad_quality(col: pl.Series, good: tuple[str, ...]) -> pl.Series:
+    """Rows whose quality code is not one of ``export.good_quality`` (a missing code is bad)."""
+    if isinstance(col.dtype, (pl.Categorical, pl.Enum)) or col.dtype == pl.String:
+        ok = col.is_in(list(good))
+    else:
+        ok = col.cast(pl.String).is_in(list(good))
+    return ~ok.fill_null(False)
 
 
 def _quarantine_frame(
@@ -110,10 +126,10 @@ def _quarantine_frame(
     return pl.DataFrame(
         {
             "line": lines.cast(pl.Int64),
-            "tag": tag.cast(pl.String),
-            "timestamp_raw": _raw_text(ts_raw),
-            "value_raw": _raw_text(value_raw),
-            "quality": pl.Series([None] * n, dtype=pl.String) if quality is None else _raw_text(quality),
+            "tag": _text(tag),
+            "timestamp_raw": _text(ts_raw),
+            "value_raw": _text(value_raw),
+            "quality": pl.repeat(None, n, dtype=pl.String, eager=True) if quality is None else _text(quality),
             "reason": reason,
         }
     )
@@ -124,24 +140,54 @@ def empty_quarantine() -> pl.DataFrame:
 
 
 def _reason(missing_tag, bad_quality, missing, non_numeric, non_finite) -> pl.Expr:
-    expr = pl.when(pl.lit(missing_tag)).then(pl.lit("missing_tag")) if missing_tag is not None else None
-    for mask, name in ((bad_quality, "bad_quality"), (missing, "missing_value"), (non_numeric, "non_numeric"), (non_finite, "non_finite")):
+    """The first reason that applies, in the order of the table in the module doc."""
+    expr = None
+    for mask, name in ((missing_tag, "missing_tag"), (bad_quality, "bad_quality"), (missing, "missing_value"), (non_numeric, "non_numeric"), (non_finite, "non_finite")):
         if mask is None:
             continue
         expr = pl.when(pl.lit(mask)).then(pl.lit(name)) if expr is None else expr.when(pl.lit(mask)).then(pl.lit(name))
     return expr.otherwise(pl.lit(None, dtype=pl.String))
 
 
+def _any(masks) -> pl.Series | None:
+    used = [m for m in masks if m is not None]
+    return pl.select(pl.any_horizontal([pl.lit(m) for m in used])).to_series() if used else None
+
+
 def _drop_blank(df: pl.DataFrame, first_line: int) -> tuple[pl.DataFrame, pl.Series]:
     """Drop all-null rows (blank lines); the line number of every remaining row."""
     lines = pl.int_range(first_line, first_line + df.height, dtype=pl.Int64, eager=True)
-    if df.width == 0 or df.height == 0:
+    if df.width == 0 or df.height == 0 or not any(df[c].null_count() for c in df.columns):
         return df, lines
     blank = df.select(pl.all_horizontal(pl.all().is_null())).to_series()
     if blank.any():
         keep = ~blank
         return df.filter(keep), lines.filter(keep)
     return df, lines
+
+
+def _tag_enum(col: pl.Series, tags: TagTable) -> pl.Series:
+    """The tag column as an Enum of the plant's tags (null for a missing or unknown tag)."""
+    if isinstance(col.dtype, pl.Enum) and tuple(col.dtype.categories.to_list()) == tags.tags:
+        return col
+    return _text(col).cast(tags.enum, strict=False)
+
+
+def _accepted(lines: pl.Series, tag: pl.Series, ts: pl.Series, values: pl.Series, tags: TagTable) -> pl.DataFrame:
+    tag_id = tag.to_physical().to_numpy()
+    value_si = values.to_numpy() * tags.factors[tag_id] if len(tag_id) else np.zeros(0)
+    return pl.DataFrame(
+        {
+            "line": lines.cast(pl.Int64),
+            "tag": tag,
+            "timestamp_utc": ts.cast(UTC_NS),
+            "value_si": pl.Series(value_si, dtype=pl.Float64),
+        }
+    )
+
+
+def _empty_accepted(tags: TagTable) -> pl.DataFrame:
+    return pl.DataFrame(schema={"line": pl.Int64, "tag": tags.enum, "timestamp_utc": UTC_NS, "value_si": pl.Float64})
 
 
 def long_samples(df: pl.DataFrame, export: ExportSpec, timezone: str, tags: TagTable, *, first_line: int = 2) -> Samples:
@@ -151,7 +197,7 @@ def long_samples(df: pl.DataFrame, export: ExportSpec, timezone: str, tags: TagT
     ----------
     df : DataFrame
         The file as read, in file order; a blank line may appear as an all-null row. Extra
-        columns are ignored.
+        columns are ignored. The tag column may be text or already an Enum of the plant's tags.
     export : ExportSpec
         Column names, timestamp format, quality codes, decimal mark.
     timezone : str
@@ -167,55 +213,45 @@ def long_samples(df: pl.DataFrame, export: ExportSpec, timezone: str, tags: TagT
     _require_columns(df, wanted)
     df, lines = _drop_blank(df.select(list(wanted.values())), first_line)
     n = df.height
-    tag_s = df[export.tag_column].cast(pl.String)
-    tag_id = tag_s.replace_strict(tags.ids, default=None, return_dtype=pl.Int32)
-    unknown = tag_id.is_null() & tag_s.is_not_null()
-    if unknown.any():
-        i = int(unknown.arg_true()[0])
-        raise IngestError(f"unknown tag {tag_s[i]!r}: no valve of the plant configuration has it", line=int(lines[i]))
+    tag_raw = df[export.tag_column]
+    tag = _tag_enum(tag_raw, tags)
+    missing_tag = None
+    if tag.null_count():
+        missing_tag = tag_raw.is_null() | (_text(tag_raw).str.strip_chars().str.len_bytes() == 0)
+        unknown = tag.is_null() & ~missing_tag
+        if unknown.any():
+            i = int(unknown.arg_true()[0])
+            raise IngestError(f"unknown tag {tag_raw[i]!r}: no valve of the plant configuration has it", line=int(lines[i]))
+        if not missing_tag.any():
+            missing_tag = None
+    tag_id = tag.to_physical()
     ts_raw = df[export.timestamp_column]
-    ts = parse_timestamps(ts_raw, export.timestamp_format, timezone, groups=tag_id, lines=lines, tags=tag_s)
+    ts = parse_timestamps(ts_raw, export.timestamp_format, timezone, groups=tag_id, lines=lines, tags=tag)
     if ts.null_count():
         i = int(ts.is_null().arg_true()[0])
-        raise IngestError("missing timestamp", line=int(lines[i]), tag=tag_s[i])
+        raise IngestError("missing timestamp", line=int(lines[i]), tag=tag[i])
     values, missing, non_numeric, non_finite = _value_checks(df[export.value_column], export.decimal)
-    missing_tag = tag_s.is_null()
-    bad_quality = None
-    if export.quality_column:
-        bad_quality = ~df[export.quality_column].cast(pl.String).is_in(list(export.good_quality)).fill_null(False)
+    bad_quality = _bad_quality(df[export.quality_column], export.good_quality) if export.quality_column else None
     masks = (missing_tag, bad_quality, missing, non_numeric, non_finite)
-    rejected = pl.select(pl.any_horizontal([pl.lit(m) for m in masks if m is not None])).to_series()
-    tags_present = frozenset(tag_s.drop_nulls().unique().to_list())
-    if rejected.any():
+    rejected = _any(masks)
+    ids = tag_id.drop_nulls().to_numpy()
+    counts = np.bincount(ids, minlength=len(tags.tags)) if len(ids) else np.zeros(len(tags.tags), dtype=np.int64)
+    tags_present = frozenset(tags.tags[i] for i in np.flatnonzero(counts))
+    if rejected is not None and rejected.any():
         sub = rejected.arg_true()
-        reason = pl.select(_reason(*(None if m is None else m.gather(sub) for m in masks))).to_series()
         quarantine = _quarantine_frame(
             lines.gather(sub),
-            tag_s.gather(sub),
+            tag_raw.gather(sub),
             ts_raw.gather(sub),
             df[export.value_column].gather(sub),
             df[export.quality_column].gather(sub) if export.quality_column else None,
-            reason,
+            pl.select(_reason(*(None if m is None else m.gather(sub) for m in masks))).to_series(),
         )
         ok = ~rejected
-        lines, tag_s, tag_id, ts, values = lines.filter(ok), tag_s.filter(ok), tag_id.filter(ok), ts.filter(ok), values.filter(ok)
+        lines, tag, ts, values = lines.filter(ok), tag.filter(ok), ts.filter(ok), values.filter(ok)
     else:
         quarantine = empty_quarantine()
-    accepted = _accepted(lines, tag_s, tag_id, ts, values, tags)
-    return Samples(accepted, quarantine, n, n, tags_present)
-
-
-def _accepted(lines: pl.Series, tag_s: pl.Series, tag_id: pl.Series, ts: pl.Series, values: pl.Series, tags: TagTable) -> pl.DataFrame:
-    value_si = values.to_numpy() * tags.factors[tag_id.to_numpy()] if len(tag_id) else np.zeros(0)
-    return pl.DataFrame(
-        {
-            "line": lines.cast(pl.Int64),
-            "tag": tag_s.cast(pl.String),
-            "tag_id": tag_id.cast(pl.Int32),
-            "timestamp_utc": ts.cast(UTC_NS),
-            "value_si": pl.Series(value_si, dtype=pl.Float64),
-        }
-    )
+    return Samples(_accepted(lines, tag, ts, values, tags), quarantine, n, n, tags_present)
 
 
 def _is_placeholder(df: pl.DataFrame, name: str) -> bool:
@@ -245,51 +281,41 @@ def wide_samples(df: pl.DataFrame, export: ExportSpec, timezone: str, tags: TagT
     if ts.null_count():
         i = int(ts.is_null().arg_true()[0])
         raise IngestError("missing timestamp", line=int(lines[i]))
-    bad_quality = None
-    if export.quality_column:
-        bad_quality = ~df[export.quality_column].cast(pl.String).is_in(list(export.good_quality)).fill_null(False)
+    bad_quality = _bad_quality(df[export.quality_column], export.good_quality) if export.quality_column else None
     accepted, quarantined = [], []
     samples_in = 0
-    present_tags = []
     for c in tag_columns:
         values, missing, non_numeric, non_finite = _value_checks(df[c], export.decimal)
-        present = ~missing
-        n_present = int(present.sum())
+        present = None if missing is None else ~missing
+        n_present = n if present is None else int(present.sum())
         if n_present == 0:
             continue
-        present_tags.append(c)
         samples_in += n_present
-        masks = (None, None if bad_quality is None else bad_quality & present, None, non_numeric, non_finite)
-        rejected = pl.select(pl.any_horizontal([pl.lit(m) for m in masks if m is not None])).to_series()
-        if rejected.any():
+        bad_q = None if bad_quality is None else (bad_quality if present is None else bad_quality & present)
+        masks = (None, bad_q, None, non_numeric, non_finite)
+        rejected = _any(masks)
+        if rejected is not None and rejected.any():
             sub = rejected.arg_true()
             quarantined.append(
                 _quarantine_frame(
                     lines.gather(sub),
-                    pl.Series([c] * len(sub), dtype=pl.String),
+                    pl.repeat(c, len(sub), dtype=pl.String, eager=True),
                     ts_raw.gather(sub),
                     df[c].gather(sub),
                     df[export.quality_column].gather(sub) if export.quality_column else None,
                     pl.select(_reason(*(None if m is None else m.gather(sub) for m in masks))).to_series(),
                 )
             )
-        keep = present & ~rejected
-        k = int(keep.sum())
-        tid = ids[c]
-        accepted.append(
-            _accepted(
-                lines.filter(keep) if k < n else lines,
-                pl.Series([c], dtype=pl.String).gather(np.zeros(k, dtype=np.int64)),
-                pl.Series(np.full(k, tid, dtype=np.int32)),
-                ts.filter(keep) if k < n else ts,
-                values.filter(keep) if k < n else values,
-                tags,
-            )
-        )
-    present_all = frozenset(tag_columns)
-    acc = pl.concat(accepted) if accepted else _accepted(*(pl.Series([], dtype=d) for d in (pl.Int64, pl.String, pl.Int32, UTC_NS, pl.Float64)), tags)
+        if rejected is None:
+            keep = present
+        else:
+            keep = ~rejected if present is None else present & ~rejected
+        k = n if keep is None else int(keep.sum())
+        sel = (lambda s: s) if k == n else (lambda s: s.filter(keep))
+        accepted.append(_accepted(sel(lines), pl.repeat(c, k, dtype=tags.enum, eager=True), sel(ts), sel(values), tags))
+    acc = pl.concat(accepted) if accepted else _empty_accepted(tags)
     quarantine = pl.concat(quarantined) if quarantined else empty_quarantine()
-    return Samples(acc, quarantine, n, samples_in, present_all)
+    return Samples(acc, quarantine, n, samples_in, frozenset(tag_columns))
 
 
 def samples_of(df: pl.DataFrame, config: PlantConfig, tags: TagTable | None = None, *, first_line: int = 2) -> Samples:

@@ -26,6 +26,8 @@ import re
 
 import numpy as np
 import polars as pl
+import pyarrow as pa
+import pyarrow.compute as pc
 
 from transforms.ingest.errors import IngestError
 
@@ -191,10 +193,26 @@ def parse_timestamps(
     if fmt == "iso8601":
         first = text.drop_nulls()
         candidates = _iso_formats(first[0]) if len(first) else []
+        if candidates:
+            fast = _arrow_iso(text, zoned=candidates[0][1])
+            if fast is not None:
+                return fast if candidates[0][1] else localize(fast, timezone, groups=groups, lines=lines, tags=tags)
     else:
         zoned = any(d in fmt for d in _ZONED_DIRECTIVES)
         candidates = [(fmt, zoned)]
     return _parse_text(text, candidates, fmt, timezone, groups=groups, lines=lines, tags=tags)
+
+
+def _arrow_iso(text: pl.Series, *, zoned: bool) -> pl.Series | None:
+    """Arrow's ISO-8601 parser on the whole column (fast); None if any element is not
+    ISO-8601 of that kind (with an offset when ``zoned``, without otherwise), so the caller
+    falls back to the format-by-format path, which also names the offending line."""
+    try:
+        parsed = pc.cast(text.to_arrow(), pa.timestamp("ns", "UTC" if zoned else None))
+    except (pa.ArrowInvalid, pa.ArrowNotImplementedError, pa.ArrowTypeError):
+        return None
+    out = pl.from_arrow(parsed)
+    return out.alias(text.name) if isinstance(out, pl.Series) else None
 
 
 def _epoch_ms(values: pl.Series) -> pl.Series:
@@ -236,7 +254,7 @@ def _parse_text(
             if whole and n_ok == n:
                 placed = parsed
             else:
-                placed = pl.Series(text.name, [None] * n, dtype=parsed.dtype).scatter(todo.filter(ok), parsed.filter(ok))
+                placed = pl.repeat(None, n, dtype=parsed.dtype, eager=True).alias(text.name).scatter(todo.filter(ok), parsed.filter(ok))
             if zoned:
                 zoned_out = placed if zoned_out is None else pl.select(pl.coalesce(zoned_out, placed)).to_series()
             else:
@@ -249,5 +267,5 @@ def _parse_text(
         local = localize(naive_out, timezone, groups=groups, lines=lines, tags=tags)
         return local if zoned_out is None else pl.select(pl.coalesce(zoned_out, local)).to_series()
     if zoned_out is None:
-        return pl.Series(text.name, [None] * n, dtype=UTC_NS)
+        return pl.repeat(None, n, dtype=UTC_NS, eager=True).alias(text.name)
     return zoned_out.cast(UTC_NS)
