@@ -165,7 +165,7 @@ def publish_snapshot(con: duckdb.DuckDBPyConnection, warehouse: str | Path) -> P
         stale.unlink(missing_ok=True)
     tmp = target.parent / f".{DB_NAME}.{uuid.uuid4().hex}.tmp"
     alias = f"snap_{uuid.uuid4().hex[:8]}"
-    main = con.sql("SELECT current_database()").fetchone()[0]
+    main = con.execute("SELECT current_database()").fetchall()[0][0]
     try:
         con.execute(f"ATTACH '{tmp}' AS {alias}")
         try:

@@ -1,0 +1,217 @@
+"""``valvemon report``: fits → decisions (step 5b), pictures and one HTML report.
+
+:func:`run_report`
+
+1. writes each configured valve's condition bounds (``[valve_types.NAME.bounds]``, with the
+   Eq. 9 rest residual of its design) to table ``condition_bounds``;
+2. brings table ``standstill_checks`` up to date from the lake (Eq. 9 per window,
+   :mod:`flows.standstill`; only windows from the latest one already checked onwards are read);
+3. creates or refreshes the ``sql/`` views (:mod:`flows.views`) and publishes the read-only
+   snapshot ``WAREHOUSE/snapshot/valvemon.duckdb`` that readers query;
+4. reads the views from the snapshot and writes the BI hand-off (:mod:`flows.export`), the PNG
+   pictures (:mod:`flows.report_figures`) and ``WAREHOUSE/reports/report.html``
+   (:mod:`flows.report_html`).
+
+Every write to ``valvemon.duckdb`` happens in a short-lived connection; the pictures and the
+export are made from the snapshot, without holding the live database.
+
+:func:`report_flow` is the Prefect flow the command line runs.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import uuid
+from dataclasses import dataclass, field
+from datetime import datetime, timedelta, timezone
+from pathlib import Path
+
+import numpy as np
+import polars as pl
+from prefect import flow
+
+from flows.config import load_plant_config
+from flows.errors import ValvemonError
+from flows.export import export_bi
+from flows.report_figures import characteristics_figure, fleet_figure, trends_figure
+from flows.report_html import render_report
+from flows.standstill import expected_residual, standstill_rows
+from flows.views import connect_snapshot, create_views, ensure_report_tables, publish_snapshot
+from flows.warehouse_db import connect, insert_frame, query_frame
+from model.area import edge_area
+from schemas.fields import EDGES, polars_schema
+from schemas.plant_config import BOUND_KEYS, PlantConfig
+from schemas.report_fields import CONDITION_BOUNDS_FIELDS
+
+REPORTS_DIR = "reports"
+REPORT_NAME = "report.html"
+DETAIL_VALVES = 20
+"""Valves shown with pictures in the HTML report by default: the most urgent ones."""
+U_GRID_POINTS = 281
+
+
+@dataclass
+class ReportResult:
+    """What a report run produced."""
+
+    html: Path
+    snapshot: Path
+    pngs: list[Path] = field(default_factory=list)
+    exports: dict[str, Path] = field(default_factory=dict)
+    views: list[str] = field(default_factory=list)
+    standstill_rows: int = 0
+    ranking: pl.DataFrame | None = None
+
+
+def bounds_frame(config: PlantConfig, now: datetime) -> pl.DataFrame:
+    """One ``condition_bounds`` row per configured valve."""
+    cache: dict[tuple, float] = {}
+    rows = []
+    for v in config.valves:
+        b = v.design.bounds
+        row = {k: getattr(b, k) for k in BOUND_KEYS}
+        if row["eq9_expected"] is None:
+            key = (v.design, v.piston_diameter_m, v.rod_diameter_m)
+            if key not in cache:
+                cache[key] = expected_residual(v, config.export)
+            row["eq9_expected"] = cache[key]
+        row |= {"valve_id": v.id, "valve_type": v.type, "x_max_mm": v.design.x_max_m * 1e3, "updated_at": now}
+        rows.append(row)
+    return pl.DataFrame(rows, schema=polars_schema(CONDITION_BOUNDS_FIELDS))
+
+
+def update_standstill(config: PlantConfig, warehouse: Path, now: datetime) -> int:
+    """Add Eq. 9 rows for the lake's windows not yet checked (from each valve's latest on)."""
+    from flows.monitor import lake_chunks  # the monitor's gap-aligned chunks of the lake
+
+    with connect(warehouse) as con:
+        ensure_report_tables(con)
+        last = dict(con.execute("SELECT valve_id, max(window_start) FROM standstill_checks GROUP BY 1").fetchall())
+    added = 0
+    for v in config.valves:
+        start = last.get(v.id)
+        for rows in lake_chunks(warehouse, v.id, config.export.max_gap_s, start, None):
+            frame = standstill_rows(rows, max_gap_s=config.export.max_gap_s, commissioned=v.commissioned, computed_at=now)
+            lo, hi = rows["timestamp_utc"][0], rows["timestamp_utc"][-1]
+            with connect(warehouse) as con:
+                con.execute("BEGIN TRANSACTION")
+                try:
+                    con.execute("DELETE FROM standstill_checks WHERE valve_id = ? AND window_start BETWEEN ? AND ?", [v.id, lo, hi])
+                    insert_frame(con, "standstill_checks", frame)
+                    con.execute("COMMIT")
+                except BaseException:
+                    con.execute("ROLLBACK")
+                    raise
+            added += frame.height
+    return added
+
+
+def refresh(config: PlantConfig, warehouse: Path, now: datetime) -> tuple[list[str], Path]:
+    """Bounds table, views and the published snapshot, in one short write connection."""
+    bounds = bounds_frame(config, now)
+    with connect(warehouse) as con:
+        ensure_report_tables(con)
+        con.execute("BEGIN TRANSACTION")
+        try:
+            con.execute("DELETE FROM condition_bounds")
+            insert_frame(con, "condition_bounds", bounds)
+            con.execute("COMMIT")
+        except BaseException:
+            con.execute("ROLLBACK")
+            raise
+        views = create_views(con)
+        con.execute("CHECKPOINT")
+        snapshot = publish_snapshot(con, warehouse)
+    return views, snapshot
+
+
+def _edge_curves(config: PlantConfig, valve_id: str, baselines: pl.DataFrame, latest: dict[str, dict]) -> dict[str, dict]:
+    """Nominal, baseline and current characteristic of each edge on one u grid (mm, mm²)."""
+    valve = config.valve(valve_id)
+    d = valve.design
+    x_max_mm = d.x_max_m * 1e3
+    u_mm = np.linspace(-x_max_mm, x_max_mm, U_GRID_POINTS)
+    out = {}
+    for edge in EDGES:
+        b = baselines.filter(pl.col("edge") == edge)
+        if b.height == 0:
+            continue
+        knots = np.asarray(b["knots_u_mm"][0], float)
+        values = np.asarray(b["values_mm2"][0], float)
+
+        def base(u: np.ndarray) -> np.ndarray:  # piecewise linear, linear beyond the end knots
+            y = np.interp(u, knots, values)
+            lo_slope = (values[1] - values[0]) / (knots[1] - knots[0])
+            hi_slope = (values[-1] - values[-2]) / (knots[-1] - knots[-2])
+            y = np.where(u < knots[0], values[0] + lo_slope * (u - knots[0]), y)
+            return np.where(u > knots[-1], values[-1] + hi_slope * (u - knots[-1]), y)
+
+        nominal = d.contraction_coefficient * edge_area(
+            u_mm * 1e-3, d.underlap_m[EDGES.index(edge)], d.taper_angle_rad(edge), d.bore_radius_m, d.spool_radius_m
+        ) * 1e6
+        info = latest.get(edge) or {}
+        current = None
+        if info.get("alpha_hat") is not None and info.get("x_hat_pct") is not None:
+            current = info["alpha_hat"] * base(u_mm + info["x_hat_pct"] / 100 * x_max_mm)
+        out[edge] = {"u_mm": u_mm, "nominal_mm2": nominal, "baseline_mm2": base(u_mm), "current_mm2": current}
+    return out
+
+
+def _write_html(path: Path, text: str) -> None:
+    tmp = path.parent / f".{path.name}.{uuid.uuid4().hex}.tmp"
+    tmp.write_text(text, encoding="utf-8")
+    os.replace(tmp, path)
+
+
+def run_report(config_path: str | Path, warehouse: str | Path, *, detail: int = DETAIL_VALVES, valve_ids: list[str] | None = None) -> ReportResult:
+    """The whole report (module docstring). ``detail`` most urgent valves (or ``valve_ids``) get pictures."""
+    config = load_plant_config(config_path)
+    warehouse = Path(warehouse)
+    known = [v.id for v in config.valves]
+    unknown = sorted(set(valve_ids or []) - set(known))
+    if unknown:
+        raise ValvemonError(f"{config_path}: no valve {unknown[0]!r} in plant {config.name!r}")
+    now = datetime.now(timezone.utc).replace(microsecond=0)
+    n_standstill = update_standstill(config, warehouse, now)
+    views, snapshot = refresh(config, warehouse, now)
+    out_dir = warehouse / REPORTS_DIR
+    out_dir.mkdir(parents=True, exist_ok=True)
+    con = connect_snapshot(warehouse)
+    try:
+        exports = export_bi(con, warehouse)
+        ranking = query_frame(con, "SELECT * FROM fleet_ranking ORDER BY urgency_rank")
+        conditions = query_frame(con, "SELECT * FROM valve_condition ORDER BY valve_id, edge_order")
+        chosen = valve_ids or ranking["valve_id"].head(detail).to_list()
+        chosen = [v for v in ranking["valve_id"].to_list() if v in set(chosen)]
+        pngs = [fleet_figure(ranking, conditions, out_dir / "fleet_overview.png")]
+        valve_pngs: dict[str, list[tuple[str, Path]]] = {}
+        for vid in chosen:
+            cond = conditions.filter(pl.col("valve_id") == vid)
+            latest = {r["edge"]: r for r in cond.iter_rows(named=True)}
+            baselines = query_frame(
+                con,
+                "SELECT * FROM baselines WHERE valve_id = ? QUALIFY version = max(version) OVER (PARTITION BY edge)",
+                [vid],
+            )
+            trend = query_frame(con, "SELECT * FROM trend_operating_hours WHERE valve_id = ?", [vid])
+            lines = query_frame(con, "SELECT * FROM parameter_trends WHERE valve_id = ?", [vid])
+            ch = characteristics_figure(vid, _edge_curves(config, vid, baselines, latest), latest, out_dir / f"characteristics_{vid}.png")
+            tr = trends_figure(vid, trend, lines, out_dir / f"trends_{vid}.png")
+            pngs += [ch, tr]
+            valve_pngs[vid] = [("Opening-area characteristics (nominal, baseline, current)", ch),
+                               ("α̂, x̂ and e over operating hours with bounds and end of life", tr)]  # fmt: skip
+    finally:
+        con.close()
+    html_path = out_dir / REPORT_NAME
+    _write_html(html_path, render_report(
+        plant=config.name, generated_at=now, ranking=ranking, conditions=conditions,
+        fleet_png=pngs[0], valve_pngs=valve_pngs, snapshot=snapshot,
+    ))  # fmt: skip
+    return ReportResult(html_path, snapshot, pngs, exports, views, n_standstill, ranking)
+
+
+@flow(name="valvemon-report", persist_result=False, validate_parameters=False)
+def report_flow(config_path: str, warehouse: str, detail: int = DETAIL_VALVES, valve_ids: list[str] | None = None) -> ReportResult:
+    """The Prefect flow behind ``valvemon report``."""
+    return run_report(config_path, warehouse, detail=detail, valve_ids=valve_ids)

@@ -1,0 +1,186 @@
+"""The report's pictures (matplotlib, Agg), written as PNG files.
+
+* :func:`characteristics_figure`: per valve, the opening-area characteristic of each edge:
+  nominal α·A(u) (Eq. 3), the baseline Â(u) the fits are made against, and the current
+  α̂·Â(u + x̂) of the latest ok window (the paper's Figs. 4, 5, 8 and 9), with the change
+  current − baseline underneath, where wear of a few per cent becomes visible.
+* :func:`trends_figure`: per valve, α̂, x̂ and e over operating hours for each edge, with the
+  wear and fault bounds, the rolling median, the fitted trend extrapolated to its bound and the
+  predicted end of life with its 95 % interval (the paper's Fig. 6); alarm windows in red.
+* :func:`fleet_figure`: the fleet at a glance: the state of every edge of the most urgent
+  valves, the remaining life of those with a forecast, and the count of valves per state.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import polars as pl  # noqa: E402
+from matplotlib.colors import ListedColormap  # noqa: E402
+from matplotlib.patches import Patch  # noqa: E402
+
+from schemas.fields import EDGES  # noqa: E402
+from schemas.report_fields import STATES  # noqa: E402
+
+STATE_COLOURS = {"healthy": "#4caf50", "worn": "#ff9800", "faulty": "#d32f2f", "unknown": "#9e9e9e"}
+PARAM_LABELS = {"alpha_hat": "α̂ (relative)", "x_hat_pct": "x̂ (% of x_max)", "e_mm2": "e (mm²)"}
+DPI = 100
+
+
+def _save(fig, path: Path) -> Path:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=DPI)
+    plt.close(fig)
+    return path
+
+
+def characteristics_figure(valve_id: str, curves: dict[str, dict[str, np.ndarray]], latest: dict[str, dict], path: Path) -> Path:
+    """Opening-area characteristics of one valve's four edges.
+
+    Parameters
+    ----------
+    curves : dict
+        edge → {"u_mm", "nominal_mm2", "baseline_mm2", "current_mm2" (or None)} on one u grid.
+    latest : dict
+        edge → {"alpha_hat", "x_hat_pct", "state", "window_start"} of the latest ok window.
+    """
+    fig, axes = plt.subplots(2, 4, figsize=(16, 7.5), sharex=True, gridspec_kw={"height_ratios": [3, 1.4]}, constrained_layout=True)
+    for j, edge in enumerate(EDGES):
+        c = curves.get(edge)
+        top, bottom = axes[0, j], axes[1, j]
+        info = latest.get(edge) or {}
+        state = info.get("state") or "unknown"
+        top.set_title(f"{valve_id} edge {edge}: {state}", color=STATE_COLOURS.get(state, "black"), fontsize=11)
+        if c is None:
+            top.text(0.5, 0.5, "no baseline", ha="center", va="center", transform=top.transAxes)
+            continue
+        u = c["u_mm"]
+        top.plot(u, c["nominal_mm2"], "k--", lw=1.2, label="nominal α·A(u), Eq. 3")
+        top.plot(u, c["baseline_mm2"], "-", color="#1565c0", lw=1.6, label="baseline Â(u)")
+        if c.get("current_mm2") is not None:
+            label = f"current α̂·Â(u+x̂): α̂ {info['alpha_hat']:.3f}, x̂ {info['x_hat_pct']:+.2f} %"
+            top.plot(u, c["current_mm2"], "-", color=STATE_COLOURS.get(state, "#000"), lw=1.6, label=label)
+            bottom.plot(u, c["current_mm2"] - c["baseline_mm2"], color=STATE_COLOURS.get(state, "#000"), lw=1.4)
+        bottom.axhline(0, color="#1565c0", lw=0.8)
+        top.grid(alpha=0.3)
+        bottom.grid(alpha=0.3)
+        top.legend(fontsize=7.5, loc="upper left")
+        bottom.set_xlabel("opening coordinate u (mm)")
+        if j == 0:
+            top.set_ylabel("α·A (mm²)")
+            bottom.set_ylabel("current − baseline (mm²)")
+    fig.suptitle(f"Opening-area characteristics of valve {valve_id}", fontsize=13)
+    return _save(fig, path)
+
+
+def trends_figure(valve_id: str, trend: pl.DataFrame, lines: pl.DataFrame, path: Path) -> Path:
+    """α̂, x̂ and e over operating hours for the four edges of one valve.
+
+    Parameters
+    ----------
+    trend : DataFrame
+        Rows of view ``trend_operating_hours`` for the valve.
+    lines : DataFrame
+        Rows of view ``parameter_trends`` for the valve (slope, intercept, bounds, end of life).
+    """
+    params = ("alpha_hat", "x_hat_pct", "e_mm2")
+    fig, axes = plt.subplots(3, 4, figsize=(16, 10), sharex="col", constrained_layout=True)
+    for j, edge in enumerate(EDGES):
+        for i, p in enumerate(params):
+            ax = axes[i, j]
+            d = trend.filter((pl.col("edge") == edge) & (pl.col("parameter") == p)).sort("operating_hours")
+            if i == 0:
+                ax.set_title(f"{valve_id} edge {edge}", fontsize=11)
+            if j == 0:
+                ax.set_ylabel(PARAM_LABELS[p])
+            if i == 2:
+                ax.set_xlabel("operating hours (h)")
+            ax.grid(alpha=0.3)
+            if d.height == 0:
+                ax.text(0.5, 0.5, "no ok fits", ha="center", va="center", transform=ax.transAxes)
+                continue
+            h = d["operating_hours"].to_numpy()
+            y = d["value"].to_numpy()
+            alarm = d["is_alarm"].fill_null(False).to_numpy()
+            ax.plot(h[~alarm], y[~alarm], ".", color="#37474f", ms=4, label="window")
+            if alarm.any():
+                ax.plot(h[alarm], y[alarm], "x", color=STATE_COLOURS["faulty"], ms=7, mew=2, label="alarm")
+            med = d["rolling_median"].to_numpy()
+            ax.plot(h, med, "-", color="#8e24aa", lw=1, alpha=0.8, label="rolling median")
+            x_end = h.max()
+            lp = lines.filter((pl.col("edge") == edge) & (pl.col("parameter") == p))
+            predicted = lp.filter(pl.col("crossing_status") == "predicted").sort("end_of_life_hours")
+            if predicted.height:
+                eol = predicted.row(0, named=True)
+                x_end = max(x_end, min(eol["end_of_life_hours"], h.max() + 20 * max(h.max() - h.min(), 1.0)))
+                ax.axvline(eol["end_of_life_hours"], color=STATE_COLOURS["worn"], lw=1.2)
+                lo, hi = eol["end_of_life_hours_low"], eol["end_of_life_hours_high"]
+                ax.axvspan(lo, min(hi, x_end * 1.05), color=STATE_COLOURS["worn"], alpha=0.15, label="end of life (95 %)")
+            if lp.height and lp["slope_per_hour"][0] is not None and lp["n_fits"][0] >= 3:
+                xs = np.array([h.min(), x_end])
+                ax.plot(xs, lp["intercept"][0] + lp["slope_per_hour"][0] * xs, "--", color="#ef6c00", lw=1.2, label="trend (OLS)")
+            for col, style, colour in (("wear_low", "--", STATE_COLOURS["worn"]), ("wear_high", "--", STATE_COLOURS["worn"]),
+                                       ("fault_low", ":", STATE_COLOURS["faulty"]), ("fault_high", ":", STATE_COLOURS["faulty"])):  # fmt: skip
+                v = d[col][0]
+                if v is not None:
+                    ax.axhline(v, ls=style, color=colour, lw=1)
+            lo_y = min([float(np.nanmin(y))] + [v for v in (d["wear_low"][0],) if v is not None])
+            hi_y = max([float(np.nanmax(y))] + [v for v in (d["wear_high"][0],) if v is not None])
+            pad = 0.08 * (hi_y - lo_y or 1.0)
+            ax.set_ylim(lo_y - pad, hi_y + pad)
+            if i == 0 and j == 0:
+                ax.legend(fontsize=7, loc="best")
+    fig.suptitle(f"Condition parameters of valve {valve_id} over operating hours "
+                 "(dashed orange: wear bounds; dotted red: fault bounds)", fontsize=13)  # fmt: skip
+    return _save(fig, path)
+
+
+def fleet_figure(ranking: pl.DataFrame, conditions: pl.DataFrame, path: Path, max_valves: int = 40) -> Path:
+    """Fleet overview: edge states of the most urgent valves, their remaining life, state counts."""
+    top = ranking.sort("urgency_rank").head(max_valves)
+    ids = top["valve_id"].to_list()
+    n = max(len(ids), 1)
+    fig = plt.figure(figsize=(16, max(4.5, 0.32 * n + 2.0)), constrained_layout=True)
+    gs = fig.add_gridspec(1, 3, width_ratios=[1.1, 2.2, 1.0])
+    ax_state, ax_life, ax_count = fig.add_subplot(gs[0]), fig.add_subplot(gs[1]), fig.add_subplot(gs[2])
+    codes = {s: k for k, s in enumerate(STATES)}
+    grid = np.full((n, len(EDGES)), codes["unknown"], dtype=float)
+    lookup = {(r["valve_id"], r["edge"]): r["state"] for r in conditions.iter_rows(named=True)}
+    for a, vid in enumerate(ids):
+        for b, edge in enumerate(EDGES):
+            grid[a, b] = codes[lookup.get((vid, edge), "unknown")]
+    cmap = ListedColormap([STATE_COLOURS[s] for s in STATES])
+    ax_state.imshow(grid, cmap=cmap, vmin=-0.5, vmax=len(STATES) - 0.5, aspect="auto")
+    ax_state.set_xticks(range(len(EDGES)), EDGES)
+    ax_state.set_yticks(range(len(ids)), [f"{r['urgency_rank']}. {r['valve_id']}" for r in top.iter_rows(named=True)], fontsize=8)
+    ax_state.set_title(f"edge states, {len(ids)} most urgent valves")
+    ax_state.legend(handles=[Patch(color=STATE_COLOURS[s], label=s) for s in STATES], fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.04), ncol=2)
+    y = np.arange(len(ids))
+    rem = top["remaining_hours"].to_numpy().astype(float)
+    lo = top["remaining_hours_low"].to_numpy().astype(float)
+    hi = top["remaining_hours_high"].to_numpy().astype(float)
+    has = np.isfinite(rem)
+    colours = [STATE_COLOURS.get(s, "#000") for s in top["state"].to_list()]
+    if has.any():
+        ax_life.barh(y[has], rem[has], color=[c for c, k in zip(colours, has) if k], alpha=0.85)
+        err = np.vstack([rem[has] - lo[has], np.where(np.isfinite(hi[has]), hi[has] - rem[has], 0)])
+        ax_life.errorbar(rem[has], y[has], xerr=np.clip(err, 0, None), fmt="none", ecolor="black", capsize=3, lw=1)
+    for k in np.flatnonzero(~has):
+        ax_life.text(0, y[k], "  no forecast", va="center", fontsize=8, color="#616161")
+    ax_life.set_yticks(y, [str(v) for v in ids], fontsize=8)
+    ax_life.set_ylim(len(ids) - 0.5, -0.5)
+    ax_life.set_xlabel("remaining operating hours to a wear bound (bar) with 95 % interval")
+    ax_life.set_title("remaining service life")
+    ax_life.grid(axis="x", alpha=0.3)
+    counts = {s: int((ranking["state"] == s).sum()) for s in STATES}
+    ax_count.bar(list(counts), list(counts.values()), color=[STATE_COLOURS[s] for s in counts])
+    for k, (s, v) in enumerate(counts.items()):
+        ax_count.text(k, v, str(v), ha="center", va="bottom")
+    ax_count.set_title(f"valves per state ({ranking.height} valves)")
+    fig.suptitle("Fleet overview", fontsize=13)
+    return _save(fig, path)

@@ -1,0 +1,136 @@
+"""One self-contained HTML report: inline CSS, PNG pictures inlined as base64, no scripts, no
+external assets; it opens offline in any browser and can be mailed as one file."""
+
+from __future__ import annotations
+
+import base64
+import html
+from datetime import datetime
+from pathlib import Path
+
+import polars as pl
+
+from flows.report_figures import STATE_COLOURS
+
+CSS = """
+body { font-family: -apple-system, 'Segoe UI', Helvetica, Arial, sans-serif; margin: 24px; color: #212121; background: #fff; }
+h1 { font-size: 24px; margin-bottom: 4px; } h2 { font-size: 19px; margin-top: 32px; border-bottom: 2px solid #e0e0e0; }
+h3 { font-size: 16px; margin-top: 22px; }
+.meta { color: #616161; font-size: 13px; }
+table { border-collapse: collapse; font-size: 13px; margin: 8px 0 16px 0; }
+th, td { border: 1px solid #e0e0e0; padding: 4px 8px; text-align: left; vertical-align: top; }
+th { background: #f5f5f5; } td.num { text-align: right; font-variant-numeric: tabular-nums; }
+.state { font-weight: bold; color: #fff; border-radius: 3px; padding: 1px 6px; white-space: nowrap; }
+.cards { display: flex; gap: 12px; margin: 12px 0; }
+.card { border-radius: 6px; padding: 10px 18px; color: #fff; font-size: 15px; min-width: 110px; }
+.card b { font-size: 26px; display: block; }
+img { max-width: 100%; height: auto; border: 1px solid #eeeeee; margin: 6px 0; }
+.note { font-size: 12px; color: #616161; max-width: 1100px; }
+"""
+
+
+def _state(s: str | None) -> str:
+    s = s or "unknown"
+    return f'<span class="state" style="background:{STATE_COLOURS.get(s, "#000")}">{html.escape(s)}</span>'
+
+
+def _num(v, fmt: str = "{:,.0f}") -> str:
+    if v is None:
+        return "—"
+    try:
+        return fmt.format(v)
+    except (TypeError, ValueError):
+        return html.escape(str(v))
+
+
+def _life(r: dict) -> str:
+    if r.get("remaining_hours") is None:
+        return "—"
+    return f"{_num(r['remaining_hours'])} ({_num(r.get('remaining_hours_low'))}–{_num(r.get('remaining_hours_high'))})"
+
+
+def _img(path: Path, alt: str) -> str:
+    data = base64.b64encode(path.read_bytes()).decode("ascii")
+    return f'<img alt="{html.escape(alt)}" src="data:image/png;base64,{data}">'
+
+
+def _eq9(ok) -> str:
+    return "—" if ok is None else ("ok" if ok else '<b style="color:#d32f2f">fails</b>')
+
+
+def render_report(
+    *,
+    plant: str,
+    generated_at: datetime,
+    ranking: pl.DataFrame,
+    conditions: pl.DataFrame,
+    fleet_png: Path,
+    valve_pngs: dict[str, list[tuple[str, Path]]],
+    snapshot: Path,
+) -> str:
+    """The report's HTML text.
+
+    Parameters
+    ----------
+    ranking, conditions : DataFrame
+        Views ``fleet_ranking`` and ``valve_condition``.
+    fleet_png : Path
+        The fleet overview picture.
+    valve_pngs : dict
+        valve id → [(caption, PNG path)], for the valves shown in detail, in ranking order.
+    snapshot : Path
+        The database snapshot the report was made from (named for the reader's queries).
+    """
+    counts = {s: int((ranking["state"] == s).sum()) for s in STATE_COLOURS}
+    parts = [
+        "<!DOCTYPE html>",
+        '<html lang="en"><head><meta charset="utf-8">',
+        f"<title>valvemon report: {html.escape(plant)}</title>",
+        f"<style>{CSS}</style></head><body>",
+        f"<h1>Valve condition report: plant {html.escape(plant)}</h1>",
+        f'<div class="meta">generated {generated_at:%Y-%m-%d %H:%M} UTC from {html.escape(str(snapshot))} · '
+        f"{ranking.height} valves · method: Steinboeck et al. (2013), step 5b</div>",
+        '<div class="cards">'
+        + "".join(f'<div class="card" style="background:{STATE_COLOURS[s]}"><b>{counts[s]}</b>{s}</div>' for s in counts)
+        + "</div>",
+        "<h2>Fleet, most urgent first</h2>",
+        _img(fleet_png, "fleet overview"),
+        "<table><tr><th>#</th><th>valve</th><th>state</th><th>edge</th><th>reason</th>"
+        "<th>remaining h (95 %)</th><th>Eq. 9</th><th>operating h</th><th>last window (UTC)</th></tr>",
+    ]
+    for r in ranking.sort("urgency_rank").iter_rows(named=True):
+        last = r["last_window_start"].strftime("%Y-%m-%d %H:%M") if r["last_window_start"] else "—"
+        parts.append(
+            f"<tr><td class='num'>{r['urgency_rank']}</td><td><a href='#valve-{html.escape(r['valve_id'])}'>"
+            f"{html.escape(r['valve_id'])}</a></td><td>{_state(r['state'])}</td><td>{html.escape(r['worst_edge'] or '')}</td>"
+            f"<td>{html.escape(r['reason'] or '')}</td><td class='num'>{_life(r)}</td><td>{_eq9(r['eq9_ok'])}</td>"
+            f"<td class='num'>{_num(r['operating_hours'])}</td><td>{last}</td></tr>"
+        )
+    parts.append("</table>")
+    parts.append(
+        '<p class="note">State per edge: <b>faulty</b> = a window beyond a fault bound or a significant departure '
+        "(robust z-score) from the edge's recent trend within the hold time; <b>worn</b> = the long-term level of "
+        "α̂, x̂ or e beyond a wear bound; <b>unknown</b> = too few ok windows to judge; otherwise <b>healthy</b>. "
+        "Remaining hours: the least-squares trend over operating hours extrapolated to the wear bound, with the "
+        "95 % interval of the crossing (Fieller). Eq. 9: the standstill pressure check, an indicator independent "
+        "of the fits. Bounds: the plant configuration's [valve_types.NAME.bounds].</p>"
+    )
+    for vid, pngs in valve_pngs.items():
+        parts.append(f"<h2 id='valve-{html.escape(vid)}'>Valve {html.escape(vid)}</h2>")
+        parts.append(
+            "<table><tr><th>edge</th><th>state</th><th>reason</th><th>α̂</th><th>x̂ (% x_max)</th><th>e (mm²)</th>"
+            "<th>remaining h (95 %)</th><th>ok windows</th></tr>"
+        )
+        for r in conditions.filter(pl.col("valve_id") == vid).sort("edge_order").iter_rows(named=True):
+            parts.append(
+                f"<tr><td>{html.escape(r['edge'])}</td><td>{_state(r['state'])}</td><td>{html.escape(r['reason'] or '')}</td>"
+                f"<td class='num'>{_num(r['alpha_hat'], '{:.3f}')}</td><td class='num'>{_num(r['x_hat_pct'], '{:+.2f}')}</td>"
+                f"<td class='num'>{_num(r['e_mm2'], '{:.3f}')}</td><td class='num'>{_life(r)}</td>"
+                f"<td class='num'>{r['n_ok_windows']} / {r['n_windows']}</td></tr>"
+            )
+        parts.append("</table>")
+        for caption, png in pngs:
+            parts.append(f"<h3>{html.escape(caption)}</h3>")
+            parts.append(_img(png, f"{vid}: {caption}"))
+    parts.append("</body></html>")
+    return "\n".join(parts)
