@@ -10,7 +10,7 @@ export PREFECT_SERVER_ANALYTICS_ENABLED := false
 export PREFECT_HOME ?= $(CURDIR)/.prefect
 export UV_LINK_MODE := copy
 
-.PHONY: setup demo test bench clean
+.PHONY: setup demo test bench clean chromium
 
 $(UV):
 	$(PYTHON) -m venv $(TOOLS)
@@ -25,7 +25,15 @@ setup: $(VENV)/.synced
 demo: setup
 	$(VENV)/bin/valvemon demo
 
-test: setup
+# the report's HTML is checked in headless Chromium (tests/report): install Debian's package when
+# it is missing and we may (CI runs as root on a fresh machine); otherwise that test is skipped
+chromium:
+	@if [ ! -x /usr/bin/chromium ] && [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
+		echo "installing chromium (Debian package) for the report's rendering test"; \
+		apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null; \
+	fi
+
+test: setup chromium
 	$(VENV)/bin/python -m pytest -n 2 --durations=15
 
 bench: setup

@@ -41,7 +41,23 @@ def _not_yet(what: str, issue: int) -> None:
 @app.command()
 def demo(warehouse: Warehouse = None) -> None:
     """Simulate a small plant, run the whole pipeline on it, print the fleet's condition and the report's path."""
-    _not_yet("demo", 6)
+    from rich.console import Console
+    from rich.table import Table
+
+    import flows.demo as demo_flows
+    from flows.config import warehouse_dir
+    from flows.ingest import quiet_prefect_console
+
+    quiet_prefect_console()
+    wh = warehouse_dir(warehouse)
+    result = demo_flows.demo_flow(warehouse=str(wh))
+    fleet = demo_flows.fleet_table(wh)
+    table = Table(title=f"Fleet condition ({result['config']})")
+    for c in fleet.columns:
+        table.add_column(c)
+    for row in fleet.iter_rows():
+        table.add_row(*("" if v is None else str(v) for v in row))
+    Console().print(table)
 
 
 @app.command()
@@ -123,15 +139,39 @@ def monitor(config: Config, valves: Valves = None, start: From = None, end: To =
 
 
 @app.command()
-def report(config: Config, warehouse: Warehouse = None) -> None:
+def report(
+    config: Config,
+    warehouse: Warehouse = None,
+    detail: Annotated[int, typer.Option("--detail", help="Valves shown with pictures in the HTML report: the N most urgent.")] = 20,
+    valves: Annotated[Optional[list[str]], typer.Option("--valves", help="Show these valves in detail instead (repeat the option).")] = None,
+) -> None:
     """Refresh the views, write the pictures and the HTML report."""
-    _not_yet("report", 5)
+    import flows.report as report_flows
+    from flows.config import warehouse_dir
+    from flows.ingest import quiet_prefect_console
+
+    quiet_prefect_console()
+    result = report_flows.report_flow(config_path=str(config), warehouse=str(warehouse_dir(warehouse)), detail=detail, valve_ids=valves)
+    counts = result.ranking["state"].value_counts(sort=True) if result.ranking is not None else None
+    summary = ", ".join(f"{n} {s}" for s, n in counts.iter_rows()) if counts is not None and counts.height else "no valves"
+    typer.echo(f"{summary}; {len(result.pngs)} pictures, export in {result.exports.get('valve_condition', Path()).parent}")
+    typer.echo(str(result.html.resolve()))
 
 
 @app.command()
-def query(sql: Annotated[str, typer.Argument(help="SQL against the warehouse.")], warehouse: Warehouse = None) -> None:
+def query(
+    sql: Annotated[str, typer.Argument(help="SQL against the warehouse (tables and views; docs/warehouse.md).")],
+    fmt: Annotated[str, typer.Option("--format", help="table | csv | json | parquet (parquet needs --out).")] = "table",
+    out: Annotated[Optional[Path], typer.Option("--out", help="Write the result to this file instead of standard output.")] = None,
+    live: Annotated[bool, typer.Option("--live", help="Query the live database (read-only; waits while a writer holds it) instead of the snapshot of the last report.")] = False,
+    max_rows: Annotated[int, typer.Option("--max-rows", help="Rows shown by --format table (the others write all rows).")] = 200,
+    warehouse: Warehouse = None,
+) -> None:
     """An ad-hoc query against the warehouse, printed as a table."""
-    _not_yet("query", 5)
+    from flows.config import warehouse_dir
+    from flows.query import run_query
+
+    run_query(sql, warehouse_dir(warehouse), fmt=fmt, out=out, live=live, max_rows=max_rows)
 
 
 @app.command()

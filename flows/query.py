@@ -1,0 +1,77 @@
+"""``valvemon query``: an ad-hoc SQL query against the warehouse, printed or written to a file.
+
+Reads the read-only snapshot the last ``valvemon report`` published (``--live``: the live
+database, read-only), so a query never waits for the nightly writer and never holds it up
+(:mod:`flows.views`). Output: a rich table (default), CSV, JSON (an array of objects, times as
+ISO-8601 UTC) or Parquet (``--out`` required).
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import duckdb
+import polars as pl
+
+from flows.errors import ValvemonError
+from flows.views import connect_snapshot
+
+FORMATS = ("table", "csv", "json", "parquet")
+
+
+def fetch(sql: str, warehouse: Path, *, live: bool = False) -> pl.DataFrame:
+    """Run ``sql`` on the snapshot (or the live file) and return the whole result."""
+    con = connect_snapshot(warehouse, live=live)
+    try:
+        try:
+            rel = con.sql(sql)
+        except duckdb.Error as exc:
+            raise ValvemonError(f"query failed: {str(exc).splitlines()[0]}") from None
+        if rel is None:
+            raise ValvemonError("the statement returned no result (only queries are supported)")
+        try:
+            return pl.from_arrow(rel.to_arrow_table())
+        except duckdb.Error as exc:
+            raise ValvemonError(f"query failed: {str(exc).splitlines()[0]}") from None
+    finally:
+        con.close()
+
+
+def _table(frame: pl.DataFrame, max_rows: int):
+    from rich.table import Table
+
+    t = Table(show_lines=False, header_style="bold")
+    for name, dtype in frame.schema.items():
+        t.add_column(f"{name}\n[dim]{dtype}[/dim]", justify="right" if dtype.is_numeric() else "left")
+    for row in frame.head(max_rows).iter_rows():
+        t.add_row(*("NULL" if v is None else (f"{v:.6g}" if isinstance(v, float) else str(v)) for v in row))
+    return t
+
+
+def run_query(sql: str, warehouse: Path, *, fmt: str = "table", out: Path | None = None, live: bool = False, max_rows: int = 200) -> pl.DataFrame:
+    """``valvemon query``: fetch and print (or write) the result in ``fmt``."""
+    if fmt not in FORMATS:
+        raise ValvemonError(f"--format: {fmt!r} is not one of {', '.join(FORMATS)}")
+    if fmt == "parquet" and out is None:
+        raise ValvemonError("--format parquet needs --out FILE")
+    frame = fetch(sql, warehouse, live=live)
+    if fmt == "parquet":
+        frame.write_parquet(out)
+    elif fmt == "csv":
+        text = frame.write_csv()
+        out.write_text(text) if out else sys.stdout.write(text)
+    elif fmt == "json":
+        text = frame.write_json() + "\n"
+        out.write_text(text) if out else sys.stdout.write(text)
+    else:
+        from rich.console import Console
+
+        wide = out is not None or not sys.stdout.isatty()
+        console = Console(file=out.open("w") if out else None, width=250 if wide else None)
+        console.print(_table(frame, max_rows))
+        note = f"{frame.height} row(s)" + (f", first {max_rows} shown" if frame.height > max_rows else "")
+        console.print(f"[dim]{note}[/dim]")
+        if out:
+            console.file.close()
+    return frame
