@@ -1,0 +1,235 @@
+"""The sql/ views against hand-built fits with known answers (in-memory DuckDB, no Prefect)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from flows.errors import ValvemonError
+from flows.views import SQL_DIR, discover_views, ordered_views
+from schemas.fields import EDGES
+
+HOURS = np.arange(0.0, 200.0, 1.0)  # one window per operating hour
+
+
+def test_views_load_in_dependency_order(wh):
+    views = ordered_views(discover_views())
+    names = [v.name for v in views]
+    for v in views:
+        for d in v.depends_on:
+            assert names.index(d) < names.index(v.name)
+    layers = {v.name: v.layer for v in views}
+    assert layers["stg_edge_fits"] == "staging" and layers["valve_condition"] == "report"
+    assert {"valve_condition", "fleet_ranking", "fault_alarms", "threshold_breaches", "parameter_trends",
+            "trend_daily", "trend_operating_hours", "standstill_indicator"} <= set(names)
+    cols = wh.q("SELECT * FROM valve_condition LIMIT 0").columns
+    assert cols[:7] == ["valve_id", "edge", "state", "reason", "remaining_hours", "remaining_hours_low", "remaining_hours_high"]
+
+
+def test_a_cycle_and_a_layer_violation_are_refused(tmp_path):
+    for layer in ("staging", "core", "report"):
+        (tmp_path / layer).mkdir()
+    (tmp_path / "staging" / "stg_a.sql").write_text("select * from core_b")
+    (tmp_path / "core" / "core_b.sql").write_text("select * from stg_a")
+    with pytest.raises(ValvemonError, match="staging view may not read the core view 'core_b'"):
+        ordered_views(discover_views(tmp_path))
+    (tmp_path / "staging" / "stg_a.sql").write_text("select * from stg_c -- reads c")
+    (tmp_path / "staging" / "stg_c.sql").write_text("select * from stg_a")
+    with pytest.raises(ValvemonError, match="cycle"):
+        ordered_views(discover_views(tmp_path))
+    assert SQL_DIR.is_dir()
+
+
+def test_normal_scatter_raises_no_alarm_and_is_healthy(wh):
+    # Table 2's normal valve, window after window: α̂ 0.98 ± 0.01, x̂ 0.23 ± 0.1 %, e 0.10 ± 0.01 mm²
+    wh.add_valve("N1")
+    wh.add_healthy_edges("N1", HOURS, seed=1)
+    assert wh.q("SELECT count(*) AS n FROM fault_alarms")["n"][0] == 0
+    assert wh.q("SELECT count(*) AS n FROM threshold_breaches")["n"][0] == 0
+    states = wh.q("SELECT state FROM valve_condition WHERE valve_id = 'N1'")["state"].to_list()
+    assert states == ["healthy"] * 4
+    z = wh.q("SELECT max(abs(z)) AS z FROM fit_checks WHERE valve_id = 'N1'")["z"][0]
+    assert 0 < z < 6  # scored, but nowhere near the threshold
+
+
+def test_table3_wear_raises_no_alarm(wh):
+    # Table 3: α̂ 1.04 → 1.17 and x̂ 0.1 → 3.7 % of x_max over 700 … 16,700 h, one window a day, with scatter
+    rng = np.random.default_rng(3)
+    h = np.arange(700.0, 16_700.0 + 1, 24.0)
+    f = (h - 700) / 16_000
+    wh.add_valve("W1")
+    wh.add_fits("W1", "s2", h, 1.04 + 0.13 * np.sqrt(f) + 0.01 * rng.standard_normal(h.size),
+                0.1 + 3.6 * f + 0.1 * rng.standard_normal(h.size), 0.32 - 0.14 * f + 0.01 * rng.standard_normal(h.size))
+    assert wh.q("SELECT count(*) AS n FROM fault_alarms")["n"][0] == 0
+    c = wh.condition("W1", "s2")
+    assert c["state"] == "healthy", c["reason"]
+    assert c["alpha_level"] == pytest.approx(1.17, abs=0.02) and c["x_hat_pct_level"] == pytest.approx(3.7, abs=0.2)
+    # x̂ rises 0.225 %/1000 h: its bound of 6 % is ahead, after the latest window
+    assert c["remaining_hours"] > 0 and c["limiting_parameter"] in ("x_hat_pct", "alpha_hat")
+
+
+def test_one_faulty_window_among_normal_ones_is_caught(wh):
+    # the paper's faulty edge 1r (Table 2: α̂ 2.53, x̂ 11.8 %, e 1.13 mm²) in the latest window
+    wh.add_valve("F1")
+    wh.add_healthy_edges("F1", HOURS, seed=2, skip=("1r",))
+    a, x, e = np.full(HOURS.size, 0.98), np.full(HOURS.size, 0.23), np.full(HOURS.size, 0.10)
+    a[-1], x[-1], e[-1] = 2.53, 11.8, 1.13
+    wh.add_fits("F1", "1r", HOURS, a, x, e)
+    alarms = wh.q("SELECT * FROM fault_alarms")
+    assert alarms.height == 1 and alarms["edge"][0] == "1r" and alarms["operating_hours"][0] == HOURS[-1]
+    assert alarms["beyond_fault_bound"][0] and alarms["change_alarm"][0]
+    c = wh.condition("F1", "1r")
+    assert c["state"] == "faulty" and "alpha_hat 2.53" in c["reason"] and c["remaining_hours"] is None
+    assert [wh.condition("F1", e)["state"] for e in ("s1", "s2", "2r")] == ["healthy"] * 3
+    breaches = wh.q("SELECT parameter, bound_kind FROM threshold_breaches WHERE bound_kind = 'fault' ORDER BY parameter")
+    assert breaches["parameter"].to_list() == ["alpha_hat", "e_mm2", "x_hat_pct"]
+    rank = wh.q("SELECT * FROM fleet_ranking")
+    assert rank["valve_id"][0] == "F1" and rank["state"][0] == "faulty" and rank["worst_edge"][0] == "1r"
+
+
+def test_a_departure_inside_the_bounds_is_caught_by_the_change_detector(wh):
+    # α̂ jumps from 1.00 to 1.25: inside every bound, but 25 σ-floors away from its own history
+    wh.add_valve("C1")
+    a = np.full(HOURS.size, 1.0) + 0.005 * np.sin(HOURS)
+    a[150] = 1.25
+    wh.add_fits("C1", "s1", HOURS, a, 0.2, 0.1)
+    alarms = wh.q("SELECT * FROM fault_alarms")
+    assert alarms["operating_hours"].to_list() == [150.0]
+    assert alarms["change_alarm"][0] and not alarms["beyond_fault_bound"][0]
+    assert alarms["alpha_z"][0] > 6
+    # 49 h later the alarm is past fault_hold_hours (24 h): the edge is healthy again, the alarm stays on record
+    assert wh.condition("C1", "s1")["state"] == "healthy"
+
+
+def test_a_trend_beyond_its_wear_bound_is_worn(wh):
+    # x̂ = 0.1 + 0.01 h % crosses the wear bound 6 % at 590 h; fits until 800 h
+    h = np.arange(0.0, 800.0, 1.0)
+    wh.add_valve("T1")
+    wh.add_fits("T1", "s2", h, 1.0, 0.1 + 0.01 * h, 0.1)
+    c = wh.condition("T1", "s2")
+    assert c["state"] == "worn" and "x_hat_pct level" in c["reason"] and "above wear bound 6" in c["reason"]
+    assert (c["remaining_hours"], c["remaining_hours_low"], c["remaining_hours_high"]) == (0.0, 0.0, 0.0)
+    assert wh.q("SELECT count(*) AS n FROM fault_alarms")["n"][0] == 0  # slow wear: no short-term alarm
+    first = wh.q("SELECT min(operating_hours) AS h FROM threshold_breaches WHERE bound_kind = 'wear'")["h"][0]
+    assert first == 591.0  # the first window beyond 6 %
+
+
+def test_remaining_life_of_an_exactly_linear_trend_is_its_crossing(wh):
+    # x̂ = 0.1 + 0.01 h %: reaches 6 % at exactly 590 h; the latest window is at 199 h → 391 h left
+    wh.add_valve("L1")
+    wh.add_fits("L1", "s2", HOURS, 1.0, 0.1 + 0.01 * HOURS, 0.1)
+    c = wh.condition("L1", "s2")
+    assert c["state"] == "healthy" and c["limiting_parameter"] == "x_hat_pct"
+    assert c["end_of_life_hours"] == pytest.approx(590.0, abs=1e-6)
+    assert c["remaining_hours"] == pytest.approx(391.0, abs=1e-6)
+    assert c["remaining_hours_low"] <= c["remaining_hours"] <= c["remaining_hours_high"]
+    assert c["remaining_hours_high"] - c["remaining_hours_low"] < 1e-3
+
+
+def test_remaining_life_interval_covers_the_crossing_of_a_noisy_trend(wh):
+    # α̂ = 1 + 0.0005 h with scatter 0.005: reaches 1.30 at 600 h; the interval must contain it
+    rng = np.random.default_rng(7)
+    wh.add_valve("L2")
+    wh.add_fits("L2", "1r", HOURS, 1.0 + 0.0005 * HOURS + 0.005 * rng.standard_normal(HOURS.size), 0.2, 0.1)
+    c = wh.condition("L2", "1r")
+    assert c["limiting_parameter"] == "alpha_hat"
+    assert c["end_of_life_hours"] == pytest.approx(600.0, rel=0.1)
+    assert c["remaining_hours_low"] < 600.0 - HOURS[-1] < c["remaining_hours_high"]
+    assert c["remaining_hours_low"] < c["remaining_hours"] < c["remaining_hours_high"]
+    trend = wh.q("SELECT * FROM parameter_trends WHERE valve_id = 'L2' AND parameter = 'alpha_hat' AND side = 'high'").row(0, named=True)
+    assert trend["slope_per_hour"] == pytest.approx(0.0005, rel=0.1) and trend["crossing_status"] == "predicted"
+    low = wh.q("SELECT crossing_status FROM parameter_trends WHERE valve_id = 'L2' AND parameter = 'alpha_hat' AND side = 'low'")
+    assert low["crossing_status"][0] == "away_from_bound"
+
+
+def test_too_little_data_is_unknown(wh):
+    wh.add_valve("U1")
+    wh.add_fits("U1", "s1", HOURS[:5], 1.0, 0.2, 0.1)  # 5 ok windows, 10 needed
+    wh.add_fits("U1", "1r", HOURS[:30], 1.0, 0.2, 0.1, status="too_few_points")
+    c = {e: wh.condition("U1", e) for e in EDGES}
+    assert [c[e]["state"] for e in EDGES] == ["unknown"] * 4
+    assert "too little data: 5" in c["s1"]["reason"]
+    assert "no ok fit in 30 window(s); last status too_few_points" in c["1r"]["reason"]
+    assert c["s2"]["reason"] == "no fits yet" and c["s1"]["remaining_hours"] is None
+    rank = wh.q("SELECT * FROM fleet_ranking").row(0, named=True)
+    assert rank["state"] == "unknown" and rank["urgency_tier"] == 5
+
+
+def test_a_short_span_gives_a_state_but_no_forecast(wh):
+    wh.add_valve("S1", trend_min_span_hours=100.0)
+    h = np.arange(0.0, 50.0, 1.0)
+    wh.add_fits("S1", "s1", h, 1.0 + 0.001 * h, 0.2, 0.1)
+    c = wh.condition("S1", "s1")
+    assert c["state"] == "healthy" and c["remaining_hours"] is None
+    st = wh.q("SELECT DISTINCT crossing_status FROM parameter_trends WHERE valve_id = 'S1'")["crossing_status"].to_list()
+    assert st == ["too_little_data"]
+
+
+def test_fits_against_an_older_baseline_are_left_out(wh):
+    wh.add_valve("B1")
+    wh.add_fits("B1", "s1", HOURS, 2.5, 11.0, 1.1, baseline_version=1)  # against the old baseline
+    wh.add_fits("B1", "s1", HOURS + 200, 1.0, 0.2, 0.1, baseline_version=2)
+    assert wh.condition("B1", "s1")["state"] == "healthy"
+    assert wh.q("SELECT count(*) AS n FROM stg_edge_fits")["n"][0] == HOURS.size
+
+
+def test_configured_bounds_are_used(wh):
+    # the same fits: healthy with the defaults, worn with a tighter α̂ wear bound
+    wh.add_valve("K1")
+    wh.add_valve("K2", alpha_wear_high=1.10)
+    for v in ("K1", "K2"):
+        wh.add_fits(v, "s1", HOURS, 1.15, 0.2, 0.1)
+    assert wh.condition("K1", "s1")["state"] == "healthy"
+    assert wh.condition("K2", "s1")["state"] == "worn"
+
+
+def test_eq9_indicator_against_the_design_value(wh):
+    wh.add_valve("E1")
+    wh.add_valve("E2")
+    for v in ("E1", "E2"):
+        wh.add_healthy_edges(v, HOURS, seed=4)
+    wh.add_standstill("E1", HOURS[::10], -0.15)  # healthy Table 1 valve rests near -0.17
+    r = np.full(HOURS[::10].size, -0.16)
+    r[-1] = -1.4  # the paper's broken edge
+    wh.add_standstill("E2", HOURS[::10], r)
+    ind = {row["valve_id"]: row for row in wh.q("SELECT * FROM standstill_indicator").iter_rows(named=True)}
+    assert ind["E1"]["eq9_ok"] and not ind["E2"]["eq9_ok"]
+    assert ind["E2"]["eq9_deviation"] == pytest.approx(-1.4 + 0.17)
+    assert ind["E2"]["eq9_drift"] == pytest.approx(-1.4 + 0.16)
+    assert ind["E2"]["n_recent_failures"] == 1
+    c = wh.condition("E2", "s1")
+    assert c["state"] == "healthy" and "Eq. 9 standstill check fails" in c["reason"] and c["eq9_ok"] is False
+    rank = wh.q("SELECT valve_id, urgency_tier FROM fleet_ranking ORDER BY urgency_rank")
+    assert rank.row(0) == ("E2", 3)
+
+
+def test_fleet_ranking_orders_by_urgency(wh):
+    for v in ("A_healthy", "B_faulty", "C_worn", "D_soon", "E_later", "F_unknown"):
+        wh.add_valve(v)
+    for v in ("A_healthy", "B_faulty", "C_worn", "D_soon", "E_later"):
+        wh.add_healthy_edges(v, HOURS, seed=5, skip=("s1",))
+    flat = np.zeros(HOURS.size)
+    wh.add_fits("A_healthy", "s1", HOURS, 1.0 + flat, 0.2, 0.1)
+    wh.add_fits("B_faulty", "s1", HOURS, np.where(HOURS == HOURS[-1], 2.5, 1.0), 0.2, 0.1)
+    wh.add_fits("C_worn", "s1", HOURS, 1.4 + flat, 0.2, 0.1)
+    wh.add_fits("D_soon", "s1", HOURS, 1.0 + 0.001 * HOURS, 0.2, 0.1)  # 1.3 at 300 h
+    wh.add_fits("E_later", "s1", HOURS, 1.0 + 0.0001 * HOURS, 0.2, 0.1)  # 1.3 at 3000 h
+    wh.add_fits("F_unknown", "s1", HOURS[:3], 1.0, 0.2, 0.1)
+    rank = wh.q("SELECT valve_id, state FROM fleet_ranking ORDER BY urgency_rank")
+    # the random scatter of the healthy edges may give a forecast too, but far beyond these
+    assert rank["valve_id"].to_list()[:4] == ["B_faulty", "C_worn", "D_soon", "E_later"]
+    assert rank["state"].to_list()[:2] == ["faulty", "worn"]
+    assert set(rank["valve_id"].to_list()[4:]) == {"A_healthy", "F_unknown"}
+
+
+def test_trend_views(wh):
+    wh.add_valve("D1")
+    wh.add_fits("D1", "s1", HOURS, 1.0 + 0.001 * HOURS, 0.2, 0.1)
+    daily = wh.q("SELECT * FROM trend_daily WHERE parameter = 'alpha_hat' ORDER BY day_utc")
+    assert daily["n_windows"].to_list() == [24] * 8 + [8]  # 200 hourly windows from 2025-01-01 00:00 UTC
+    assert str(daily["day_utc"][0]) == "2025-01-01"
+    assert daily["median_value"][0] == pytest.approx(1.0115)
+    oh = wh.q("SELECT * FROM trend_operating_hours WHERE parameter = 'alpha_hat' ORDER BY operating_hours")
+    assert oh.height == HOURS.size
+    assert np.allclose(oh["trend_value"].to_numpy(), 1.0 + 0.001 * HOURS)
+    assert oh["rolling_median"][0] is None and oh["rolling_median"][30] == pytest.approx(1.0 + 0.001 * 17.5)
