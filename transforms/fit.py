@@ -7,13 +7,14 @@ For a population (one window, one edge) of N points (u_i, A_i),
 For fixed x̂ the best α̂ is closed-form, α̂(x̂) = Σ A_i Â_i / Σ Â_i², so the fit is a 1-D search
 on the profile cost f(x̂) = Σ A_i² − (Σ A_i Â_i)² / Σ Â_i² (variable projection):
 
-1. a coarse grid of x̂ over [−x_bound, x_bound] on an evenly strided subsample (≤ 128 points; 31 grid points, 0.1 mm apart) of
-   the population finds the basin of the global minimum;
+1. a coarse grid of x̂ over [−x_bound, x_bound] (25 points, 0.125 mm apart for the default
+   1.5 mm) on an evenly strided subsample (≤ 96 points) of the population finds the basin of the
+   global minimum;
 2. a safeguarded Newton iteration on the full population (bisection whenever Newton would leave
-   the bracket or f″ ≤ 0) converges to |Δx̂| < 1 nm (should it end on a bracket edge, the
-   bracket moves on by a grid step). The derivatives are analytic for a
-   piecewise-linear Â (Â″ = 0 between knots): with S_a = Σ A Â, S_b = Σ Â², S_ad = Σ A Â',
-   S_bd = Σ Â Â', S_dd = Σ Â'², α = S_a/S_b,
+   the bracket or f″ ≤ 0) converges to |Δx̂| < 1 nm; should it end on a bracket edge, the
+   bracket moves on by a grid step. The derivatives are analytic for a piecewise-linear Â
+   (Â″ = 0 between knots): with S_a = Σ A Â, S_b = Σ Â², S_ad = Σ A Â', S_bd = Σ Â Â',
+   S_dd = Σ Â'², α = S_a/S_b,
 
        f'  = −2 α S_ad + 2 α² S_bd  (= the gradient of the cost at the optimal α̂: −2 α̂ Σ Â' r)
        f'' = −2 α' S_ad + 4 α α' S_bd + 2 α² S_dd,   α' = (S_ad − 2 α S_bd) / S_b.
@@ -35,7 +36,7 @@ Status of a row: ``ok``, or why there is no (trustworthy) estimate: ``no_points`
 ``too_few_points`` (< min_points), ``too_little_coverage`` (u_max − u_min < min_coverage),
 ``no_baseline`` (no Â for the valve/edge), ``degenerate`` (Â vanishes or α̂ ≤ 0 at the points),
 ``x_hat_at_bound`` (optimum on the search bound; estimates reported), ``not_converged``
-(iteration limit; estimates reported).
+(iteration limit; estimates reported). ``iterations`` counts the full-population Newton passes.
 """
 
 from __future__ import annotations
@@ -379,8 +380,8 @@ def fit_arrays(
     min_points: int | np.ndarray = 500,
     min_coverage_m: float | np.ndarray = 0.25e-3,
     ci_level: float = 0.95,
-    n_grid: int = 31,
-    sub_max: int = 128,
+    n_grid: int = 25,
+    sub_max: int = 96,
     xtol_m: float = 1e-9,
     maxiter: int = 60,
 ) -> dict[str, np.ndarray]:

@@ -226,7 +226,7 @@ def _points_kernel(codes, n_selected, selected_code, ps, pr, p1, p2, x, xc, dp1,
     cursor = offsets[:4].copy()
     for i in range(x.shape[0]):
         for e in range(4):
-            if codes[e, i] != selected_code:
+            if codes[i, e] != selected_code:
                 continue
             if e < 2:
                 num = dp1[i] * (v01 + a1 * xc[i]) + (beta * a1) * v[i]
@@ -260,7 +260,7 @@ def points_arrays(
     *,
     leakage: Mapping[str, Characteristic] | None = None,
 ):
-    """Eq. 7 (and its siblings) for the rows whose ``codes[e]`` equal ``selected_code``
+    """Eq. 7 (and its siblings) for the rows whose ``codes[:, e]`` equal ``selected_code``
     (:func:`transforms.selection.selection_codes`), in one compiled pass per edge.
 
     Returns ``(idx, area, offsets)``: row indices and α·A of edge e in
@@ -268,7 +268,7 @@ def points_arrays(
     Same formulas as :func:`area_expr`, same optional closed-edge correction.
     """
     s = DEFAULT_SIGNALS
-    n_sel = (codes == selected_code).sum(axis=1).astype(np.int64)
+    n_sel = (codes == selected_code).sum(axis=0).astype(np.int64)
     c = np.array(
         [sqrt(params.density_kg_m3 / 2.0), params.bulk_modulus_pa, params.piston_area_m2,
          params.annulus_area_m2, params.v01_m3, params.v02_m3],

@@ -214,7 +214,7 @@ def _selection_kernel(win, n_windows, valid, ps, pr, p1, p2, x, xc, dp1, dp2, v,
     vmin, pmax, kr, beta, a1, a2, v01, v02, lim_pos, lim_neg, min_dp = (
         c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7], c[8], c[9], c[10])
     n = x.shape[0]
-    codes = np.empty((4, n), dtype=np.uint8)
+    codes = np.empty((n, 4), dtype=np.uint8)
     flagged = np.zeros((n_windows, 4, 5), dtype=np.int64)
     removed = np.zeros((n_windows, 4, 5), dtype=np.int64)
     selected = np.zeros((n_windows, 4), dtype=np.int64)
@@ -271,7 +271,7 @@ def _selection_kernel(win, n_windows, valid, ps, pr, p1, p2, x, xc, dp1, dp2, v,
                 removed[w, e, code] += 1
             else:
                 selected[w, e] += 1
-            codes[e, i] = code
+            codes[i, e] = code
     return codes, flagged, removed, selected, n_samples
 
 
@@ -291,7 +291,7 @@ def selection_codes(
     ``valid`` (bool, optional): False where the Savitzky–Golay values do not count (counted as
     ``no_derivative``, like a null).
 
-    Returns ``codes`` (uint8, shape (4, n): the first rule that removes the sample for each edge
+    Returns ``codes`` (uint8, shape (n, 4): the first rule that removes the sample for each edge
     in :data:`EDGES` order, :data:`SELECTED_CODE` if none) and per window the counts
     ``flagged`` and ``removed`` (n_windows, 4, len(RULES)), ``selected`` (n_windows, 4),
     ``n_samples`` (n_windows,).

@@ -116,7 +116,21 @@ TRUTH = EdgeTruth(
 )
 
 
+_CACHE: dict = {}
+
+
 def chamber_data(duration_s: float = 6.0, dt: float = 1e-3, truth: EdgeTruth = TRUTH):
+    """Cached :func:`_chamber_data` (the stiff integration takes about a second); read-only arrays."""
+    key = (duration_s, dt, repr(truth))
+    if key not in _CACHE:
+        out = _chamber_data(duration_s, dt, truth)
+        for arr in out:
+            arr.setflags(write=False)
+        _CACHE[key] = out
+    return _CACHE[key]
+
+
+def _chamber_data(duration_s: float, dt: float, truth: EdgeTruth):
     """X(t), x(t) prescribed; p1, p2 integrated from Eq. 6 with Eq. 4 flows of the open edges.
 
     X moves sinusoidally (period 3 s, amplitude 80 mm, up to 0.17 m/s); the spool follows
