@@ -167,13 +167,21 @@ def _profile(u, a, jc, s, e, stride, kn, kv, ks, k0, k1, tab, toff, tlo, tinv, t
 
 @numba.njit(cache=True)
 def _newton(u, a, jc, s, e, kn, kv, ks, k0, k1, tab, toff, tlo, tinv, tn, x, lo, hi, saa, first_mode, xtol, maxiter):
-    """Safeguarded Newton on f' within [lo, hi] from x; returns (x, code, passes)."""
+    """Safeguarded Newton on f' within [lo, hi] from x.
+
+    Returns (x, code, passes, sums): on convergence x is the last point evaluated (within
+    ``xtol`` of the predicted optimum) and ``sums`` = (S_a, S_b, S_bd, S_dd) there, so no extra
+    pass is needed for α̂ and JᵀJ."""
     mode = first_mode
     for it in range(maxiter):
-        f, fp, fpp, al, good = _profile(u, a, jc, s, e, 1, kn, kv, ks, k0, k1, tab, toff, tlo, tinv, tn, x, mode, saa)
+        sa, sb, sad, sbd, sdd = _sums(u, a, jc, s, e, 1, kn, kv, ks, k0, k1, tab, toff, tlo, tinv, tn, x, mode)
         mode = 2
-        if not good:
-            return x, _DEGENERATE, it + 1
+        if sb <= 0.0 or sa <= 0.0:
+            return x, _DEGENERATE, it + 1, (sa, sb, sbd, sdd)
+        al = sa / sb
+        fp = -2.0 * al * sad + 2.0 * al * al * sbd
+        alp = (sad - 2.0 * al * sbd) / sb
+        fpp = -2.0 * alp * sad + 4.0 * al * alp * sbd + 2.0 * al * al * sdd
         if fp < 0.0:
             lo = x
         else:
@@ -184,14 +192,18 @@ def _newton(u, a, jc, s, e, kn, kv, ks, k0, k1, tab, toff, tlo, tinv, tn, x, lo,
                 xn = 0.5 * (lo + hi)
         else:
             xn = 0.5 * (lo + hi)
-        if abs(xn - x) < xtol or hi - lo < xtol:
-            return xn, _OK, it + 1
+        if abs(xn - x) < xtol:
+            return x, _OK, it + 1, (sa, sb, sbd, sdd)
+        if hi - lo < xtol:
+            return xn, _OK, it + 1, (0.0, 0.0, 0.0, 0.0)  # sums not at xn
         x = xn
-    return x, _NOT_CONVERGED, maxiter
+    return x, _NOT_CONVERGED, maxiter, (0.0, 0.0, 0.0, 0.0)
 
 
 @numba.njit(cache=True)
 def _fit_one(u, a, jc, s, e, kn, kv, ks, k0, k1, tab, toff, tlo, tinv, tn, xb, n_grid, sub_max, xtol, maxiter):
+    """Returns (x̂, code, passes, sums at x̂ or zeros)."""
+    zero = (0.0, 0.0, 0.0, 0.0)
     n = e - s
     stride = max(1, n // sub_max)
     saa = 0.0
@@ -211,7 +223,7 @@ def _fit_one(u, a, jc, s, e, kn, kv, ks, k0, k1, tab, toff, tlo, tinv, tn, xb, n
             best_f = f
             best_g = g
     if best_g < 0:
-        return 0.0, _DEGENERATE, 0
+        return 0.0, _DEGENERATE, 0, zero
     x0 = -xb + best_g * step
     lo = max(-xb, x0 - step)
     hi = min(xb, x0 + step)
@@ -221,11 +233,11 @@ def _fit_one(u, a, jc, s, e, kn, kv, ks, k0, k1, tab, toff, tlo, tinv, tn, xb, n
     mode = 1
     x = x0
     for _expand in range(2 * n_grid):
-        x, code, p = _newton(u, a, jc, s, e, kn, kv, ks, k0, k1, tab, toff, tlo, tinv, tn, x, lo, hi, saa, mode, xtol, maxiter)
+        x, code, p, sums = _newton(u, a, jc, s, e, kn, kv, ks, k0, k1, tab, toff, tlo, tinv, tn, x, lo, hi, saa, mode, xtol, maxiter)
         passes += p
         mode = 2
         if code != _OK:
-            return x, code, passes
+            return x, code, passes, zero
         if x - lo < 2.0 * xtol and lo > -xb:
             hi = lo
             lo = max(-xb, lo - step)
@@ -237,9 +249,9 @@ def _fit_one(u, a, jc, s, e, kn, kv, ks, k0, k1, tab, toff, tlo, tinv, tn, xb, n
             x = 0.5 * (lo + hi)
             continue
         if x - lo < 2.0 * xtol or hi - x < 2.0 * xtol:
-            return x, _AT_BOUND, passes
-        return x, _OK, passes
-    return x, _NOT_CONVERGED, passes
+            return x, _AT_BOUND, passes, zero
+        return x, _OK, passes, sums
+    return x, _NOT_CONVERGED, passes, zero
 
 
 @numba.njit(cache=True)
@@ -263,13 +275,16 @@ def _fit_groups(u, a, offsets, kstart, kend, kn, kv, ks, tab, tstart, tlo, tinv,
         k0 = kstart[g]
         k1 = kend[g]
         toff, tlo_g, tinv_g, tn_g = tstart[g], tlo[g], tinv[g], tn[g]
-        x, c, p = _fit_one(u, a, jc, s, e, kn, kv, ks, k0, k1, tab, toff, tlo_g, tinv_g, tn_g, xbound[g], n_grid, sub_max, xtol, maxiter)
+        x, c, p, sums = _fit_one(u, a, jc, s, e, kn, kv, ks, k0, k1, tab, toff, tlo_g, tinv_g, tn_g, xbound[g], n_grid, sub_max, xtol, maxiter)
         iters[g] = p
         code[g] = c
         if c == _DEGENERATE:
             continue
-        # final pass at the optimum: α̂, residual sums, JᵀJ pieces, lag-1 autocorrelation
-        sa, sb, sad, sbd, sdd_ = _sums(u, a, jc, s, e, 1, kn, kv, ks, k0, k1, tab, toff, tlo_g, tinv_g, tn_g, x, 2)
+        # α̂ and the JᵀJ pieces at the optimum (from the last Newton pass, else one more pass),
+        # then the residuals: their sum of squares and lag-1 autocorrelation
+        sa, sb, sbd, sdd_ = sums
+        if sb <= 0.0:
+            sa, sb, _sad, sbd, sdd_ = _sums(u, a, jc, s, e, 1, kn, kv, ks, k0, k1, tab, toff, tlo_g, tinv_g, tn_g, x, 2)
         if sb <= 0.0 or sa <= 0.0:
             code[g] = _DEGENERATE
             continue
