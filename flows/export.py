@@ -6,7 +6,7 @@ Layout::
     export/valve_condition.parquet                  view valve_condition
     export/fleet_ranking.parquet                    view fleet_ranking
 
-Each file's schema is built from the field registry (``schemas.fields.EDGE_FIT_FIELDS``,
+Each file's schema is built from the field registry (:func:`bi_schema`) (``schemas.fields.EDGE_FIT_FIELDS``,
 ``schemas.report_fields.VALVE_CONDITION_FIELDS`` / ``FLEET_RANKING_FIELDS``): the same column
 names, order and types on every export, timestamps ``timestamp[us, tz=UTC]``, each field's unit
 and description in the Parquet field metadata. The partition key ``valve_id`` is also inside
@@ -50,8 +50,23 @@ def conform(frame: pl.DataFrame, fields: tuple[Field, ...]) -> pa.Table:
     if missing:
         raise ValueError(f"export: columns missing from the query result: {', '.join(missing)}")
     table = frame.select([f.name for f in fields]).cast(dict(polars_schema(fields))).to_arrow()
-    schema = arrow_schema(fields)
+    schema = bi_schema(fields)
     return pa.Table.from_arrays([table.column(f.name).cast(schema.field(f.name).type) for f in fields], schema=schema)
+
+
+def _plain(t: pa.DataType) -> pa.DataType:
+    if pa.types.is_large_string(t):
+        return pa.string()
+    if pa.types.is_large_list(t):
+        return pa.list_(_plain(t.value_type))
+    return t
+
+
+def bi_schema(fields: tuple[Field, ...]) -> pa.Schema:
+    """The registry's Arrow schema with plain ``string``/``list`` types instead of polars' large
+    ones: what BI tools and pyarrow's hive partitioning (which infers ``string`` keys) expect."""
+    schema = arrow_schema(fields)
+    return pa.schema([pa.field(f.name, _plain(f.type), nullable=f.nullable, metadata=f.metadata) for f in schema])
 
 
 def write_parquet_atomic(table: pa.Table, path: Path) -> None:
