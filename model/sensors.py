@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .effects import Effects, sensor_readings
 from .params import SensorChannel, SensorParams
 from .simulate import SimulationResult
 
@@ -55,7 +56,7 @@ def measure_channel(values, channel: SensorChannel, rng: np.random.Generator) ->
 
 
 def measure(result: SimulationResult, sensor_params: SensorParams,
-            rng: np.random.Generator) -> MeasuredSignals:
+            rng: np.random.Generator, effects: Effects | None = None) -> MeasuredSignals:
     """Turn true simulated signals into recorded ones (noise, quantisation, range).
 
     Parameters
@@ -67,6 +68,10 @@ def measure(result: SimulationResult, sensor_params: SensorParams,
         simulation's.
     rng : numpy.random.Generator
         Source of the noise (the result is deterministic for a seeded generator).
+    effects : Effects, optional
+        Sensor effects (spool sensor offset, pressure sensor offsets and gains,
+        :mod:`model.effects`) applied to the true signals before noise; default
+        ``result.effects`` (none for a base-model simulation).
 
     Returns
     -------
@@ -75,13 +80,15 @@ def measure(result: SimulationResult, sensor_params: SensorParams,
     if abs(sensor_params.sample_rate_hz - result.sample_rate_hz) > 1e-9:
         raise ValueError("sensor sample rate differs from the simulation's sample rate")
     s = sensor_params
+    fx = getattr(result, "effects", None) if effects is None else effects
+    x, p1, p2 = sensor_readings(result.x_m, result.p1_pa, result.p2_pa, fx)
     return MeasuredSignals(
         t_s=result.t_s.copy(),
         ps=measure_channel(result.ps_pa, s.ps, rng),
         pr=measure_channel(result.pr_pa, s.pr, rng),
-        p1=measure_channel(result.p1_pa, s.p1, rng),
-        p2=measure_channel(result.p2_pa, s.p2, rng),
-        x_spool=measure_channel(result.x_m, s.x_spool, rng),
+        p1=measure_channel(p1, s.p1, rng),
+        p2=measure_channel(p2, s.p2, rng),
+        x_spool=measure_channel(x, s.x_spool, rng),
         x_cyl=measure_channel(result.X_m, s.x_cyl, rng),
         x_ref=measure_channel(result.x_ref_m, s.x_ref, rng),
     )

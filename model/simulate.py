@@ -59,8 +59,10 @@ from numba import njit
 
 from .area import edge_area_kernel, edge_tuple_kernel, valve_edge_constants
 from .controller import feedforward_table, interp_kernel, pi_step_kernel
-from .cylinder import (cylinder_acceleration_mode_kernel, friction_mode_kernel,
-                       pressure_derivatives_kernel, resultant_force_kernel)
+from .cylinder import (chamber_volumes_kernel, cylinder_acceleration_mode_kernel,
+                       friction_mode_kernel, pressure_derivatives_kernel, resultant_force_kernel)
+from .effects import (Effects, apply_to_params, effective_bulk_modulus_kernel,
+                      supply_valve_pressure_kernel)
 from .orifice import port_flows_kernel
 from .params import PlantParams, ValveCondition
 from .spool import spool_acceleration_kernel
@@ -74,22 +76,38 @@ P_LIMIT_FACTOR = 20.0
 #: Default number of RK4 steps per sample (0.5 ms at 1 kHz; see the module docstring).
 DEFAULT_SUBSTEPS = 2
 
-# Layout of the packed parameter vector of the kernels.
+# Layout of the packed parameter vector of the kernels. Beyond the base model's 16 entries:
+# the kernel terms of the effects of model.effects (0 = off) and the prescribed-spool flag of
+# the replay (model.replay; 1 = the spool follows its recorded path, dv/dt = 0 inside a sample).
 (_T, _ZETA, _VMAX, _M, _WEIGHT, _A1, _A2, _V01, _V02, _BETA, _KRHO, _DV, _DC, _DS, _V0,
- _BAND) = range(16)
-_N_P = 16
+ _BAND, _KI, _KE, _AIR, _DXS, _RS, _PRESC) = range(22)
+_N_P = 22
 
 
-def pack_params(params: PlantParams, reg_band_pa: float = DEFAULT_REG_BAND_PA) -> np.ndarray:
-    """Plant parameters as the flat float64 vector the kernels take."""
+def pack_params(params: PlantParams, reg_band_pa: float = DEFAULT_REG_BAND_PA,
+                effects: Effects | None = None, prescribed_spool: bool = False) -> np.ndarray:
+    """Plant parameters as the flat float64 vector the kernels take.
+
+    ``effects`` (default none): the library effects of :mod:`model.effects`; friction and mass
+    changes are applied to the plant, leakage, air, the spool sensor offset and the supply line
+    become kernel terms (the pressure sensor effects act on the recorded signals only).
+    ``prescribed_spool``: the spool state is not integrated (the replay drives it)."""
+    params = apply_to_params(params, effects)
     s, c, f = params.spool, params.cylinder, params.fluid
-    P = np.empty(_N_P)
+    P = np.zeros(_N_P)
     P[_T], P[_ZETA], P[_VMAX] = s.T_s, s.zeta, s.v_max_m_s
     P[_M], P[_WEIGHT], P[_A1], P[_A2] = c.mass_kg, c.weight_n, c.A1, c.A2
     P[_V01], P[_V02] = c.v01_m3, c.v02_m3
     P[_BETA], P[_KRHO] = f.bulk_modulus_pa, math.sqrt(2.0 / f.density_kg_m3)
     P[_DV], P[_DC], P[_DS], P[_V0] = c.d_v_n_s_m, c.d_c_n, c.d_s_n, c.v0_m_s
     P[_BAND] = reg_band_pa
+    if effects is not None:
+        P[_KI] = effects.internal_leakage_m3_s_pa
+        P[_KE] = effects.external_leakage_m3_s_pa
+        P[_AIR] = effects.air_fraction
+        P[_DXS] = effects.spool_sensor_offset_m
+        P[_RS] = effects.supply_resistance_pa_s2_m6
+    P[_PRESC] = 1.0 if prescribed_spool else 0.0
     return P
 
 
@@ -97,7 +115,7 @@ def pack_params(params: PlantParams, reg_band_pa: float = DEFAULT_REG_BAND_PA) -
 def params_tuple(P):
     """The packed parameter vector of :func:`pack_params` as a tuple (passed by value)."""
     return (P[0], P[1], P[2], P[3], P[4], P[5], P[6], P[7], P[8], P[9], P[10], P[11], P[12],
-            P[13], P[14], P[15])
+            P[13], P[14], P[15], P[16], P[17], P[18], P[19], P[20], P[21])
 
 
 @njit(cache=True)
@@ -113,20 +131,40 @@ def rhs_mode_kernel(x, v, X, vX, p1, p2, mode, x_ref, F_l, p_s, p_r, ecs, alpha,
 
     ``ecs`` tuple of the 4 edge-constant tuples, ``alpha`` tuple of the 4 contraction
     coefficients, ``P`` the packed parameters as a tuple (:func:`params_tuple`). Returns the time derivatives of
-    (x, v, X, v_X, p1, p2)."""
-    dv = spool_acceleration_kernel(x, v, x_ref, P[_T], P[_ZETA], P[_VMAX])
+    (x, v, X, v_X, p1, p2).
+
+    The effects of :mod:`model.effects` enter where their entries of ``P`` are non-zero: the
+    spool sensor offset shifts the spool's set point (the valve's inner loop regulates the
+    reading x + delta_x), the supply line lowers the supply pressure at the valve, leakage and
+    entrained air change Eq. 6. With all of them zero the base model is evaluated unchanged."""
+    if P[_PRESC] != 0.0:
+        dv = 0.0
+    elif P[_DXS] != 0.0:
+        dv = spool_acceleration_kernel(x, v, x_ref - P[_DXS], P[_T], P[_ZETA], P[_VMAX])
+    else:
+        dv = spool_acceleration_kernel(x, v, x_ref, P[_T], P[_ZETA], P[_VMAX])
     a_s1 = edge_area_kernel(x, ecs[0])
     a_1r = edge_area_kernel(-x, ecs[1])
     a_s2 = edge_area_kernel(-x, ecs[2])
     a_2r = edge_area_kernel(x, ecs[3])
+    if P[_RS] != 0.0:
+        p_s = supply_valve_pressure_kernel(p_s, p1, p2, alpha[0] * a_s1, alpha[2] * a_s2,
+                                           P[_KRHO], P[_BAND], P[_RS])
     q1, q2 = port_flows_kernel(a_s1, a_1r, a_s2, a_2r, alpha[0], alpha[1], alpha[2], alpha[3],
                                p1, p2, p_s, p_r, P[_KRHO], P[_BAND])
     F_R = resultant_force_kernel(p1, p2, F_l, P[_WEIGHT], P[_A1], P[_A2])
     if mode == 2.0:
         mode = friction_mode_kernel(vX, F_R, P[_DS])
     dvX = cylinder_acceleration_mode_kernel(vX, F_R, mode, P[_M], P[_DV], P[_DC], P[_DS], P[_V0])
-    dp1, dp2 = pressure_derivatives_kernel(q1, q2, X, vX, P[_A1], P[_A2], P[_V01], P[_V02],
-                                           P[_BETA])
+    if P[_KI] == 0.0 and P[_KE] == 0.0 and P[_AIR] == 0.0:
+        dp1, dp2 = pressure_derivatives_kernel(q1, q2, X, vX, P[_A1], P[_A2], P[_V01], P[_V02],
+                                               P[_BETA])
+    else:
+        V1, V2 = chamber_volumes_kernel(X, P[_A1], P[_A2], P[_V01], P[_V02])
+        qi = P[_KI] * (p1 - p2)
+        dp1 = effective_bulk_modulus_kernel(p1, P[_BETA], P[_AIR]) / V1 * (q1 - P[_A1] * vX - qi)
+        dp2 = (effective_bulk_modulus_kernel(p2, P[_BETA], P[_AIR]) / V2
+               * (P[_A2] * vX - q2 + qi - P[_KE] * p2))
     return v, dv, vX, dvX, dp1, dp2
 
 
@@ -365,6 +403,8 @@ class SimulationResult:
     v_ref_m_s : Reference cylinder velocity. [m/s]
     conditions : The valve condition of each window.
     sample_rate_hz : Sample rate. [Hz]
+    effects : The library effects simulated (:mod:`model.effects`), None = none. The arrays
+        hold the true signals; :func:`model.sensors.measure` applies the sensor effects.
     """
 
     t_s: np.ndarray
@@ -384,6 +424,7 @@ class SimulationResult:
     v_ref_m_s: np.ndarray
     conditions: tuple[ValveCondition, ...]
     sample_rate_hz: float
+    effects: Effects | None = None
 
     @property
     def dp1_dt(self) -> np.ndarray:
@@ -405,7 +446,7 @@ class SimulationResult:
 
 
 def rhs(t: float, state, inputs, params: PlantParams, condition: ValveCondition | None = None,
-        reg_band_pa: float = 0.0) -> np.ndarray:
+        reg_band_pa: float = 0.0, effects: Effects | None = None) -> np.ndarray:
     """Right-hand side of the plant, Eqs. 1-6 (python-control ``updfcn`` convention).
 
     Parameters
@@ -421,6 +462,10 @@ def rhs(t: float, state, inputs, params: PlantParams, condition: ValveCondition 
         Default ``params.nominal_condition``.
     reg_band_pa : float
         Regularisation band of the orifice law; 0 = exact Eq. 4. [Pa]
+    effects : Effects, optional
+        Library effects (:mod:`model.effects`) switched on; default none (the base model).
+        The state is the true state (sensor effects do not enter the plant, except the spool
+        sensor offset through the valve's inner position loop).
 
     Returns
     -------
@@ -432,7 +477,7 @@ def rhs(t: float, state, inputs, params: PlantParams, condition: ValveCondition 
     s = np.asarray(state, dtype=np.float64)
     u = np.asarray(inputs, dtype=np.float64)
     return _rhs_arrays(s, u, valve_edge_constants(params.geometry, cond),
-                       np.asarray(cond.alpha, float), pack_params(params, reg_band_pa))
+                       np.asarray(cond.alpha, float), pack_params(params, reg_band_pa, effects))
 
 
 @njit(cache=True)
@@ -461,7 +506,8 @@ def _check_rates(params: PlantParams) -> float:
 def simulate_inputs(params: PlantParams, conditions: Sequence[ValveCondition],
                     inputs: Sequence[WindowInputs], *, substeps: int = DEFAULT_SUBSTEPS,
                     reg_band_pa: float = DEFAULT_REG_BAND_PA,
-                    initial_states: np.ndarray | None = None) -> SimulationResult:
+                    initial_states: np.ndarray | None = None,
+                    effects: Effects | None = None) -> SimulationResult:
     """Simulate windows with given inputs (see :func:`simulate_windows`).
 
     Parameters
@@ -477,7 +523,12 @@ def simulate_inputs(params: PlantParams, conditions: Sequence[ValveCondition],
         Orifice-law regularisation band. [Pa]
     initial_states : ndarray (n_windows, 6), optional
         Start states; default the rest state of each window (module docstring). The
-        controller's integrator then starts so that x_ref = x at t = 0.
+        controller's integrator then starts so that x_ref = x at t = 0 (x_ref = x + delta_x
+        with a spool sensor offset, so that the spool rests there).
+    effects : Effects, optional
+        Library effects (:mod:`model.effects`) of every window; default none, which is the
+        base model exactly. The controller's feed-forward stays that of the nominal plant.
+        With leakage or a supply line the rest state is that of the model with the effect.
 
     Returns
     -------
@@ -501,6 +552,9 @@ def simulate_inputs(params: PlantParams, conditions: Sequence[ValveCondition],
     integ0 = np.empty(n_win)
     ff_grid, ff_table = feedforward_table(params)
     ffw = params.controller.feedforward
+    plant = apply_to_params(params, effects)
+    P = pack_params(params, reg_band_pa, effects)
+    dxs = 0.0 if effects is None else effects.spool_sensor_offset_m
     for w, (cond, inp) in enumerate(zip(conditions, inputs)):
         if inp.X_ref_m.size != n_samp:
             raise ValueError("all windows must have the same number of samples")
@@ -513,19 +567,24 @@ def simulate_inputs(params: PlantParams, conditions: Sequence[ValveCondition],
         ecs[w] = valve_edge_constants(params.geometry, cond)
         alpha[w] = cond.alpha
         if initial_states is None:
-            rest = standstill(params, cond, F_l_n=F_l[w, 0], p_s_pa=float(inp.supply.p_s(0.0)),
+            p_s0 = float(inp.supply.p_s(0.0))
+            rest = standstill(plant, cond, F_l_n=F_l[w, 0], p_s_pa=p_s0,
                               p_r_pa=inp.supply.p_r_pa)
             state0[w] = (rest.x_m, 0.0, X_ref[w, 0], 0.0, rest.p1_pa, rest.p2_pa)
+            if effects is not None and effects.has_flow_terms:
+                state0[w] = _rest_with_effects(state0[w], F_l[w, 0], p_s0, inp.supply.p_r_pa,
+                                               ecs[w], alpha[w], P)
         else:
             state0[w] = initial_states[w]
         ff0 = ffw * np.interp(v_ref[w, 0], ff_grid, ff_table)
-        integ0[w] = state0[w, 0] - ff0 - params.controller.kp_m_per_m * (X_ref[w, 0] - state0[w, 2])
+        integ0[w] = (state0[w, 0] + dxs - ff0
+                     - params.controller.kp_m_per_m * (X_ref[w, 0] - state0[w, 2]))
     c = params.controller
     out = np.empty((13, n_win, n_samp))
     bad = _simulate_kernel(X_ref, v_ref, F_l, supply, ecs, alpha, state0, integ0,
                            ff_grid, ff_table, ffw, c.kp_m_per_m,
                            c.kp_m_per_m * c.sample_time_s / c.ti_s, c.sample_time_s / c.tt_s,
-                           params.x_limit_m, pack_params(params, reg_band_pa), fs, int(substeps),
+                           params.x_limit_m, P, fs, int(substeps),
                            P_LIMIT_FACTOR * float(np.max(supply[:, 0])), out)
     if bad >= 0:
         raise FloatingPointError(f"simulation diverged in window {bad}; reduce the step "
@@ -534,12 +593,49 @@ def simulate_inputs(params: PlantParams, conditions: Sequence[ValveCondition],
         t_s=out[12], x_m=out[0], v_m_s=out[1], X_m=out[2], vX_m_s=out[3], p1_pa=out[4],
         p2_pa=out[5], ps_pa=out[6], pr_pa=out[7], x_ref_m=out[8], F_l_n=out[9],
         dp1_dt_pa_s=out[10], dp2_dt_pa_s=out[11], X_ref_m=X_ref, v_ref_m_s=v_ref,
-        conditions=conditions, sample_rate_hz=fs)
+        conditions=conditions, sample_rate_hz=fs, effects=effects)
+
+
+def _rest_with_effects(state, F_l, p_s, p_r, ecs, alpha, P, iterations: int = 30) -> np.ndarray:
+    """The rest state (v_X = 0, dp1/dt = dp2/dt = 0, F_R = 0) of the model with leakage, air
+    or a supply line, by Newton's method on (x, p1, p2) from the base model's rest ``state``;
+    returns ``state`` unchanged if it does not converge."""
+    s = np.array(state, dtype=np.float64)
+    u = np.array([0.0, F_l, p_s, p_r])
+    A1, A2, weight = P[_A1], P[_A2], P[_WEIGHT]
+    scale = np.array([1.0e-9, 1.0, 1.0])  # dp/dt [Pa/s] is ~1e9 x the flow imbalance [m^3/s]
+
+    def g(z):
+        s[0], s[4], s[5] = z
+        u[0] = z[0] + P[_DXS]  # x_ref that holds the spool at x
+        d = _rhs_arrays(s, u, ecs, alpha, P)
+        return np.array([d[4], d[5], (weight + A1 * z[1] - A2 * z[2] - F_l) * 1.0e3]) * scale
+
+    z = np.array([state[0], state[4], state[5]], dtype=np.float64)
+    steps = np.array([1.0e-9, 1.0, 1.0])
+    for _ in range(iterations):
+        f = g(z)
+        J = np.empty((3, 3))
+        for j in range(3):
+            dz = np.zeros(3)
+            dz[j] = steps[j]
+            J[:, j] = (g(z + dz) - f) / steps[j]
+        try:
+            step = np.linalg.solve(J, -f)
+        except np.linalg.LinAlgError:
+            return np.asarray(state, dtype=np.float64)
+        z = z + step
+        if abs(step[0]) < 1.0e-13 and abs(step[1]) < 1.0e-3 and abs(step[2]) < 1.0e-3:
+            out = np.array(state, dtype=np.float64)
+            out[0], out[4], out[5] = z
+            return out
+    return np.asarray(state, dtype=np.float64)
 
 
 def simulate_windows(params: PlantParams, conditions: Sequence[ValveCondition],
                      duration_s: float, seed: int, *, substeps: int = DEFAULT_SUBSTEPS,
-                     reg_band_pa: float = DEFAULT_REG_BAND_PA) -> SimulationResult:
+                     reg_band_pa: float = DEFAULT_REG_BAND_PA,
+                     effects: Effects | None = None) -> SimulationResult:
     """Simulate one window per entry of ``conditions``, each ``duration_s`` long.
 
     Window i draws its trajectory, load and supply profile from
@@ -559,6 +655,8 @@ def simulate_windows(params: PlantParams, conditions: Sequence[ValveCondition],
         RK4 steps per sample (default 2: 0.5 ms at 1 kHz).
     reg_band_pa : float
         Orifice-law regularisation band (default 0.1 bar). [Pa]
+    effects : Effects, optional
+        Library effects (:mod:`model.effects`); default none (the base model).
 
     Returns
     -------
@@ -568,4 +666,4 @@ def simulate_windows(params: PlantParams, conditions: Sequence[ValveCondition],
     inputs = [window_inputs(params, duration_s, window_seed(seed, i))
               for i in range(len(conditions))]
     return simulate_inputs(params, conditions, inputs, substeps=substeps,
-                           reg_band_pa=reg_band_pa)
+                           reg_band_pa=reg_band_pa, effects=effects)

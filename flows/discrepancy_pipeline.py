@@ -1,0 +1,529 @@
+"""The model-discrepancy workflow without I/O: records in, a :class:`Diagnosis` out.
+
+Steps (``docs/discrepancy.md``):
+
+1. **where they disagree** -- every record is replayed (``model.replay``) on its recorded spool
+   position, supply and return pressure and the estimated load, restarting from the measured
+   state every ``replay_segment_s``; the gap to the recorded p1, p2, X is measured per signal and
+   operating region (:mod:`transforms.discrepancy.gaps`). The equations' pointwise residuals
+   (Savitzky–Golay derivatives) are summarised per region.
+2. **name the missing effect** -- the integrated residuals of both chamber equations and the
+   motion equation of the base model, and their derivatives with respect to each library
+   candidate's parameter, go into the blocked-cross-validation forward selection of
+   :mod:`transforms.discrepancy.selection`; the named parameters are refined by Gauss–Newton on
+   the exact (not linearised) residuals, with jackknife intervals.
+3. **add it** -- the named effects are switched on one after the other, each record replayed
+   again; gap before/after per effect.
+4. **what it did to monitoring** -- the monitoring (steps 2–4b) is run on the records as
+   recorded and with the effect accounted for (:func:`monitoring_bias`).
+
+The model is imported here and its per-sample terms are handed to the pure transforms.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from model.effects import EFFECT_LIBRARY, EffectSpec, Effects, equation_terms, sensor_readings, true_signals
+from model.params import PlantParams, ValveCondition
+from model.replay import replay
+from model.simulate import DEFAULT_REG_BAND_PA
+from transforms.discrepancy.gaps import GapAccumulator
+from transforms.discrepancy.load import LoadEstimate, estimate_load, segment_levels
+from transforms.discrepancy.records import REGIONS, Record, operating_regions, prepare_record
+from transforms.discrepancy.residuals import demean_by_group, interval_edges, interval_residuals, pointwise_residuals, triangular_force_balance
+from transforms.discrepancy.selection import SelectionResult, block_stats, cv_losses, forward_select
+from transforms.discrepancy.settings import DiscrepancySettings
+
+__all__ = ["Diagnosis", "NamedEffect", "diagnose", "perturbed", "prepare_records"]
+
+EQUATIONS = ("chamber1", "chamber2", "motion")
+FD_FRACTION = 0.01
+"""Finite-difference step of the regressors: this fraction of the candidate's typical magnitude."""
+
+
+def perturbed(effects: Effects, spec: EffectSpec, delta: float) -> Effects:
+    """``effects`` with the candidate's parameter moved by ``delta``."""
+    return replace(effects, **{spec.attribute: spec.value(effects) + delta})
+
+
+@dataclass
+class _Prepared:
+    rec: Record
+    regions: dict[str, np.ndarray]
+    edges: np.ndarray
+    base_load: LoadEstimate
+    loads: dict = field(default_factory=dict)  # Effects -> LoadEstimate of that model
+
+
+def prepare_records(records: list[Record], plant: PlantParams, condition: ValveCondition, settings: DiscrepancySettings) -> list[_Prepared]:
+    """Savitzky–Golay values, operating regions, interval edges and the base model's load."""
+    out = []
+    h = settings.savgol_window // 2
+    k = settings.interval_smoothing // 2
+    for rec in records:
+        prepare_record(rec, settings)
+        sg = rec.sg
+        regions = operating_regions(sg["v"], sg["p1"], sg["p2"], sg["ps"], settings)
+        edges = interval_edges(rec.n - max(h, k), settings.interval_samples, max(h, k))
+        if edges.size < 4:
+            continue
+        load = _estimate_load(rec, plant, condition, Effects(), settings)
+        out.append(_Prepared(rec, regions, edges, load, {Effects(): load}))
+    return out
+
+
+def _signals(rec: Record, smooth: bool) -> dict:
+    src = rec.sg if smooth else rec.raw
+    return {"x": src["x"], "p1": src["p1"], "p2": src["p2"], "ps": src["ps"], "pr": src["pr"], "X": rec.raw["X"], "v": rec.sg["v"]}
+
+
+def _terms_raw(rec, plant, condition, effects):
+    return equation_terms(_signals(rec, False), plant, condition, effects, DEFAULT_REG_BAND_PA)
+
+
+def _terms_sg(rec, plant, condition, effects):
+    return equation_terms(_signals(rec, True), plant, condition, effects, DEFAULT_REG_BAND_PA)
+
+
+def _force_balance(rec: Record, plant, condition, effects, settings) -> np.ndarray:
+    t = _terms_raw(rec, plant, condition, effects)
+    return triangular_force_balance(t["force"], rec.raw["X"], t["mass"], rec.dt, settings.interval_samples)
+
+
+def _estimate_load(rec: Record, plant, condition, effects, settings) -> LoadEstimate:
+    """The piecewise-constant load of one record under the model with ``effects``."""
+    f_hat = _force_balance(rec, plant, condition, effects, settings)
+    t = _terms_sg(rec, plant, condition, effects)
+    load = estimate_load(f_hat, rec.sg["v"], settings, f_point=t["force"] - t["mass"] * rec.sg["a"])
+    return _refine_rest_steps(rec, load, f_hat, plant, condition, effects, settings)
+
+
+def _load_for(p: _Prepared, plant, condition, effects, settings) -> np.ndarray:
+    """The load at every sample under the model with ``effects`` (estimated once per model)."""
+    if effects not in p.loads:
+        p.loads[effects] = _estimate_load(p.rec, plant, condition, effects, settings)
+    return p.loads[effects].load
+
+
+REST_STEP_GRID = 5
+"""Candidate spacing (samples) when a load step found across a standstill is placed by replay."""
+REST_STEP_TAIL = 300
+"""Samples replayed after the standstill to judge a placement."""
+
+
+def _replay_span(rec: Record, plant, condition, effects, a: int, b: int, load: np.ndarray):
+    """Replay samples [a, b) of a record from its measured state at a; returns the readings
+    (p1, p2, X) or None if the replay diverged."""
+    x_src = np.where(np.isfinite(rec.sg["x"]), rec.sg["x"], rec.raw["x"])
+    x_true, p1_true, p2_true = true_signals(x_src[a:b], rec.sg["p1"][a:a + 1], rec.sg["p2"][a:a + 1], effects)
+    v0 = rec.sg["v"][a]
+    state = [[rec.raw["X"][a], 0.0 if abs(v0) < 1e-3 else v0, p1_true[0], p2_true[0]]]
+    try:
+        r = replay(plant, x_true, rec.raw["ps"][a:b], rec.raw["pr"][a:b], load, [0], state, condition=condition, effects=effects)
+    except FloatingPointError:
+        return None
+    _, p1r, p2r = sensor_readings(np.zeros(1), r.p1_pa, r.p2_pa, effects)
+    return p1r, p2r, r.X_m
+
+
+def _refine_rest_steps(rec: Record, load: LoadEstimate, f_hat: np.ndarray, plant, condition, effects, settings) -> LoadEstimate:
+    """Place each load step found across a standstill where a replay of the standstill (from
+    the measured state before it to ``REST_STEP_TAIL`` samples after it) fits the recorded
+    p1, p2 and X best: while the cylinder sticks the load does not show in the motion equation,
+    but when it changed decides when and how the cylinder breaks away."""
+    if not np.any(load.brackets[:, 0] >= 0):
+        return load
+    h = settings.savgol_window // 2
+    steps = load.steps.copy()
+    for i, (lo, hi) in enumerate(load.brackets):
+        if lo < 0:
+            continue
+        a = max(int(lo), h)
+        b = min(int(hi) + REST_STEP_TAIL, rec.n - h - 1)
+        prev_s = steps[i - 1] if i > 0 else 0
+        next_s = steps[i + 1] if i + 1 < steps.size else rec.n
+        cands = np.unique(np.r_[np.arange(max(lo + 1, prev_s + 1), min(hi, next_s - 1) + 1, REST_STEP_GRID), steps[i]])
+        if b - a < 10 or cands.size < 2:
+            continue
+        old, new = load.levels[i], load.levels[i + 1]
+        best, best_err = steps[i], np.inf
+        for c in cands:
+            out = _replay_span(rec, plant, condition, effects, a, b, np.where(np.arange(a, b) < c, old, new))
+            if out is None:
+                continue
+            p1r, p2r, Xr = out
+            err = (np.sum((p1r - rec.raw["p1"][a:b]) ** 2) + np.sum((p2r - rec.raw["p2"][a:b]) ** 2)) / 1e10 + np.sum((Xr - rec.raw["X"][a:b]) ** 2) / 1e-6
+            if err < best_err:
+                best, best_err = int(c), err
+        steps[i] = best
+    return load.with_steps(steps, f_hat)
+
+
+# --- step 2: regression data ---------------------------------------------------------------
+
+
+@dataclass
+class _Rows:
+    """Stacked integrated residuals of all records (one model)."""
+
+    y: np.ndarray  # residuals (not yet weighted)
+    eq: np.ndarray  # equation index per row (0 chamber 1, 1 chamber 2, 2 motion)
+    block: np.ndarray
+    group: np.ndarray  # motion rows: (record, load segment) id; -1 otherwise
+
+
+def _rows(prepared: list[_Prepared], plant, condition, effects, settings) -> _Rows:
+    c = plant.cylinder
+    ys, eqs, blocks, groups = [], [], [], []
+    for i, p in enumerate(prepared):
+        rec = p.rec
+        ir = interval_residuals(_terms_raw(rec, plant, condition, effects), rec.raw["X"], c.A1, c.A2, rec.dt, p.edges, settings.interval_smoothing)
+        e = p.edges
+        L = settings.interval_samples
+        nb = 100000
+        bc = (ir.t_cont // settings.block_s).astype(np.int64) + i * nb
+        bm = (ir.t_motion // settings.block_s).astype(np.int64) + i * nb
+        # motion rows: every sample of [e_{i-1}, e_{i+1}] usable and in one load segment
+        us = p.base_load.usable.astype(np.int64)
+        cus = np.r_[0, np.cumsum(us)]
+        lo, hi = e[:-2], e[2:] + 1
+        all_usable = (cus[hi] - cus[lo]) == (hi - lo)
+        seg = p.base_load.segment
+        same = seg[lo] == seg[np.minimum(hi - 1, rec.n - 1)]
+        mrow = all_usable & same & np.isfinite(ir.rm)
+        ys += [ir.r1, ir.r2, ir.rm[mrow]]
+        eqs += [np.zeros(ir.r1.size, int), np.ones(ir.r2.size, int), np.full(int(mrow.sum()), 2)]
+        blocks += [bc, bc, bm[mrow]]
+        groups += [np.full(ir.r1.size, -1), np.full(ir.r2.size, -1), (i * nb + seg[e[1:-1]])[mrow]]
+        del L
+    return _Rows(np.concatenate(ys), np.concatenate(eqs), np.concatenate(blocks), np.concatenate(groups))
+
+
+def _demean_motion(values: np.ndarray, rows: _Rows) -> np.ndarray:
+    out = np.array(values, dtype=float, copy=True)
+    m = rows.eq == 2
+    if m.any():
+        out[m] = demean_by_group(out[m], rows.group[m])
+    return out
+
+
+def _equation_sigmas(y: np.ndarray, rows: _Rows) -> np.ndarray:
+    """Robust scale (1.4826 MAD) of each equation's residual rows."""
+    sig = np.ones(3)
+    for k in range(3):
+        v = y[(rows.eq == k) & np.isfinite(y)]
+        if v.size > 10:
+            s = 1.4826 * float(np.median(np.abs(v - np.median(v))))
+            sig[k] = s if s > 0 else (float(np.std(v)) or 1.0)
+    return sig
+
+
+def _jacobian(prepared, plant, condition, effects, specs: list[EffectSpec], rows: _Rows, settings, r_here: np.ndarray | None = None) -> np.ndarray:
+    """Forward differences (step FD_FRACTION x typical, towards the physical side) of the
+    residual rows with respect to each candidate's parameter at ``effects``."""
+    if r_here is None:
+        r_here = _rows(prepared, plant, condition, effects, settings).y
+    cols = []
+    for spec in specs:
+        d = FD_FRACTION * spec.typical
+        rp = _rows(prepared, plant, condition, perturbed(effects, spec, d), settings).y
+        cols.append(_demean_motion((rp - r_here) / d, rows))
+    return np.column_stack(cols) if cols else np.zeros((rows.y.size, 0))
+
+
+# --- step 3 and 1: replays and gaps ---------------------------------------------------------
+
+
+@dataclass
+class ReplayTrace:
+    """One record's recorded signals and replayed readings (for the overlay plots)."""
+
+    record_index: int
+    start_us: int
+    t: np.ndarray
+    measured: dict[str, np.ndarray]
+    replayed: dict[str, np.ndarray]
+
+
+def _replay_record(p: _Prepared, plant, condition, effects, settings) -> dict[str, np.ndarray]:
+    rec = p.rec
+    h = settings.savgol_window // 2
+    n = rec.n
+    x_src = np.where(np.isfinite(rec.sg["x"]), rec.sg["x"], rec.raw["x"])
+    x_true, p1_true, p2_true = true_signals(x_src, rec.sg["p1"], rec.sg["p2"], effects)
+    seg = max(2, int(round(settings.replay_segment_s / rec.dt)))
+    starts = np.arange(h, n - h - 1, seg)
+    v = rec.sg["v"][starts]
+    v = np.where(np.abs(v) < 1e-3, 0.0, v)
+    states = np.column_stack([rec.raw["X"][starts], v, p1_true[starts], p2_true[starts]])
+    load = _load_for(p, plant, condition, effects, settings)
+    res = replay(plant, x_true, rec.raw["ps"], rec.raw["pr"], load, starts, states, condition=condition, effects=effects)
+    _, p1r, p2r = sensor_readings(np.zeros(1), res.p1_pa, res.p2_pa, effects)
+    out = {"p1": np.asarray(p1r, float).copy(), "p2": np.asarray(p2r, float).copy(), "X": res.X_m.copy()}
+    for k in out:
+        out[k][n - h:] = np.nan  # the record's tail has no Savitzky–Golay regions
+    return out
+
+
+def _gaps(prepared, plant, condition, effects, settings, keep: set[int]) -> tuple[GapAccumulator, dict[int, dict]]:
+    acc = GapAccumulator()
+    kept = {}
+    for i, p in enumerate(prepared):
+        rr = _replay_record(p, plant, condition, effects, settings)
+        for s, meas in (("p1", p.rec.raw["p1"]), ("p2", p.rec.raw["p2"]), ("X", p.rec.raw["X"])):
+            acc.add(s, rr[s] - meas, p.regions)
+        if i in keep:
+            kept[i] = rr
+    return acc, kept
+
+
+def _residual_summary(prepared, plant, condition, effects, settings) -> list[dict]:
+    """RMS and mean of the pointwise residuals per equation and region."""
+    c = plant.cylinder
+    sums: dict[tuple[str, str], list[float]] = {}
+    for p in prepared:
+        rec = p.rec
+        t = _terms_sg(rec, plant, condition, effects)
+        g1 = effects.p1_sensor_gain
+        g2 = effects.p2_sensor_gain
+        r = pointwise_residuals(t, rec.sg["v"], rec.sg["a"], rec.sg["dp1"] / g1, rec.sg["dp2"] / g2, c.A1, c.A2, _load_for(p, plant, condition, effects, settings))
+        for eq, key in (("chamber1", "r1"), ("chamber2", "r2"), ("motion", "rm")):
+            val = r[key]
+            base = np.isfinite(val)
+            if eq == "motion":
+                base &= p.base_load.usable
+            for reg in REGIONS:
+                m = base & p.regions[reg]
+                acc = sums.setdefault((eq, reg), [0.0, 0.0, 0])
+                acc[0] += float(np.sum(val[m] ** 2))
+                acc[1] += float(np.sum(val[m]))
+                acc[2] += int(m.sum())
+    rows = []
+    for (eq, reg), (ss, s, n) in sorted(sums.items()):
+        rows.append({
+            "equation": eq, "region": reg, "n_samples": n,
+            "rms": float(np.sqrt(ss / n)) if n else float("nan"),
+            "mean": float(s / n) if n else float("nan"),
+            "unit": "N" if eq == "motion" else "m3/s",
+        })
+    return rows
+
+
+# --- the diagnosis ---------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class NamedEffect:
+    """An effect the workflow named.
+
+    Attributes
+    ----------
+    rank : int
+        1 = named first.
+    spec : EffectSpec
+        The library entry (name, variant, parameter name and unit).
+    value : float
+        The fitted parameter (refined on the exact residuals). [spec.unit]
+    ci_low, ci_high : float
+        Its interval at the settings' level (jackknife over blocks).
+    linear_value : float
+        The parameter of the linearised selection step.
+    relative_gain, t_stat, z : float
+        The selection statistics at the step it was named.
+    gap_before, gap_after : float
+        Normalised gap with the effects named before it, and with it added.
+    """
+
+    rank: int
+    spec: EffectSpec
+    value: float
+    ci_low: float
+    ci_high: float
+    linear_value: float
+    relative_gain: float
+    t_stat: float
+    z: float
+    gap_before: float
+    gap_after: float
+
+
+@dataclass
+class Diagnosis:
+    """What :func:`diagnose` found (see the module docstring for the steps)."""
+
+    n_records: int
+    records: list[tuple[int, int]]
+    named: list[NamedEffect]
+    candidates: list[dict]
+    gap_rows: list[dict]
+    residual_rows: list[dict]
+    stage_effects: list[Effects]
+    stage_gaps: list[float]
+    traces: list[ReplayTrace] = field(default_factory=list)
+    n_blocks: int = 0
+    equation_sigmas: tuple[float, float, float] = (1.0, 1.0, 1.0)
+
+    @property
+    def final_effects(self) -> Effects:
+        return self.stage_effects[-1]
+
+    @property
+    def gap_before(self) -> float:
+        return self.stage_gaps[0]
+
+    @property
+    def gap_after(self) -> float:
+        return self.stage_gaps[-1]
+
+
+def _refine(prepared, plant, condition, specs: list[EffectSpec], start: Effects, rows0: _Rows, w_rows: np.ndarray, settings) -> tuple[Effects, np.ndarray, np.ndarray]:
+    """Gauss–Newton on the exact residuals for the parameters of ``specs`` from ``start``;
+    returns the effects, the jackknife SEs and the final Jacobian."""
+    fx = start
+    J = None
+    r = None
+    for _ in range(settings.gauss_newton_iterations):
+        y_here = _rows(prepared, plant, condition, fx, settings).y
+        r = _demean_motion(y_here, rows0)
+        J = _jacobian(prepared, plant, condition, fx, specs, rows0, settings, y_here)
+        ok = np.isfinite(r) & np.all(np.isfinite(J), axis=1)
+        Jw = J[ok] * w_rows[ok, None]
+        rw = r[ok] * w_rows[ok]
+        scale = np.sqrt(np.mean(Jw * Jw, axis=0))
+        scale = np.where(scale > 0, scale, 1.0)
+        step, *_ = np.linalg.lstsq(Jw / scale, -rw, rcond=None)
+        step = step / scale
+        new = fx
+        for spec, d in zip(specs, step):
+            v = spec.value(new) + float(d)
+            if spec.lower is not None and v < spec.lower:  # projected onto the physical range
+                v = spec.lower
+            new = replace(new, **{spec.attribute: v})
+        try:
+            new = Effects(**{f: getattr(new, f) for f in new.__dataclass_fields__})
+        except ValueError:
+            break
+        small = all(abs(d) < 1e-4 * spec.typical for spec, d in zip(specs, step))
+        fx = new
+        if small:
+            break
+    y_here = _rows(prepared, plant, condition, fx, settings).y
+    r = _demean_motion(y_here, rows0)
+    J = _jacobian(prepared, plant, condition, fx, specs, rows0, settings, y_here)
+    st = block_stats(-r * w_rows, J * w_rows[:, None], rows0.block)
+    _, _, loo = cv_losses(st, list(range(len(specs))))
+    B = loo.shape[0]
+    se = np.sqrt((B - 1) / B * np.sum((loo - loo.mean(axis=0)) ** 2, axis=0)) / st.scale if B > 1 else np.full(len(specs), np.inf)
+    return fx, se, J
+
+
+def diagnose(records: list[Record], plant: PlantParams, condition: ValveCondition | None = None, settings: DiscrepancySettings | None = None, *, library: tuple[EffectSpec, ...] = EFFECT_LIBRARY, trace_records: int = 1) -> Diagnosis:
+    """Run steps 1–3 on ``records`` of one valve (module docstring).
+
+    Parameters
+    ----------
+    records : list of Record
+        From :func:`transforms.discrepancy.records.split_records`.
+    plant : PlantParams
+        The plant's model (its ``sensors.sample_rate_hz`` must be the records').
+    condition : ValveCondition, optional
+        The valve's condition; default the plant's nominal condition.
+    settings : DiscrepancySettings, optional
+    library : tuple of EffectSpec
+        The candidates (default the whole library).
+    trace_records : int
+        Keep the replays of this many records (those with the largest gap before) for plots.
+    """
+    from scipy import stats as _stats
+
+    settings = settings or DiscrepancySettings()
+    condition = plant.nominal_condition if condition is None else condition
+    prepared = prepare_records(records, plant, condition, settings)
+    if not prepared:
+        raise ValueError("no record long enough to diagnose")
+    base = Effects()
+    # step 2: the base model's residuals and the library's regressors
+    rows0 = _rows(prepared, plant, condition, base, settings)
+    r0 = _demean_motion(rows0.y, rows0)
+    sig = _equation_sigmas(r0, rows0)
+    w_rows = 1.0 / sig[rows0.eq]
+    specs = list(library)
+    J0 = _jacobian(prepared, plant, condition, base, specs, rows0, settings, rows0.y)
+    st = block_stats(-r0 * w_rows, J0 * w_rows[:, None], rows0.block)
+    sel: SelectionResult = forward_select(
+        st, list(range(len(specs))), max_effects=settings.max_effects, min_t_stat=settings.min_t_stat,
+        min_relative_gain=settings.min_relative_gain, min_z=settings.min_z,
+        positive=frozenset(j for j, spec in enumerate(specs) if spec.lower is not None),
+    )
+    B = sel.n_blocks
+    q = float(_stats.t.ppf(0.5 + settings.ci_level / 2.0, max(B - 1, 1)))
+    candidates = []
+    for cs in sorted(sel.first_step, key=lambda s: -s.gain):
+        spec = specs[cs.column]
+        candidates.append({
+            "effect": spec.name, "variant": spec.variant, "parameter_name": spec.parameter_name, "parameter_unit": spec.unit,
+            "linear_value": cs.theta + spec.neutral, "se": cs.se, "relative_gain": cs.relative_gain, "t_stat": cs.t_stat,
+            "z": cs.z, "significant": cs.significant,
+        })
+    # refine the named effects jointly, then build the stages
+    named_specs = [specs[cs.column] for cs in sel.named]
+    stage_effects = [base]
+    refined = base
+    se = np.zeros(0)
+    if named_specs:
+        start = base
+        for spec, cs in zip(named_specs, sel.named):
+            start = perturbed(start, spec, cs.theta)
+        refined, se, _ = _refine(prepared, plant, condition, named_specs, start, rows0, w_rows, settings)
+        cur = base
+        for spec in named_specs:
+            cur = replace(cur, **{spec.attribute: spec.value(refined)})
+            stage_effects.append(cur)
+    # steps 1 and 3: replay every stage
+    stage_acc = []
+    kept_all = []
+    for k, fx in enumerate(stage_effects):
+        keep = set(range(len(prepared))) if k == 0 else kept_idx
+        acc, kept = _gaps(prepared, plant, condition, fx, settings, keep)
+        if k == 0:
+            per_rec = []
+            for i, p in enumerate(prepared):
+                rr = kept[i]
+                e = np.nanmean((rr["p1"] - p.rec.raw["p1"]) ** 2) / 1e10 + np.nanmean((rr["X"] - p.rec.raw["X"]) ** 2) / 1e-6
+                per_rec.append(e)
+            kept_idx = set(np.argsort(per_rec)[::-1][:trace_records].tolist())
+            kept = {i: kept[i] for i in kept_idx}
+        stage_acc.append(acc)
+        kept_all.append(kept)
+    stage_gaps = [a.gap() for a in stage_acc]
+    named = []
+    for k, (spec, cs) in enumerate(zip(named_specs, sel.named)):
+        val = spec.value(refined)
+        named.append(NamedEffect(
+            rank=k + 1, spec=spec, value=val, ci_low=val - q * float(se[k]), ci_high=val + q * float(se[k]),
+            linear_value=cs.theta + spec.neutral, relative_gain=cs.relative_gain, t_stat=cs.t_stat, z=cs.z,
+            gap_before=stage_gaps[k], gap_after=stage_gaps[k + 1],
+        ))
+    gap_rows = []
+    for k, acc in enumerate(stage_acc):
+        for row in acc.rows():
+            gap_rows.append({"stage": k, **row})
+    residual_rows = [{"stage": 0, **r} for r in _residual_summary(prepared, plant, condition, base, settings)]
+    if len(stage_effects) > 1:
+        residual_rows += [{"stage": len(stage_effects) - 1, **r} for r in _residual_summary(prepared, plant, condition, stage_effects[-1], settings)]
+    traces = []
+    for i in sorted(kept_all[0]):
+        p = prepared[i]
+        traces.append(ReplayTrace(
+            record_index=i, start_us=p.rec.start_us, t=p.rec.t,
+            measured={"p1": p.rec.raw["p1"], "p2": p.rec.raw["p2"], "X": p.rec.raw["X"]},
+            replayed={f"stage{k}_{s}": kept_all[k][i][s] for k in range(len(stage_effects)) for s in ("p1", "p2", "X")},
+        ))
+    return Diagnosis(
+        n_records=len(prepared), records=[(p.rec.start_us, p.rec.end_us) for p in prepared], named=named,
+        candidates=candidates, gap_rows=gap_rows, residual_rows=residual_rows, stage_effects=stage_effects,
+        stage_gaps=stage_gaps, traces=traces, n_blocks=B, equation_sigmas=tuple(float(s) for s in sig),
+    )

@@ -1,0 +1,166 @@
+"""Replay of the plant on recorded inputs: the simulator of :mod:`model.simulate` driven by a
+recorded spool position instead of the spool model and the position controller.
+
+Inputs per sample: the spool position x (the true one: recorded minus a known sensor offset),
+the supply and return pressures and the external load F_l (estimated by the caller). Between
+samples x and p_s are interpolated linearly (the spool state of the kernel moves at the constant
+slope of the sample interval, dv/dt = 0), p_r and F_l are held. The state (X, v_X, p1, p2) is
+integrated with the simulator's RK4 and its located stick/slip events (same numerics, same
+``substeps`` and regularisation band), with any library effect of :mod:`model.effects`.
+
+A replay may restart from given states at chosen samples (multiple shooting): the caller passes
+``restart`` indices and their states, so a long record is replayed in segments that each start
+from the measured state, and a position drift from a small flow error does not accumulate over
+a whole window.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from .area import valve_edge_constants
+from .effects import Effects
+from .params import PlantParams, ValveCondition
+from .simulate import (_DS, DEFAULT_REG_BAND_PA, DEFAULT_SUBSTEPS, P_LIMIT_FACTOR, _event_step,
+                       _F_R, _mode_of, _rk4, _valve_tuples, pack_params, params_tuple,
+                       rhs_mode_kernel)
+
+
+@njit(cache=True)
+def _replay_kernel(x, ps, pr, F_l, restart_at, restart_state, ecs_row, alpha_row, P, fs, n_sub,
+                   p_limit, out):
+    """Integrate one record; ``out`` (4, n) receives X, v_X, p1, p2 from sample
+    ``restart_at[0]`` on (NaN before). Returns the first sample index where the state diverged,
+    or -1."""
+    n = x.shape[0]
+    P = params_tuple(P)
+    ecs, alpha = _valve_tuples(ecs_row, alpha_row)
+    T0 = 1.0 / fs
+    h = T0 / n_sub
+    d_s = P[_DS]
+    for i in range(4):
+        for k in range(n):
+            out[i, k] = np.nan
+    r = 0
+    n_r = restart_at.shape[0]
+    s = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    for k in range(restart_at[0], n):
+        if r < n_r and k == restart_at[r]:
+            s = (x[k], 0.0, restart_state[r, 0], restart_state[r, 1], restart_state[r, 2],
+                 restart_state[r, 3])
+            r += 1
+        out[0, k] = s[2]
+        out[1, k] = s[3]
+        out[2, k] = s[4]
+        out[3, k] = s[5]
+        if k == n - 1:
+            break
+        if not (abs(s[4]) < p_limit and abs(s[5]) < p_limit and abs(s[3]) < 1.0e3):
+            return k
+        t = k * T0
+        slope_x = (x[k + 1] - x[k]) / T0
+        slope_ps = (ps[k + 1] - ps[k]) / T0
+        sup = (ps[k] - slope_ps * t, slope_ps, 0.0, 0.0, 0.0, pr[k])
+        fl = F_l[k]
+        p_r = pr[k]
+        # the spool follows its recorded path: position at the sample, slope of the interval
+        s = (x[k], slope_x, s[2], s[3], s[4], s[5])
+        for j in range(n_sub):
+            tj = t + j * h
+            ps_t = ps[k] + slope_ps * (j * h)
+            ps_h = ps_t + slope_ps * 0.5 * h
+            ps_1 = ps_t + slope_ps * h
+            mode = _mode_of(s, fl, P)
+            k1 = rhs_mode_kernel(s[0], s[1], s[2], s[3], s[4], s[5], mode, 0.0, fl, ps_t, p_r,
+                                 ecs, alpha, P)
+            new = _rk4(s, mode, k1, 0.0, fl, ps_t, ps_h, ps_1, p_r, ecs, alpha, P, h)
+            if mode != 0.0:
+                ok = new[3] * mode > 0.0
+            else:
+                ok = abs(_F_R(new, fl, P)) <= d_s
+            if ok:
+                s = new
+            else:
+                s = _event_step(s, tj, h, 0.0, fl, sup, ecs, alpha, P)
+    return -1
+
+
+@dataclass(frozen=True)
+class ReplayResult:
+    """True states of a replay at the sample instants (NaN before the first start).
+
+    Attributes
+    ----------
+    X_m : Cylinder position. [m]
+    vX_m_s : Cylinder velocity. [m/s]
+    p1_pa, p2_pa : Chamber pressures (true, not as recorded). [Pa]
+    """
+
+    X_m: np.ndarray
+    vX_m_s: np.ndarray
+    p1_pa: np.ndarray
+    p2_pa: np.ndarray
+
+
+def replay(params: PlantParams, x_m, p_s_pa, p_r_pa, F_l_n, restart_at, restart_states,
+           *, condition: ValveCondition | None = None, effects: Effects | None = None,
+           substeps: int = DEFAULT_SUBSTEPS,
+           reg_band_pa: float = DEFAULT_REG_BAND_PA) -> ReplayResult:
+    """Replay the plant on one record of inputs (module docstring).
+
+    Parameters
+    ----------
+    params : PlantParams
+        Plant (its sample rate is the record's).
+    x_m : array_like, shape (n,)
+        True spool position at the samples. [m]
+    p_s_pa, p_r_pa : array_like, shape (n,)
+        Supply and return pressure (the supply as measured upstream of a supply line). [Pa]
+    F_l_n : array_like, shape (n,)
+        External load, held over each sample interval. [N]
+    restart_at : sequence of int
+        Sample indices, increasing, where the state is set to ``restart_states``; the replay
+        starts at the first.
+    restart_states : array_like, shape (len(restart_at), 4)
+        (X [m], v_X [m/s], p1 [Pa], p2 [Pa]) true states at those samples (v_X = 0 lets the
+        cylinder start stuck, Eq. 5b).
+    condition : ValveCondition, optional
+        Valve condition; default ``params.nominal_condition``.
+    effects : Effects, optional
+        Library effects; the sensor effects do not enter here (the caller maps recorded to true
+        signals and back, :func:`model.effects.true_signals`, :func:`~model.effects.sensor_readings`).
+    substeps, reg_band_pa
+        As in :func:`model.simulate.simulate_inputs`.
+
+    Returns
+    -------
+    ReplayResult
+    """
+    cond = params.nominal_condition if condition is None else condition
+    x = np.ascontiguousarray(np.asarray(x_m, float))
+    n = x.size
+    ps, pr, fl = (np.ascontiguousarray(np.broadcast_to(np.asarray(a, float), (n,)))
+                  for a in (p_s_pa, p_r_pa, F_l_n))
+    at = np.ascontiguousarray(np.asarray(restart_at, dtype=np.int64))
+    st = np.ascontiguousarray(np.asarray(restart_states, dtype=float).reshape(-1, 4))
+    if at.size == 0 or at.size != st.shape[0]:
+        raise ValueError("need one restart state per restart index, at least one")
+    if np.any(np.diff(at) <= 0) or at[0] < 0 or at[-1] >= n:
+        raise ValueError("restart indices must increase and lie inside the record")
+    if substeps < 1:
+        raise ValueError("substeps must be >= 1")
+    for a in (x, ps, pr, fl):
+        if not np.all(np.isfinite(a)):
+            raise ValueError("replay inputs must be finite")
+    P = pack_params(params, reg_band_pa, effects, prescribed_spool=True)
+    out = np.empty((4, n))
+    p_limit = P_LIMIT_FACTOR * float(np.max(np.abs(ps)))
+    bad = _replay_kernel(x, ps, pr, fl, at, st, valve_edge_constants(params.geometry, cond),
+                         np.asarray(cond.alpha, float), P, params.sensors.sample_rate_hz,
+                         int(substeps), p_limit, out)
+    if bad >= 0:
+        raise FloatingPointError(f"replay diverged at sample {bad}")
+    return ReplayResult(X_m=out[0], vX_m_s=out[1], p1_pa=out[2], p2_pa=out[3])

@@ -1,0 +1,218 @@
+"""The unknown external load F_l, estimated where the replay and the motion equation need it.
+
+The motion equation (Eq. 5) integrated twice over ±L samples gives, at every sample k,
+
+    F̂_l(k) = Σ_j w_j (m g + A1 p1 − A2 p2 − F_f(v_X))_{k+j} − m (X_{k+L} − 2 X_k + X_{k−L}) / T²
+
+(triangular weights w, :func:`transforms.discrepancy.residuals.triangular_force_balance`): the
+load averaged over the triangle, exactly, if the model is right and the cylinder does not stick
+within ±L samples (a sticking cylinder's friction is unknown, anything up to d_s). Such samples
+are *valid*. The plant's load is piecewise constant (``model.params.LoadParams``: steps at random
+instants), so the estimate is made piecewise constant:
+
+1. **steps.** The valid samples are taken in time order as one sequence (a standstill in between
+   simply disappears from it). Around every sample the sequence over ±w samples is fitted by a
+   quadratic in time plus a jump after the sample; the jump's coefficient is a fixed linear
+   filter (:func:`step_filter`). A slowly varying discrepancy -- a friction or mass change
+   follows v_X and dv_X/dt, which change over the 0.3–0.6 s ramps and vanish towards a stop --
+   is absorbed by the quadratic; a load step is a jump within the triangle's 2L samples, and a
+   step while the cylinder stood still is a jump across the standstill. Local maxima of |jump|
+   above max(``step_threshold_n``, ``step_threshold_sigmas`` × robust σ) are steps. A step
+   found across a standstill is placed at the first slip fragment of a creeping cylinder in
+   between that already shows the new level (pointwise estimate), else at the first valid
+   sample after it: the load matters from the breakaway on. (The workflow then moves such a
+   step to where a short replay of the standstill fits best, ``flows.discrepancy_pipeline``.)
+2. **levels.** Each segment between steps gets the median of F̂_l over its valid samples
+   (those within ``step_guard_samples`` of a step left out); segments without any take the
+   level of the next segment (else the previous one).
+
+The segments also carry the motion equation's nuisance intercepts in the sparse regression
+(:mod:`transforms.discrepancy.selection`): one unknown load per segment.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+
+from transforms.discrepancy.settings import DiscrepancySettings
+
+__all__ = ["LoadEstimate", "estimate_load", "segment_levels", "step_filter"]
+
+
+@lru_cache(maxsize=8)
+def _step_kernel(w: int) -> tuple[float, ...]:
+    t = np.arange(-w, w + 1, dtype=float) / w
+    A = np.column_stack([np.ones_like(t), t, t * t, (t > 0).astype(float)])
+    pinv = np.linalg.pinv(A)
+    return tuple(float(v) for v in pinv[3])
+
+
+def step_filter(f: np.ndarray, w: int) -> np.ndarray:
+    """Jump at each sample of ``f`` between a quadratic fit over ±w samples and the same plus a
+    step after the sample (NaN within w of the ends or where ``f`` is NaN)."""
+    k = np.array(_step_kernel(int(w)))
+    out = np.full(f.shape, np.nan)
+    if f.size < 2 * w + 1:
+        return out
+    out[w:-w] = np.convolve(f, k[::-1], mode="valid")
+    return out
+
+
+def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """(start, stop) of the True runs of a boolean array."""
+    m = np.r_[False, mask, False].astype(np.int8)
+    d = np.diff(m)
+    return list(zip(np.flatnonzero(d == 1).tolist(), np.flatnonzero(d == -1).tolist()))
+
+
+@dataclass(frozen=True)
+class LoadEstimate:
+    """A piecewise-constant load over one record.
+
+    Attributes
+    ----------
+    segment : ndarray of int
+        Segment number of every sample (0, 1, …).
+    steps : ndarray of int
+        Sample indices where a new segment starts (the detected steps).
+    levels : ndarray
+        Load of each segment. [N]
+    load : ndarray
+        The load at every sample. [N]
+    brackets : ndarray of int, shape (len(steps), 2)
+        For a step found across a standstill, the last valid sample before it and the first
+        after it (where else it may lie); (-1, -1) for a step found while moving.
+    valid : ndarray of bool
+        Samples whose F̂_l is the load (no sticking within ±L), away from the steps: where
+        the levels come from.
+    usable : ndarray of bool
+        Valid samples with |v_X| > ``v_move_m_s``: where the motion equation is regressed.
+    """
+
+    segment: np.ndarray
+    steps: np.ndarray
+    levels: np.ndarray
+    load: np.ndarray
+    brackets: np.ndarray
+    valid: np.ndarray
+    usable: np.ndarray
+
+    def with_steps(self, steps: np.ndarray, f_hat: np.ndarray) -> "LoadEstimate":
+        """The same estimate with the steps moved to ``steps`` (same count, increasing) and the
+        levels re-estimated from ``f_hat``."""
+        steps = np.asarray(steps, dtype=np.int64)
+        segment = np.zeros(self.segment.size, dtype=np.int64)
+        for s in steps:
+            segment[s:] += 1
+        levels = segment_levels(f_hat, self.valid, segment, len(steps) + 1)
+        return LoadEstimate(segment, steps, levels, levels[segment], self.brackets, self.valid, self.usable)
+
+
+def segment_levels(f_hat: np.ndarray, valid: np.ndarray, segment: np.ndarray, n_segments: int) -> np.ndarray:
+    """Median of ``f_hat`` over the valid samples of each segment; segments without any take the
+    next segment's level (else the previous one's, else 0)."""
+    levels = np.full(n_segments, np.nan)
+    for s in range(n_segments):
+        sel = valid & (segment == s) & np.isfinite(f_hat)
+        if sel.any():
+            levels[s] = float(np.median(f_hat[sel]))
+    if np.all(np.isnan(levels)):
+        return np.zeros(n_segments)
+    for s in range(n_segments - 2, -1, -1):  # backward fill
+        if np.isnan(levels[s]):
+            levels[s] = levels[s + 1]
+    for s in range(1, n_segments):  # forward fill what is left at the end
+        if np.isnan(levels[s]):
+            levels[s] = levels[s - 1]
+    return levels
+
+
+def _window_all(mask: np.ndarray, half: int) -> np.ndarray:
+    """True where ``mask`` holds on every sample of [k − half, k + half]."""
+    n = mask.size
+    c = np.r_[0, np.cumsum(mask.astype(np.int64))]
+    k = np.arange(n)
+    lo = k - half
+    hi = k + half + 1
+    ok = (lo >= 0) & (hi <= n)
+    out = np.zeros(n, dtype=bool)
+    out[ok] = (c[hi[ok]] - c[lo[ok]]) == (2 * half + 1)
+    return out
+
+
+def _place_in_gap(j: int, idx: np.ndarray, f_hat: np.ndarray, f_point: np.ndarray | None, not_stuck: np.ndarray, w: int) -> int:
+    """Where a step found between valid samples idx[j] and idx[j + 1] starts: the first slip
+    fragment in between whose pointwise load is nearer the new level than the old one, else
+    idx[j + 1]."""
+    a, b = int(idx[j]), int(idx[j + 1]) if j + 1 < idx.size else int(idx[j])
+    if f_point is None or b - a <= 1:
+        return b
+    old = float(np.median(f_hat[idx[max(0, j - w + 1):j + 1]]))
+    new = float(np.median(f_hat[idx[j + 1:j + 1 + w]]))
+    for fa, fb in _runs(not_stuck[a + 1:b]):
+        vals = f_point[a + 1 + fa:a + 1 + fb]
+        if not np.all(np.isfinite(vals)):
+            continue
+        if abs(float(np.median(vals)) - new) < abs(float(np.median(vals)) - old):
+            # the split within the fragment that fits (old | new) best
+            c_old = np.r_[0.0, np.cumsum((vals - old) ** 2)]
+            c_new = np.r_[0.0, np.cumsum((vals - new) ** 2)]
+            cost = c_old + (c_new[-1] - c_new)
+            return a + 1 + fa + int(np.argmin(cost))
+    return b
+
+
+def estimate_load(f_hat: np.ndarray, v: np.ndarray, settings: DiscrepancySettings, f_point: np.ndarray | None = None) -> LoadEstimate:
+    """Piecewise-constant load of one record from the triangular force balance ``f_hat`` [N]
+    (:func:`transforms.discrepancy.residuals.triangular_force_balance` with
+    ``settings.interval_samples``) and the cylinder velocity ``v`` [m/s] (module docstring).
+
+    ``f_point`` (optional): a pointwise load estimate (with a Savitzky–Golay acceleration),
+    noisier but available in the short slip fragments of a creeping cylinder; a step found
+    across a standstill is then placed at the first fragment that already shows the new level
+    (a load step is often what makes a resting cylinder creep)."""
+    n = f_hat.size
+    w = settings.step_half_width
+    L = settings.interval_samples
+    finite = np.isfinite(f_hat) & np.isfinite(v)
+    not_stuck = finite & (np.abs(v) > settings.v_load_m_s)
+    valid = finite & _window_all(not_stuck, L)
+    idx = np.flatnonzero(valid)
+    steps: list[int] = []
+    brackets: dict[int, tuple[int, int]] = {}
+    if idx.size >= 2 * w + 1:
+        jump = step_filter(f_hat[idx], w)
+        ok = np.isfinite(jump)
+        sigma = 1.4826 * float(np.median(np.abs(jump[ok] - np.median(jump[ok])))) if ok.sum() > 10 else 0.0
+        thr = max(settings.step_threshold_n, settings.step_threshold_sigmas * sigma)
+        aj = np.where(ok, np.abs(jump), 0.0)
+        last = -10 * w
+        for j in np.flatnonzero(aj > thr):
+            lo, hi = max(0, j - w), min(idx.size, j + w + 1)
+            if aj[j] >= aj[lo:hi].max() and j - last > w:
+                # the largest gap between valid samples near the peak: a step across a standstill
+                gaps = np.diff(idx[lo:hi])
+                g = int(np.argmax(gaps)) + lo if gaps.size else j
+                if gaps.size and gaps.max() > 2 * L + 1:
+                    steps.append(_place_in_gap(g, idx, f_hat, f_point, not_stuck, w))
+                    big = np.flatnonzero(gaps > 2 * L + 1) + lo
+                    brackets[steps[-1]] = (int(idx[big[0]]), int(idx[big[-1] + 1]))
+                else:
+                    steps.append(int(idx[j + 1]) if j + 1 < idx.size else int(idx[j]))
+                last = j
+    steps_arr = np.array(sorted(set(steps)), dtype=np.int64)
+    segment = np.zeros(n, dtype=np.int64)
+    for s in steps_arr:
+        segment[s:] += 1
+    g = settings.step_guard_samples
+    away = np.ones(n, dtype=bool)
+    for s in steps_arr:
+        away[max(0, s - g):min(n, s + g)] = False
+    valid = valid & away
+    levels = segment_levels(f_hat, valid, segment, len(steps_arr) + 1)
+    usable = valid & (np.abs(v) > settings.v_move_m_s)
+    br = np.array([brackets.get(int(s), (-1, -1)) for s in steps_arr], dtype=np.int64).reshape(-1, 2)
+    return LoadEstimate(segment=segment, steps=steps_arr, levels=levels, load=levels[segment], brackets=br, valid=valid, usable=usable)

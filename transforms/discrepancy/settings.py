@@ -1,0 +1,120 @@
+"""Settings of the model-discrepancy workflow (every value SI), with the reasons for the defaults.
+
+The defaults are argued for the plant of Table 1 recorded at 1 kHz (pressure noise ~0.05 bar,
+spool 1 µm, cylinder 1 µm); ``docs/discrepancy.md`` explains the method they belong to.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+__all__ = ["DiscrepancySettings"]
+
+
+@dataclass(frozen=True)
+class DiscrepancySettings:
+    """How the discrepancy workflow cuts, smooths, segments, selects and replays.
+
+    Attributes
+    ----------
+    sample_period_s : float | None
+        Nominal sample period; None = the median time step of the data. [s]
+    gap_limit_periods : float
+        A time step longer than this many sample periods ends a record (as in monitoring).
+    min_record_s, max_record_s : float
+        Records (contiguous runs) shorter than ``min_record_s`` are skipped; longer ones are cut
+        into pieces of ``max_record_s``. [s]
+    max_records : int
+        At most this many records are diagnosed (evenly spaced over the span).
+    savgol_window, savgol_order : int
+        Savitzky-Golay stencil for smoothed signals, v_X = dX/dt, a = d^2X/dt^2 and dp/dt
+        (the monitoring's 21/3, ``transforms.params``).
+    interval_samples : int
+        Length L of the integration intervals of the residuals (20 samples = 20 ms): the chamber
+        equations are integrated over each interval (no pressure derivative needed) and the
+        motion equation over two (a second difference of X, no acceleration needed).
+    interval_smoothing : int
+        Every integrated residual term is averaged over this many shifts of its interval (odd;
+        a boxcar, the same on every term), which averages the noise of the end samples
+        (:mod:`transforms.discrepancy.residuals`). At most ``savgol_window``.
+    v_move_m_s : float
+        |v_X| above which the motion equation is used (2 v_0: the Stribeck excess has decayed to
+        2 % of d_s - d_c). [m/s]
+    v_load_m_s : float
+        |v_X| above which the cylinder is taken not to stick, so the motion equation shows the
+        load (2 mm/s: 50 x the velocity noise of the Savitzky-Golay derivative). [m/s]
+    v_standstill_m_s : float
+        |v_X| below which a sample counts as standstill for the regions and the replay's
+        restarts (monitoring's 5 mm/s). [m/s]
+    step_half_width : int
+        Half-width w (samples) of the load-step detector: a jump of the load estimate between
+        two straight-and-curved fits over w samples on either side.
+    step_threshold_n : float
+        Smallest load step the detector reports. [N]
+    step_threshold_sigmas : float
+        ... and at least this many robust standard deviations of the detector output.
+    step_guard_samples : int
+        Samples on either side of a detected load step left out of the motion equation.
+    replay_segment_s : float
+        The replay restarts from the measured state every this many seconds (multiple
+        shooting), so a small flow error cannot make the position drift over a whole record. [s]
+    block_s : float
+        Length of the cross-validation blocks. [s]
+    max_effects : int
+        At most this many effects are named.
+    min_t_stat : float
+        A candidate is significant only if its cross-validated improvement, paired over blocks,
+        has at least this t statistic ...
+    min_relative_gain : float
+        ... reduces the cross-validated residual sum of squares by at least this fraction ...
+    min_z : float
+        ... and its parameter is at least this many (jackknife) standard errors from neutral.
+    ci_level : float
+        Level of the parameter intervals.
+    gauss_newton_iterations : int
+        Refinement iterations of a named effect's parameter on the exact (non-linearised)
+        residuals.
+    """
+
+    sample_period_s: float | None = None
+    gap_limit_periods: float = 3.0
+    min_record_s: float = 2.0
+    max_record_s: float = 30.0
+    max_records: int = 48
+    savgol_window: int = 21
+    savgol_order: int = 3
+    interval_samples: int = 20
+    interval_smoothing: int = 21
+    v_move_m_s: float = 0.03
+    v_load_m_s: float = 2e-3
+    v_standstill_m_s: float = 5e-3
+    step_half_width: int = 40
+    step_threshold_n: float = 400.0
+    step_threshold_sigmas: float = 8.0
+    step_guard_samples: int = 40
+    replay_segment_s: float = 2.5
+    block_s: float = 1.0
+    max_effects: int = 3
+    min_t_stat: float = 4.0
+    min_relative_gain: float = 0.02
+    min_z: float = 5.0
+    ci_level: float = 0.95
+    gauss_newton_iterations: int = 6
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if v is None:
+                continue
+            if not v > 0:
+                raise ValueError(f"{f.name} must be > 0, got {v}")
+        if self.savgol_window % 2 != 1 or self.savgol_window < 5:
+            raise ValueError("savgol_window must be odd and >= 5")
+        if not 2 <= self.savgol_order < self.savgol_window:
+            raise ValueError("savgol_order must be in [2, savgol_window)")
+        if not 0 < self.ci_level < 1:
+            raise ValueError("ci_level must be in (0, 1)")
+        if self.interval_smoothing % 2 != 1 or self.interval_smoothing > self.savgol_window:
+            raise ValueError("interval_smoothing must be odd and at most savgol_window")
+        if self.min_record_s > self.max_record_s:
+            raise ValueError("min_record_s must not exceed max_record_s")
