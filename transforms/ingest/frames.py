@@ -82,13 +82,20 @@ def split_days(frame: pl.DataFrame) -> list[tuple[date, pl.DataFrame]]:
 
 
 def _first_failure(err: pandera.errors.SchemaErrors) -> tuple[str | None, int | None, str, object]:
+    """Column, row, check name and failing value of the first failure pandera reports."""
     fc = err.failure_cases
     if not isinstance(fc, pl.DataFrame):
         fc = pl.from_pandas(fc) if hasattr(fc, "to_dict") else pl.DataFrame(fc)
     with_index = fc.filter(pl.col("index").is_not_null()) if "index" in fc.columns else fc
     row = (with_index if with_index.height else fc).row(0, named=True)
     index = row.get("index")
-    return row.get("column"), None if index is None else int(index), str(row.get("check")), row.get("failure_case")
+    check = str(row.get("check"))
+    for e in getattr(err, "schema_errors", []):
+        named = getattr(getattr(e, "check", None), "name", None)
+        if named and str(getattr(e.check, "error", "")) == check:
+            check = named
+            break
+    return row.get("column"), None if index is None else int(index), check, row.get("failure_case")
 
 
 def validate_sensor_frame(frame: pl.DataFrame, tags_by_column: dict[str, str]) -> pl.DataFrame:
@@ -117,7 +124,7 @@ def validate_sensor_frame(frame: pl.DataFrame, tags_by_column: dict[str, str]) -
                 value = frame[column][index]
         tag = tags_by_column.get(column or "")
         where = f"valve {frame['valve_id'][0] if frame.height else '?'}, column {column}{when}"
-        raise IngestError(f"{where}: value {value!r} fails check {check!r} of the sensor frame", tag=tag) from None
+        raise IngestError(f"{where}: value {value!r} fails check {check!r}", tag=tag) from None
 
 
 @lru_cache(maxsize=16)

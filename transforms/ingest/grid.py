@@ -124,7 +124,7 @@ def prepare_tag(t_ns: np.ndarray, values: np.ndarray, lines, rule: str, tag: str
         lines = lines if order is None else lines[order]
         bad_run = int(np.flatnonzero(distinct_per_run > 1)[0])
         members = np.flatnonzero(run == bad_run)
-        shown = ", ".join(f"line {lines[m]} = {values[m]!r}" for m in members[:4])
+        shown = ", ".join(f"line {int(lines[m])} = {float(values[m])!r}" for m in members[:4])
         raise IngestError(
             f"{_iso(int(t_ns[members[0]]))} has different values ({shown}); export.duplicate_rule is 'error'",
             line=int(lines[members[0]]),

@@ -55,6 +55,10 @@ def _example(fmt: str) -> str:
     return f"the pattern {fmt!r}"
 
 
+def _line(lines: pl.Series | None, i: int) -> int:
+    return i + 1 if lines is None else int(lines[i])
+
+
 def _first_failure(raw: pl.Series, ok: pl.Series, lines: pl.Series | None, fmt: str, tags: pl.Series | None) -> IngestError:
     bad = (~ok.fill_null(False)).arg_true()
     i = int(bad[0])

@@ -1,0 +1,219 @@
+"""Idempotence, overlapping exports, the manifest, and crashes at any point followed by a rerun."""
+
+from __future__ import annotations
+
+from datetime import timedelta
+
+import pytest
+from polars.testing import assert_frame_equal
+
+import flows.ingest
+import flows.lake
+from flows.errors import ValvemonError
+from tests.ingest.conftest import BASE, DATA, T0, base_lake, expected_lake, ingest, lake, table
+
+
+def _files(wh):
+    return {p.relative_to(wh).as_posix(): (p.stat().st_mtime_ns, p.read_bytes()) for p in (wh / "lake").rglob("*") if p.is_file()}
+
+
+def _split(tmp_path):
+    """base_long.csv as two overlapping exports: seconds 0–2 and 2–4 (second 2 in both)."""
+    lines = (DATA / "base_long.csv").read_text().splitlines()
+    header, rows = lines[0], lines[1:]
+    a, b = tmp_path / "a.csv", tmp_path / "b.csv"
+    a.write_text("\n".join([header, *rows[:18]]) + "\n")
+    b.write_text("\n".join([header, *rows[12:]]) + "\n")
+    return a, b
+
+
+def test_ingesting_the_same_export_again_changes_nothing(plant, tmp_path):
+    wh = tmp_path / "wh"
+    cfg2, _ = plant("pi.toml", quality_column=None, good_quality=None)
+    ingest(cfg2, DATA / "pi_tag_major.csv", wh)
+    before = _files(wh)
+    again = ingest(cfg2, DATA / "pi_tag_major.csv", wh)
+    assert again.files_skipped == 1 and again.files_ingested == 0
+    forced = ingest(cfg2, DATA / "pi_tag_major.csv", wh, force=True)
+    assert forced.files_ingested == 1 and forced.rows_added == 0 and forced.partitions_written == 0
+    assert _files(wh) == before  # not even rewritten
+    assert table(wh, "quarantine").height == 3  # a forced re-read replaces the file's quarantine rows
+    assert table(wh, "ingest_manifest").height == 1
+    assert table(wh, "ingest_runs")["status"].to_list() == ["ok", "ok", "ok"]
+
+
+def test_identical_content_under_another_name_is_recognised(plant, tmp_path):
+    cfg, _ = plant()
+    copy = tmp_path / "copy.csv"
+    copy.write_bytes((DATA / "base_long.csv").read_bytes())
+    ingest(cfg, DATA / "base_long.csv", tmp_path / "wh")
+    assert ingest(cfg, copy, tmp_path / "wh").files_skipped == 1
+
+
+def test_overlapping_exports_merge_without_duplicates(plant, tmp_path):
+    cfg, _ = plant()
+    a, b = _split(tmp_path)
+    ra = ingest(cfg, a, tmp_path / "wh")
+    rb = ingest(cfg, b, tmp_path / "wh")
+    assert_frame_equal(lake(tmp_path / "wh"), base_lake())
+    assert (ra.rows_written, ra.rows_added, rb.rows_written, rb.rows_added) == (3, 3, 3, 2)
+    # in either order
+    ingest(cfg, [b, a], tmp_path / "wh2")
+    assert_frame_equal(lake(tmp_path / "wh2"), base_lake())
+
+
+@pytest.mark.parametrize("rule, expected_p1", [("last", 150.0), ("first", 102.0)])
+def test_a_later_export_that_disagrees_follows_the_duplicate_rule(plant, tmp_path, rule, expected_p1):
+    cfg, _ = plant(duplicate_rule=rule)
+    revised = tmp_path / "revised.csv"
+    revised.write_text((DATA / "base_long.csv").read_text().replace("MILL1.V017.P1,102.0", "MILL1.V017.P1,150.0"))
+    ingest(cfg, DATA / "base_long.csv", tmp_path / "wh")
+    report = ingest(cfg, revised, tmp_path / "wh")
+    want = dict(BASE)
+    want["p1"] = [100.0, 101.5, expected_p1, 103.5, 104.0]
+    assert_frame_equal(lake(tmp_path / "wh"), expected_lake([T0 + timedelta(seconds=i) for i in range(5)], want))
+    assert report.lake_conflicts == 1
+
+
+def test_a_later_export_that_disagrees_is_refused_under_rule_error(plant, tmp_path):
+    cfg, _ = plant(duplicate_rule="error")
+    revised = tmp_path / "revised.csv"
+    revised.write_text((DATA / "base_long.csv").read_text().replace("MILL1.V017.P1,102.0", "MILL1.V017.P1,150.0"))
+    ingest(cfg, DATA / "base_long.csv", tmp_path / "wh")
+    with pytest.raises(ValvemonError, match=r"tag MILL1.V017.P1: valve V017 at 2025-03-01T12:00:02Z: column p1_pa is 10200000.0 in the lake but 15000000.0"):
+        ingest(cfg, revised, tmp_path / "wh")
+    assert_frame_equal(lake(tmp_path / "wh"), base_lake())
+
+
+def test_manifest_records_hash_counts_and_time_range(plant, tmp_path):
+    import hashlib
+
+    cfg, _ = plant()
+    ingest(cfg, DATA / "duplicates.csv", tmp_path / "wh")
+    m = table(tmp_path / "wh", "ingest_manifest").row(0, named=True)
+    assert m["file_sha256"] == hashlib.sha256((DATA / "duplicates.csv").read_bytes()).hexdigest()
+    assert (m["rows_in"], m["samples_in"], m["rows_out"], m["rows_added"], m["quarantined"], m["partitions"]) == (21, 21, 3, 3, 0, 1)
+    assert (m["time_start"], m["time_end"]) == (T0, T0 + timedelta(seconds=2))
+    assert m["valves"] == "V017" and m["layout"] == "long" and m["file_format"] == "csv"
+    run = table(tmp_path / "wh", "ingest_runs").row(0, named=True)
+    assert (run["rows_read"], run["rows_written"], run["duplicates"], run["conflicts"], run["status"]) == (21, 3, 2, 1, "ok")
+
+
+# --- crashes ----------------------------------------------------------------------------------
+
+class Crash(RuntimeError):
+    pass
+
+
+@pytest.fixture
+def wide(plant):
+    cfg, _ = plant("wide.toml", layout="wide", tag_column=None, value_column=None, quality_column=None, good_quality=None)
+    return cfg
+
+
+def test_crash_after_the_temp_file_keeps_the_old_partition_and_a_rerun_completes(wide, tmp_path, monkeypatch):
+    clean = tmp_path / "clean"
+    ingest(wide, DATA / "midnight.csv", clean)
+    wh = tmp_path / "wh"
+    calls = []
+
+    def crash_on_second(tmp, path):
+        calls.append(path)
+        if len(calls) == 2:
+            assert tmp.exists() and tmp.stat().st_size > 0  # the new content was written beside it
+            raise Crash("killed between the temporary file and the rename")
+        return real_commit(tmp, path)
+
+    real_commit = flows.lake._commit
+    monkeypatch.setattr(flows.lake, "_commit", crash_on_second)
+    with pytest.raises(Crash):
+        ingest(wide, DATA / "midnight.csv", wh)
+    monkeypatch.setattr(flows.lake, "_commit", real_commit)
+    # first partition new, second absent (it never existed): never a half-written file
+    assert [p.parent.name for p in (wh / "lake").rglob("part-0.parquet")] == ["date=2025-03-01"]
+    assert table(wh, "ingest_manifest").height == 0
+    assert table(wh, "ingest_runs")["status"].to_list() == ["failed"]
+    ingest(wide, DATA / "midnight.csv", wh)
+    assert_frame_equal(lake(wh), lake(clean))
+    assert not [p for p in (wh / "lake").rglob("*.tmp")]
+
+
+def test_crash_replacing_an_existing_partition_leaves_the_old_content(plant, tmp_path, monkeypatch):
+    cfg, _ = plant()
+    a, b = _split(tmp_path)
+    wh = tmp_path / "wh"
+    ingest(cfg, a, wh)
+    old = lake(wh)
+
+    def write_then_die(tmp, frame, gap_us):
+        real_write(tmp, frame, gap_us)
+        raise Crash("killed after fsync of the temporary file")
+
+    real_write = flows.lake._write_temp
+    monkeypatch.setattr(flows.lake, "_write_temp", write_then_die)
+    with pytest.raises(Crash):
+        ingest(cfg, b, wh)
+    monkeypatch.setattr(flows.lake, "_write_temp", real_write)
+    assert_frame_equal(lake(wh), old)
+    ingest(cfg, b, wh)
+    assert_frame_equal(lake(wh), base_lake())
+
+
+def test_a_kill_leaving_a_temp_file_is_tidied_by_the_next_write(plant, tmp_path):
+    cfg, _ = plant()
+    wh = tmp_path / "wh"
+    ingest(cfg, DATA / "base_long.csv", wh)
+    part = next((wh / "lake").rglob("part-0.parquet"))
+    stale = part.parent / ".part-0.parquet.deadbeef.tmp"
+    stale.write_bytes(b"half a parquet file")  # what SIGKILL during the write leaves
+    assert_frame_equal(lake(wh), base_lake())  # readers never see it
+    revised = tmp_path / "revised.csv"
+    revised.write_text((DATA / "base_long.csv").read_text().replace("MILL1.V017.P1,102.0", "MILL1.V017.P1,150.0"))
+    ingest(cfg, revised, wh)
+    assert not stale.exists()
+
+
+def test_crash_between_partitions_then_rerun_equals_one_clean_run(wide, tmp_path, monkeypatch):
+    clean = tmp_path / "clean"
+    ingest(wide, DATA / "midnight.csv", clean)
+    wh = tmp_path / "wh"
+    real = flows.ingest.write_partition
+    n = []
+
+    def die_second(path, frame, **kw):
+        n.append(path)
+        if len(n) == 2:
+            raise Crash("killed between two partitions")
+        return real(path, frame, **kw)
+
+    monkeypatch.setattr(flows.ingest, "write_partition", die_second)
+    with pytest.raises(Crash):
+        ingest(wide, DATA / "midnight.csv", wh)
+    monkeypatch.setattr(flows.ingest, "write_partition", real)
+    ingest(wide, DATA / "midnight.csv", wh)
+    assert_frame_equal(lake(wh), lake(clean))
+    assert _bytes_equal(clean, wh)
+
+
+def _bytes_equal(a, b) -> bool:
+    fa = {k: v[1] for k, v in _files(a).items()}
+    fb = {k: v[1] for k, v in _files(b).items()}
+    return fa == fb
+
+
+def test_crash_before_the_manifest_then_rerun_counts_nothing_twice(plant, tmp_path, monkeypatch):
+    cfg, _ = plant("pi.toml", quality_column=None, good_quality=None)
+    wh = tmp_path / "wh"
+    real = flows.ingest.record_file
+
+    def die(*a, **k):
+        raise Crash("killed after the partitions, before the manifest")
+
+    monkeypatch.setattr(flows.ingest, "record_file", die)
+    with pytest.raises(Crash):
+        ingest(cfg, DATA / "pi_tag_major.csv", wh)
+    monkeypatch.setattr(flows.ingest, "record_file", real)
+    report = ingest(cfg, DATA / "pi_tag_major.csv", wh)
+    assert report.files_ingested == 1 and report.rows_added == 0  # the lake already had the rows
+    assert table(wh, "quarantine").height == 3 and table(wh, "ingest_manifest").height == 1
+    assert lake(wh).height == 5

@@ -1,0 +1,192 @@
+"""The pieces on their own: timestamps, grid, merge, row groups, lake reads."""
+
+from __future__ import annotations
+
+from datetime import date, datetime, timedelta, timezone
+
+import numpy as np
+import polars as pl
+import pyarrow.parquet as pq
+import pytest
+from polars.testing import assert_frame_equal
+
+from flows.lake import partition_path, read_lake, row_group_bounds, write_partition
+from tests.ingest.conftest import DATA, base_lake, ingest
+from transforms.ingest import Grid, IngestError, merge_partition, parse_timestamps, prepare_tag, to_grid
+
+UTC = timezone.utc
+
+
+def _utc(*a):
+    return datetime(*a, tzinfo=UTC)
+
+
+# --- timestamps -------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "text, expected_ns",
+    [
+        ("2025-03-01T12:00:00.1234567Z", 1_740_830_400_123_456_700),  # PI: 7 digits, 100 ns kept
+        ("2025-03-01T13:00:00.5+01:00", 1_740_830_400_500_000_000),
+        ("2025-03-01T13:00:00+0100", 1_740_830_400_000_000_000),
+        ("2025-03-01 12:00:00Z", 1_740_830_400_000_000_000),
+        ("2025-03-01T12:00:00.000000001Z", 1_740_830_400_000_000_001),
+    ],
+)
+def test_iso8601_with_offsets_and_fractions(text, expected_ns):
+    got = parse_timestamps(pl.Series([text]), "iso8601", "Europe/Vienna")
+    assert got.dtype == pl.Datetime("ns", "UTC") and got.to_physical()[0] == expected_ns
+
+
+def test_iso8601_mixed_offsets_and_local_in_one_column():
+    s = pl.Series(["2025-03-01T12:00:00Z", "2025-03-01T13:00:01+01:00", "2025-03-01T13:00:02"])
+    assert parse_timestamps(s, "iso8601", "Europe/Vienna").to_list() == [_utc(2025, 3, 1, 12, 0, s) for s in range(3)]
+
+
+def test_epoch_ms_text_and_numbers():
+    assert parse_timestamps(pl.Series(["1740830400123", "1740830400123.5"]), "epoch_ms", "UTC").to_physical().to_list() == [1_740_830_400_123_000_000, 1_740_830_400_123_500_000]
+    assert parse_timestamps(pl.Series([1740830400123]), "epoch_ms", "UTC").to_list() == [_utc(2025, 3, 1, 12, 0, 0, 123000)]
+
+
+def test_typed_timestamps_naive_ones_are_local():
+    naive = pl.Series([datetime(2025, 7, 1, 14, 0)])
+    zoned = pl.Series([datetime(2025, 7, 1, 14, 0)]).dt.replace_time_zone("America/New_York")
+    assert parse_timestamps(naive, "iso8601", "Europe/Vienna").to_list() == [_utc(2025, 7, 1, 12, 0)]
+    assert parse_timestamps(zoned, "iso8601", "Europe/Vienna").to_list() == [_utc(2025, 7, 1, 18, 0)]
+
+
+def test_autumn_row_order_is_judged_per_tag():
+    """Tag A's rows pass the repeated hour twice; tag B's rows are only in the first pass."""
+    s = pl.Series(["2025-10-26 02:30:00", "2025-10-26 02:10:00", "2025-10-26 02:40:00", "2025-10-26 02:20:00", "2025-10-26 02:50:00"])
+    groups = pl.Series([0, 1, 0, 1, 0])
+    got = parse_timestamps(s, "iso8601", "Europe/Vienna", groups=groups).to_list()
+    # A: 02:30 summer, 02:40 summer, 02:50 summer (never went back); B: 02:10, 02:20 summer
+    assert got == [_utc(2025, 10, 26, 0, 30), _utc(2025, 10, 26, 0, 10), _utc(2025, 10, 26, 0, 40), _utc(2025, 10, 26, 0, 20), _utc(2025, 10, 26, 0, 50)]
+    s2 = pl.Series(["2025-10-26 02:30:00", "2025-10-26 02:10:00", "2025-10-26 02:40:00"])
+    got2 = parse_timestamps(s2, "iso8601", "Europe/Vienna").to_list()  # one sequence: went back at row 2
+    assert got2 == [_utc(2025, 10, 26, 0, 30), _utc(2025, 10, 26, 1, 10), _utc(2025, 10, 26, 1, 40)]
+
+
+def test_spring_gap_names_the_line_and_tag():
+    s = pl.Series(["2025-03-30 01:59:59", "2025-03-30 02:00:00"])
+    with pytest.raises(IngestError) as err:
+        parse_timestamps(s, "iso8601", "Europe/Vienna", lines=pl.Series([10, 11]), tags=pl.Series(["A", "B"]))
+    assert err.value.line == 11 and err.value.tag == "B" and "does not exist in Europe/Vienna" in str(err.value)
+
+
+def test_strftime_pattern_local_and_with_offset():
+    assert parse_timestamps(pl.Series(["01.03.2025 13:00:00.250"]), "%d.%m.%Y %H:%M:%S%.f", "Europe/Vienna").to_list() == [_utc(2025, 3, 1, 12, 0, 0, 250000)]
+    assert parse_timestamps(pl.Series(["01.03.2025 14:00:00 +0200"]), "%d.%m.%Y %H:%M:%S %z", "Europe/Vienna").to_list() == [_utc(2025, 3, 1, 12, 0)]
+
+
+# --- grid -------------------------------------------------------------------------------------
+
+
+def test_exactly_gridded_input_is_bit_identical():
+    rng = np.random.default_rng(1)
+    t = np.arange(1000, dtype=np.int64) * 1_000_000 + 1_740_830_400_000_000_000
+    v = rng.standard_normal(1000) * 1e7
+    g = to_grid(t, v, Grid.from_export(1000.0, 0.005))
+    assert np.array_equal(g.t_us, t // 1000) and g.values.tobytes() == v.tobytes()
+    # also through the general path (a hole inside the gap limit forces interpolation there only)
+    keep = np.ones(1000, dtype=bool)
+    keep[500] = False
+    g2 = to_grid(t[keep], v[keep], Grid.from_export(1000.0, 0.005))
+    assert np.array_equal(g2.t_us, t // 1000)
+    assert g2.values[keep].tobytes() == v[keep].tobytes()
+    assert g2.values[500] == pytest.approx((v[499] + v[501]) / 2, rel=1e-12)
+
+
+def test_grid_is_aligned_to_utc_multiples_of_the_period_and_never_extrapolates():
+    grid = Grid.from_export(4.0, 1.0)  # 250 ms
+    t = np.array([100_000_000, 600_000_000, 1_100_000_000], dtype=np.int64)  # 0.1 s, 0.6 s, 1.1 s
+    g = to_grid(t, np.array([0.0, 5.0, 10.0]), grid)
+    assert g.t_us.tolist() == [250_000, 500_000, 750_000, 1_000_000]
+    assert g.values.tolist() == pytest.approx([1.5, 4.0, 6.5, 9.0])
+
+
+def test_gap_splits_segments_and_is_reported():
+    grid = Grid.from_export(1.0, 2.5)
+    s = 1_000_000_000
+    t = np.array([0, 1, 2, 6, 7], dtype=np.int64) * s
+    g = to_grid(t, np.arange(5.0), grid)
+    assert (g.t_us // 1_000_000).tolist() == [0, 1, 2, 6, 7]
+    assert (g.gap_start_ns.tolist(), g.gap_end_ns.tolist()) == ([2 * s], [6 * s])
+
+
+def test_prepare_tag_sorts_and_counts_duplicates_and_conflicts():
+    t = np.array([3, 1, 2, 1, 2, 2], dtype=np.int64)
+    v = np.array([30.0, 10.0, 20.0, 10.0, 21.0, 20.0])
+    last = prepare_tag(t, v, np.arange(6), "last")
+    assert last.t_ns.tolist() == [1, 2, 3] and last.values.tolist() == [10.0, 20.0, 30.0]
+    assert (last.duplicates, last.conflicts) == (2, 1)
+    first = prepare_tag(t, v, np.arange(6), "first")
+    assert first.values.tolist() == [10.0, 20.0, 30.0]
+    v2 = v.copy()
+    v2[5] = 22.0
+    assert prepare_tag(t, v2, np.arange(6), "last").values.tolist() == [10.0, 22.0, 30.0]
+    assert prepare_tag(t, v2, np.arange(6), "first").values.tolist() == [10.0, 20.0, 30.0]
+
+
+def test_sample_rate_must_give_a_whole_microsecond_period():
+    assert Grid.from_export(1000.0, 0.005).period_us == 1000
+    assert Grid.from_export(8000.0, 0.001).period_us == 125
+    with pytest.raises(IngestError, match="whole number of microseconds"):
+        Grid.from_export(3000.0, 0.005)
+
+
+# --- merge ------------------------------------------------------------------------------------
+
+
+def test_merge_adds_new_rows_keeps_equal_ones_and_applies_the_rule():
+    base = base_lake()
+    old, new = base[:3], base[2:]
+    m = merge_partition(old, new, "last")
+    assert_frame_equal(m.frame, base)
+    assert (m.rows_added, m.lake_conflicts, m.changed) == (2, 0, True)
+    same = merge_partition(base, base[1:4], "error")
+    assert (same.changed, same.rows_added) == (False, 0)
+    revised = base[2:3].with_columns(pl.col("p1_pa") * 2)
+    assert merge_partition(base, revised, "last").frame["p1_pa"][2] == base["p1_pa"][2] * 2
+    kept = merge_partition(base, revised, "first")
+    assert not kept.changed and kept.lake_conflicts == 1
+    with pytest.raises(IngestError, match="column p1_pa"):
+        merge_partition(base, revised, "error")
+
+
+# --- lake -------------------------------------------------------------------------------------
+
+
+def test_row_groups_follow_windows():
+    t = np.concatenate([np.arange(10) * 1000, 3_600_000_000 + np.arange(10) * 1000, 7_200_000_000 + np.arange(25) * 1000])
+    assert row_group_bounds(t, 5000, min_rows=10, max_rows=20) == [(0, 10), (10, 20), (20, 40), (40, 45)]
+    assert row_group_bounds(t, 5000, min_rows=15, max_rows=100) == [(0, 20), (20, 45)]
+
+
+def test_partition_file_layout_codec_and_sorting(tmp_path):
+    frame = base_lake()
+    path = partition_path(tmp_path, "V017", date(2025, 3, 1))
+    write_partition(path, frame, gap_us=2_500_000)
+    meta = pq.ParquetFile(path).metadata
+    assert meta.num_rows == 5 and meta.row_group(0).column(3).compression == "ZSTD"
+    schema = pq.read_schema(path)
+    assert schema.field("timestamp_utc").type.unit == "us" and str(schema.field("timestamp_utc").type.tz) == "UTC"
+    assert schema.field("p1_pa").metadata[b"unit"] == b"Pa"
+    assert meta.row_group(0).sorting_columns[0].column_index == 2
+
+
+def test_read_lake_filters_valves_and_time(plant, tmp_path):
+    cfg, _ = plant("wide.toml", layout="wide", tag_column=None, value_column=None, quality_column=None, good_quality=None)
+    ingest(cfg, DATA / "midnight.csv", tmp_path / "wh")
+    all_rows = read_lake(tmp_path / "wh")
+    assert isinstance(all_rows, pl.LazyFrame) and all_rows.collect().height == 4
+    assert read_lake(tmp_path / "wh", start="2025-03-02").collect().height == 2
+    assert read_lake(tmp_path / "wh", end=date(2025, 3, 2)).collect().height == 2
+    assert read_lake(tmp_path / "wh", start="2025-03-01T23:59:59Z", end=_utc(2025, 3, 2, 0, 0, 1)).collect()["timestamp_utc"].to_list() == [
+        _utc(2025, 3, 1, 23, 59, 59),
+        _utc(2025, 3, 2),
+    ]
+    assert read_lake(tmp_path / "wh", valve_ids=["V999"]).collect().height == 0
+    assert read_lake(tmp_path / "nowhere").collect().schema == base_lake().schema
+    assert read_lake(tmp_path / "wh", start=_utc(2025, 3, 1) + timedelta(days=5)).collect().height == 0
