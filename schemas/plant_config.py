@@ -348,8 +348,8 @@ def _parse_bounds(raw: Any, key: str, base: ConditionBounds) -> ConditionBounds:
                 raise ConfigError(f"{key}.{p}_wear_{side}: the wear bounds of {p} must enclose {unchanged:g} (unchanged)")
     if b.change_min_history > b.change_history_windows:
         raise ConfigError(f"{key}.change_min_history: {b.change_min_history} must be <= change_history_windows = {b.change_history_windows}")
-    if b.trend_min_fits < 3:
-        raise ConfigError(f"{key}.trend_min_fits: {b.trend_min_fits} must be >= 3 (a line and its scatter)")
+    if b.trend_min_fits < 5:
+        raise ConfigError(f"{key}.trend_min_fits: {b.trend_min_fits} must be >= 5 (a line, its scatter and a t quantile)")
     if b.trend_min_span_hours > b.trend_span_hours:
         raise ConfigError(f"{key}.trend_min_span_hours: {b.trend_min_span_hours:g} must be <= trend_span_hours = {b.trend_span_hours:g}")
     return b

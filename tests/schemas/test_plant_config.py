@@ -179,6 +179,7 @@ def test_bounds_round_trip_keeps_an_override_equal_to_its_type(raw, tmp_path):
         ({"x_hat_pct_sigma_floor": 0}, "x_hat_pct_sigma_floor: 0 must be > 0"),
         ({"trend_min_span_hours": 9000.0}, "trend_min_span_hours: 9000 must be <= trend_span_hours"),
         ({"change_z": "six"}, "valve_types.servo_4w.bounds.change_z: expected a finite number"),
+        ({"trend_min_fits": 4}, "valve_types.servo_4w.bounds.trend_min_fits: 4 must be >= 5"),
         ("strict", "valve_types.servo_4w.bounds: expected a table"),
     ],
 )
