@@ -51,13 +51,16 @@ def demo(warehouse: Warehouse = None) -> None:
     quiet_prefect_console()
     wh = warehouse_dir(warehouse)
     result = demo_flows.demo_flow(warehouse=str(wh))
-    fleet = demo_flows.fleet_table(wh)
-    table = Table(title=f"Fleet condition ({result['config']})")
-    for c in fleet.columns:
+    report = result["report"]
+    ranking = report.ranking if report.ranking is not None else None
+    table = Table(title=f"Fleet condition, most urgent first ({result['config']})")
+    columns = [c for c in ("urgency_rank", "valve_id", "state", "worst_edge", "reason", "remaining_hours") if ranking is not None and c in ranking.columns]
+    for c in columns:
         table.add_column(c)
-    for row in fleet.iter_rows():
-        table.add_row(*("" if v is None else str(v) for v in row))
+    for row in ranking.select(columns).iter_rows() if ranking is not None else []:
+        table.add_row(*("" if v is None else (f"{v:,.0f}" if isinstance(v, float) else str(v)) for v in row))
     Console().print(table)
+    typer.echo(f"report: {report.html.resolve()}")
 
 
 @app.command()
@@ -199,9 +202,19 @@ def discrepancy(
     start: From = None,
     end: To = None,
     warehouse: Warehouse = None,
+    max_records: Annotated[Optional[int], typer.Option("--max-records", help="Diagnose at most this many records (windows), evenly spaced over the span. \\[default: 48]")] = None,
 ) -> None:
-    """The model-discrepancy workflow."""
-    _not_yet("discrepancy", 7)
+    """The model-discrepancy workflow: replay, name the missing effect, add it, its effect on monitoring."""
+    import flows.discrepancy as discrepancy_flows
+    from flows.config import warehouse_dir
+    from flows.ingest import quiet_prefect_console
+
+    quiet_prefect_console()
+    report = discrepancy_flows.discrepancy_flow(
+        config_path=str(config), warehouse=str(warehouse_dir(warehouse)), valve_id=valve, start=start, end=end, max_records=max_records
+    )
+    for line in discrepancy_flows.summary_lines(report):
+        typer.echo(line)
 
 
 def main() -> None:

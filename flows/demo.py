@@ -7,8 +7,8 @@ too and named as its ``baseline_window``, so each edge's baseline is the step-4a
 commissioning data (checked against the nominal characteristic, step 5a), as at a real plant.
 
 Steps: write ``plant.toml``; simulate the commissioning days and the demo span into historian
-exports (Parquet, long layout); ingest them into the lake; monitor (baselines, fits); build the
-report. Everything lives under ``WAREHOUSE/demo/`` and the warehouse itself; a second run
+exports (Parquet, long layout); ingest them into the lake; monitor (baselines, fits); refresh the
+views and write the report (pictures, HTML, BI export). Everything lives under ``WAREHOUSE/demo/`` and the warehouse itself; a second run
 replaces the archive and leaves the lake and the fits as they were (idempotent).
 """
 
@@ -25,7 +25,7 @@ from prefect import flow
 from flows.archive import SimulateRequest, generate_plant_config, run_simulate
 from flows.ingest import run_ingest
 from flows.monitor import run_monitor
-from flows.warehouse_db import connect, query_frame
+from flows.report import run_report
 from schemas.plant_config import plant_config_to_dict
 
 DEMO_END = datetime(2026, 10, 1, tzinfo=timezone.utc)
@@ -82,21 +82,6 @@ def demo_config(out: Path):
     return config, path
 
 
-def fleet_table(warehouse: Path) -> pl.DataFrame:
-    """Latest estimate per valve and edge (the report's ``valve_condition`` adds the verdict)."""
-    with connect(warehouse, read_only=True) as con:
-        return query_frame(
-            con,
-            """
-            SELECT valve_id, edge, round(operating_hours) AS hours, status,
-                   round(alpha_hat, 3) AS alpha_hat, round(x_hat_pct, 2) AS x_hat_pct, round(e_mm2, 3) AS e_mm2
-            FROM edge_fits WHERE status = 'ok'
-            QUALIFY row_number() OVER (PARTITION BY valve_id, edge ORDER BY window_start DESC) = 1
-            ORDER BY valve_id, edge
-            """,
-        )
-
-
 def run_demo(warehouse: Path, *, show_progress: bool = True) -> dict:
     """Simulate, ingest, monitor and report the demo plant into ``warehouse``."""
     out = warehouse / "demo"
@@ -126,8 +111,9 @@ def run_demo(warehouse: Path, *, show_progress: bool = True) -> dict:
         show_progress=show_progress,
     )  # fmt: skip
     ingest = run_ingest(config_path, [*archives, span / "exports"], warehouse, show_progress=show_progress)
-    reports = run_monitor(config_path, warehouse)
-    return {"config": config_path, "ingest": ingest, "monitor": reports}
+    monitored = run_monitor(config_path, warehouse)
+    report = run_report(config_path, warehouse)
+    return {"config": config_path, "ingest": ingest, "monitor": monitored, "report": report}
 
 
 @flow(name="valvemon-demo", persist_result=False, validate_parameters=False)
