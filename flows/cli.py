@@ -203,6 +203,7 @@ def discrepancy(
     end: To = None,
     warehouse: Warehouse = None,
     max_records: Annotated[Optional[int], typer.Option("--max-records", help="Diagnose at most this many records (windows), evenly spaced over the span. \\[default: 48]")] = None,
+    valve_condition: Annotated[str, typer.Option("--valve-condition", help="auto | design | commissioning: the valve's α and underlaps in the model; commissioning fits them on the configured baseline_window, auto does so when there is one.")] = "auto",
 ) -> None:
     """The model-discrepancy workflow: replay, name the missing effect, add it, its effect on monitoring."""
     import flows.discrepancy as discrepancy_flows
@@ -211,7 +212,8 @@ def discrepancy(
 
     quiet_prefect_console()
     report = discrepancy_flows.discrepancy_flow(
-        config_path=str(config), warehouse=str(warehouse_dir(warehouse)), valve_id=valve, start=start, end=end, max_records=max_records
+        config_path=str(config), warehouse=str(warehouse_dir(warehouse)), valve_id=valve, start=start, end=end, max_records=max_records,
+        condition_mode=valve_condition,
     )
     for line in discrepancy_flows.summary_lines(report):
         typer.echo(line)

@@ -31,7 +31,7 @@ from model.params import PlantParams, ValveCondition
 from model.replay import replay
 from model.simulate import DEFAULT_REG_BAND_PA
 from transforms.discrepancy.gaps import GapAccumulator
-from transforms.discrepancy.load import LoadEstimate, estimate_load, segment_levels
+from transforms.discrepancy.load import LoadEstimate, estimate_load, replay_load, segment_levels, stuck_spans
 from transforms.discrepancy.records import REGIONS, Record, operating_regions, prepare_record
 from transforms.discrepancy.residuals import demean_by_group, interval_edges, interval_residuals, pointwise_residuals, triangular_force_balance
 from transforms.discrepancy.selection import SelectionResult, block_stats, cv_losses, forward_select
@@ -108,6 +108,28 @@ def _load_for(p: _Prepared, plant, condition, effects, settings) -> np.ndarray:
     return p.loads[effects].load
 
 
+def _holding(rec: Record, plant, condition, effects) -> tuple[np.ndarray, np.ndarray]:
+    """(m g + A1 p1 − A2 p2 with the true smoothed pressures [N], stuck mask) of a record."""
+    t = _terms_sg(rec, plant, condition, effects)
+    c = plant.cylinder
+    hold = t["mass"] * plant.cylinder.g_m_s2 + c.A1 * t["p1"] - c.A2 * t["p2"]
+    return hold, stuck_spans(rec.sg["v"], DEFAULT_STUCK_V)
+
+
+DEFAULT_STUCK_V = 1.0e-3
+"""|v_X| below which the measured cylinder counts as sticking for the replay's load. [m/s]"""
+
+
+def _replay_load_for(p: _Prepared, plant, condition, effects, settings) -> np.ndarray:
+    level = _load_for(p, plant, condition, effects, settings)
+    est = p.loads[effects]
+    if est.hold_until <= 0:
+        return level
+    hold, stuck = _holding(p.rec, plant, condition, effects)
+    stuck = stuck & (np.arange(stuck.size) < est.hold_until)
+    return replay_load(level, hold, stuck)
+
+
 REST_STEP_GRID = 5
 """Candidate spacing (samples) when a load step found across a standstill is placed by replay."""
 REST_STEP_TAIL = 300
@@ -129,15 +151,48 @@ def _replay_span(rec: Record, plant, condition, effects, a: int, b: int, load: n
     return p1r, p2r, r.X_m
 
 
+def _initial_hold(rec: Record, load: LoadEstimate, plant, condition, effects, settings) -> LoadEstimate:
+    """Does the record start at rest with another load than the first level? Replay its start
+    (to ``REST_STEP_TAIL`` samples past the first valid sample) both ways -- the first level from
+    the start, or the holding force until the cylinder first moves -- and keep the better."""
+    h = settings.savgol_window // 2
+    hold, stuck = _holding(rec, plant, condition, effects)
+    if not stuck[h] or not np.any(load.valid):
+        return load
+    first_move = int(np.argmin(stuck[h:])) + h  # first non-stuck sample
+    first_valid = int(np.flatnonzero(load.valid)[0])
+    if first_move <= h + 1 or first_move > first_valid:
+        return load
+    a, b = h, min(first_valid + REST_STEP_TAIL, rec.n - h - 1)
+    if b - a < 10:
+        return load
+    level = load.load[a:b]
+    sel = stuck[a:b] & (np.arange(a, b) < first_move)
+    errs = []
+    for F in (level, replay_load(level, hold[a:b], sel)):
+        out = _replay_span(rec, plant, condition, effects, a, b, F)
+        if out is None:
+            errs.append(np.inf)
+            continue
+        p1r, p2r, Xr = out
+        errs.append((np.sum((p1r - rec.raw["p1"][a:b]) ** 2) + np.sum((p2r - rec.raw["p2"][a:b]) ** 2)) / 1e10 + np.sum((Xr - rec.raw["X"][a:b]) ** 2) / 1e-6)
+    if errs[1] < errs[0]:
+        return replace(load, hold_until=first_move)
+    return load
+
+
 def _refine_rest_steps(rec: Record, load: LoadEstimate, f_hat: np.ndarray, plant, condition, effects, settings) -> LoadEstimate:
     """Place each load step found across a standstill where a replay of the standstill (from
     the measured state before it to ``REST_STEP_TAIL`` samples after it) fits the recorded
     p1, p2 and X best: while the cylinder sticks the load does not show in the motion equation,
     but when it changed decides when and how the cylinder breaks away."""
+    h = settings.savgol_window // 2
+    load = _initial_hold(rec, load, plant, condition, effects, settings)
     if not np.any(load.brackets[:, 0] >= 0):
         return load
-    h = settings.savgol_window // 2
     steps = load.steps.copy()
+    hold, stuck = _holding(rec, plant, condition, effects)
+    stuck = stuck & (np.arange(stuck.size) < load.hold_until)
     for i, (lo, hi) in enumerate(load.brackets):
         if lo < 0:
             continue
@@ -151,7 +206,8 @@ def _refine_rest_steps(rec: Record, load: LoadEstimate, f_hat: np.ndarray, plant
         old, new = load.levels[i], load.levels[i + 1]
         best, best_err = steps[i], np.inf
         for c in cands:
-            out = _replay_span(rec, plant, condition, effects, a, b, np.where(np.arange(a, b) < c, old, new))
+            F = replay_load(np.where(np.arange(a, b) < c, old, new), hold[a:b], stuck[a:b])
+            out = _replay_span(rec, plant, condition, effects, a, b, F)
             if out is None:
                 continue
             p1r, p2r, Xr = out
@@ -259,7 +315,7 @@ def _replay_record(p: _Prepared, plant, condition, effects, settings) -> dict[st
     v = rec.sg["v"][starts]
     v = np.where(np.abs(v) < 1e-3, 0.0, v)
     states = np.column_stack([rec.raw["X"][starts], v, p1_true[starts], p2_true[starts]])
-    load = _load_for(p, plant, condition, effects, settings)
+    load = _replay_load_for(p, plant, condition, effects, settings)
     res = replay(plant, x_true, rec.raw["ps"], rec.raw["pr"], load, starts, states, condition=condition, effects=effects)
     _, p1r, p2r = sensor_readings(np.zeros(1), res.p1_pa, res.p2_pa, effects)
     out = {"p1": np.asarray(p1r, float).copy(), "p2": np.asarray(p2r, float).copy(), "X": res.X_m.copy()}
@@ -365,6 +421,8 @@ class Diagnosis:
     traces: list[ReplayTrace] = field(default_factory=list)
     n_blocks: int = 0
     equation_sigmas: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    monitoring: list[dict] = field(default_factory=list)
+    """Step 4 per edge (:func:`monitoring_bias`); empty if not run."""
 
     @property
     def final_effects(self) -> Effects:
@@ -420,7 +478,7 @@ def _refine(prepared, plant, condition, specs: list[EffectSpec], start: Effects,
     return fx, se, J
 
 
-def diagnose(records: list[Record], plant: PlantParams, condition: ValveCondition | None = None, settings: DiscrepancySettings | None = None, *, library: tuple[EffectSpec, ...] = EFFECT_LIBRARY, trace_records: int = 1) -> Diagnosis:
+def diagnose(records: list[Record], plant: PlantParams, condition: ValveCondition | None = None, settings: DiscrepancySettings | None = None, *, library: tuple[EffectSpec, ...] = EFFECT_LIBRARY, trace_records: int = 1, monitoring: bool = True) -> Diagnosis:
     """Run steps 1–3 on ``records`` of one valve (module docstring).
 
     Parameters
@@ -436,6 +494,9 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
         The candidates (default the whole library).
     trace_records : int
         Keep the replays of this many records (those with the largest gap before) for plots.
+    monitoring : bool
+        Run step 4 (:func:`monitoring_bias`) with the named effects (with none named, the
+        as-recorded and corrected estimates coincide).
     """
     from scipy import stats as _stats
 
@@ -466,47 +527,59 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
         candidates.append({
             "effect": spec.name, "variant": spec.variant, "parameter_name": spec.parameter_name, "parameter_unit": spec.unit,
             "linear_value": cs.theta + spec.neutral, "se": cs.se, "relative_gain": cs.relative_gain, "t_stat": cs.t_stat,
-            "z": cs.z, "significant": cs.significant,
+            "z": cs.z, "significant": cs.significant, "column": cs.column,
         })
-    # refine the named effects jointly, then build the stages
-    named_specs = [specs[cs.column] for cs in sel.named]
-    stage_effects = [base]
-    refined = base
-    se = np.zeros(0)
-    if named_specs:
-        start = base
-        for spec, cs in zip(named_specs, sel.named):
-            start = perturbed(start, spec, cs.theta)
-        refined, se, _ = _refine(prepared, plant, condition, named_specs, start, rows0, w_rows, settings)
-        cur = base
-        for spec in named_specs:
-            cur = replace(cur, **{spec.attribute: spec.value(refined)})
-            stage_effects.append(cur)
-    # steps 1 and 3: replay every stage
-    stage_acc = []
-    kept_all = []
-    for k, fx in enumerate(stage_effects):
-        keep = set(range(len(prepared))) if k == 0 else kept_idx
-        acc, kept = _gaps(prepared, plant, condition, fx, settings, keep)
-        if k == 0:
-            per_rec = []
-            for i, p in enumerate(prepared):
-                rr = kept[i]
-                e = np.nanmean((rr["p1"] - p.rec.raw["p1"]) ** 2) / 1e10 + np.nanmean((rr["X"] - p.rec.raw["X"]) ** 2) / 1e-6
-                per_rec.append(e)
-            kept_idx = set(np.argsort(per_rec)[::-1][:trace_records].tolist())
-            kept = {i: kept[i] for i in kept_idx}
-        stage_acc.append(acc)
-        kept_all.append(kept)
+    # refine the named effects jointly, replay every stage (steps 1 and 3); an effect whose
+    # addition does not shrink the replay gap is not confirmed: it and the later ones are dropped
+    # and the rest refined again
+    named_sel = list(sel.named)
+    # the base model's replay, and which records to keep for the plots
+    acc0, kept0 = _gaps(prepared, plant, condition, base, settings, set(range(len(prepared))))
+    per_rec = [
+        np.nanmean((kept0[i]["p1"] - p.rec.raw["p1"]) ** 2) / 1e10 + np.nanmean((kept0[i]["p2"] - p.rec.raw["p2"]) ** 2) / 1e10
+        + np.nanmean((kept0[i]["X"] - p.rec.raw["X"]) ** 2) / 1e-6
+        for i, p in enumerate(prepared)
+    ]
+    kept_idx = set(np.argsort(per_rec)[::-1][:trace_records].tolist())
+    unconfirmed: list[int] = []
+    while True:
+        named_specs = [specs[cs.column] for cs in named_sel]
+        stage_effects = [base]
+        refined, se = base, np.zeros(0)
+        if named_specs:
+            start = base
+            for spec, cs in zip(named_specs, named_sel):
+                start = perturbed(start, spec, cs.theta)
+            refined, se, _ = _refine(prepared, plant, condition, named_specs, start, rows0, w_rows, settings)
+            cur = base
+            for spec in named_specs:
+                cur = replace(cur, **{spec.attribute: spec.value(refined)})
+                stage_effects.append(cur)
+        stage_acc = [acc0]
+        kept_all = [{i: kept0[i] for i in kept_idx}]
+        drop = None
+        for k, fx in enumerate(stage_effects[1:], start=1):
+            acc, kept = _gaps(prepared, plant, condition, fx, settings, kept_idx)
+            if not acc.gap() < stage_acc[-1].gap():
+                drop = k - 1
+                break
+            stage_acc.append(acc)
+            kept_all.append(kept)
+        if drop is None:
+            break
+        unconfirmed += [cs.column for cs in named_sel[drop:]]
+        named_sel = named_sel[:drop]
     stage_gaps = [a.gap() for a in stage_acc]
     named = []
-    for k, (spec, cs) in enumerate(zip(named_specs, sel.named)):
+    for k, (spec, cs) in enumerate(zip(named_specs, named_sel)):
         val = spec.value(refined)
         named.append(NamedEffect(
             rank=k + 1, spec=spec, value=val, ci_low=val - q * float(se[k]), ci_high=val + q * float(se[k]),
             linear_value=cs.theta + spec.neutral, relative_gain=cs.relative_gain, t_stat=cs.t_stat, z=cs.z,
             gap_before=stage_gaps[k], gap_after=stage_gaps[k + 1],
         ))
+    for c in candidates:
+        c["unconfirmed"] = c.pop("column") in unconfirmed
     gap_rows = []
     for k, acc in enumerate(stage_acc):
         for row in acc.rows():
@@ -522,8 +595,259 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
             measured={"p1": p.rec.raw["p1"], "p2": p.rec.raw["p2"], "X": p.rec.raw["X"]},
             replayed={f"stage{k}_{s}": kept_all[k][i][s] for k in range(len(stage_effects)) for s in ("p1", "p2", "X")},
         ))
+    mon = monitoring_bias([p.rec for p in prepared], plant, condition, stage_effects[-1]) if monitoring else []
     return Diagnosis(
         n_records=len(prepared), records=[(p.rec.start_us, p.rec.end_us) for p in prepared], named=named,
         candidates=candidates, gap_rows=gap_rows, residual_rows=residual_rows, stage_effects=stage_effects,
         stage_gaps=stage_gaps, traces=traces, n_blocks=B, equation_sigmas=tuple(float(s) for s in sig),
+        monitoring=mon,
+    )
+
+
+# --- step 4: what the effect did to monitoring ----------------------------------------------
+
+NOMINAL_GRID_STEP_M = 0.05e-3
+"""Knot spacing of the nominal characteristic (as ``flows.monitor``)."""
+SENSOR_ATTRIBUTES = ("spool_sensor_offset_m", "p1_sensor_offset_pa", "p2_sensor_offset_pa", "p1_sensor_gain", "p2_sensor_gain")
+MOTION_ATTRIBUTES = ("delta_viscous_friction_n_s_m", "delta_mass_kg")
+
+
+def monitor_params_for(plant: PlantParams, condition: ValveCondition, sample_period_s: float):
+    """The monitoring's view (:class:`transforms.params.MonitorParams`) of the plant model."""
+    from transforms.params import MonitorParams
+
+    c, f = plant.cylinder, plant.fluid
+    return MonitorParams.from_design(
+        piston_diameter_m=c.piston_diameter_m, rod_diameter_m=c.rod_diameter_m, v01_m3=c.v01_m3, v02_m3=c.v02_m3,
+        bulk_modulus_pa=f.bulk_modulus_pa, density_kg_m3=f.density_kg_m3, underlap_m=condition.underlap_m,
+        x_max_m=plant.geometry.x_max_m, sample_period_s=sample_period_s,
+    )
+
+
+def nominal_baselines(plant: PlantParams, condition: ValveCondition, x_hat_bound_m: float) -> dict:
+    """α·A(u) of Eq. 3 per edge for ``condition`` (the monitoring's nominal baseline)."""
+    from model.area import edge_area
+    from model.params import EDGES
+    from transforms.characteristic import Characteristic
+
+    g = plant.geometry
+    u = np.arange(-g.x_max_m, g.x_max_m + x_hat_bound_m + NOMINAL_GRID_STEP_M / 2, NOMINAL_GRID_STEP_M)
+    x_l = condition.x_l_m(g)
+    out = {}
+    for i, e in enumerate(EDGES):
+        a = edge_area(u, condition.underlap_m[i], g.taper_angle(e), g.bore_radius_m, g.spool_radius_m, x_l[i])
+        out[e] = Characteristic.from_arrays(u, condition.alpha[i] * a)
+    return out
+
+
+def _lake_frame(records: list[Record], effects: Effects | None = None):
+    """The records as lake rows; with ``effects`` the sensor effects inverted (true x, p1, p2)."""
+    import polars as pl
+
+    frames = []
+    for rec in records:
+        x, p1, p2 = true_signals(rec.raw["x"], rec.raw["p1"], rec.raw["p2"], effects)
+        ts = rec.start_us + np.round(np.arange(rec.n) * rec.dt * 1e6).astype(np.int64)
+        frames.append(pl.DataFrame({
+            "valve_id": [rec.valve_id] * rec.n,
+            "timestamp_utc": pl.Series(ts).cast(pl.Datetime("us", "UTC")),
+            "ps_pa": rec.raw["ps"], "pr_pa": rec.raw["pr"], "p1_pa": p1, "p2_pa": p2,
+            "x_spool_m": x, "x_cyl_m": rec.raw["X"],
+        }))
+    return pl.concat(frames)
+
+
+def _flow_corrected_points(points, records: list[Record], plant, condition, effects: Effects):
+    """Eq. 7 points with the flow effects of ``effects`` accounted for: the chamber flow gets
+    the leakage and entrained-air terms, the supply edges the pressure at the valve."""
+    import polars as pl
+
+    from model.effects import AIR_POLYTROPIC_EXPONENT, P_ATM_PA
+
+    if points.height == 0:
+        return points
+    ts = points["timestamp_utc"].cast(pl.Datetime("us", "UTC")).to_physical().to_numpy()
+    edge = points["edge"].to_numpy()
+    area = points["area_m2"].to_numpy().copy()
+    starts = np.array([r.start_us for r in records])
+    ends = np.array([r.end_us for r in records])
+    ri = np.searchsorted(starts, ts, side="right") - 1
+    k = 0.5 * plant.fluid.density_kg_m3  # (ρ/2)
+    c = plant.cylinder
+    for r in np.unique(ri):
+        if r < 0:
+            continue
+        rec = records[r]
+        sel = (ri == r) & (ts <= ends[r])
+        idx = np.round((ts[sel] - rec.start_us) * 1e-6 / rec.dt).astype(np.int64)
+        _, p1, p2 = true_signals(rec.sg["x"][idx], rec.sg["p1"][idx], rec.sg["p2"][idx], effects)
+        dp1 = rec.sg["dp1"][idx] / effects.p1_sensor_gain
+        dp2 = rec.sg["dp2"][idx] / effects.p2_sensor_gain
+        X = rec.raw["X"][idx]
+        ps, pr = rec.raw["ps"][idx], rec.raw["pr"][idx]
+        x_true = rec.raw["x"][idx] - effects.spool_sensor_offset_m
+        V1, V2 = c.v01_m3 + c.A1 * X, c.v02_m3 - c.A2 * X
+
+        def h(p):
+            pa = np.maximum(p + P_ATM_PA, 0.1 * P_ATM_PA)
+            return (P_ATM_PA / pa) ** (1.0 / AIR_POLYTROPIC_EXPONENT) / (AIR_POLYTROPIC_EXPONENT * pa)
+
+        qi = effects.internal_leakage_m3_s_pa * (p1 - p2)
+        dq1 = qi + effects.air_fraction * V1 * h(p1) * dp1
+        dq2 = qi - effects.external_leakage_m3_s_pa * p2 - effects.air_fraction * V2 * h(p2) * dp2
+        _, _, psv = valve_flows_for(x_true, p1, p2, ps, pr, plant, condition, effects)
+        e = edge[sel]
+        dp_old = np.select([e == "s1", e == "1r", e == "s2"], [ps - p1, pr - p1, p2 - ps], p2 - pr)
+        dp_new = np.select([e == "s1", e == "1r", e == "s2"], [psv - p1, pr - p1, p2 - psv], p2 - pr)
+        ss_old = np.sign(dp_old) * np.sqrt(np.abs(dp_old))
+        ss_new = np.sign(dp_new) * np.sqrt(np.abs(dp_new))
+        flow = area[sel] * ss_old / np.sqrt(k)  # the chamber flow Eq. 7 assumed through the edge
+        flow = flow + np.where((e == "s1") | (e == "1r"), dq1, dq2)
+        area[sel] = np.sqrt(k) * flow / ss_new
+    return points.with_columns(pl.Series("area_m2", area))
+
+
+def valve_flows_for(x, p1, p2, ps, pr, plant, condition, effects):
+    from model.effects import valve_flows
+
+    return valve_flows(x, p1, p2, ps, pr, plant, condition, effects, DEFAULT_REG_BAND_PA)
+
+
+MONITORING_SUMMARY_COLUMNS = ("edge", "n_windows", "alpha_hat_recorded", "alpha_hat_corrected", "x_hat_m_recorded", "x_hat_m_corrected", "e_m2_recorded", "e_m2_corrected")
+
+
+def monitoring_bias(records: list[Record], plant: PlantParams, condition: ValveCondition | None, effects: Effects) -> list[dict]:
+    """Step 4: the monitoring (steps 2–4b, ``transforms.monitor``) on the records as recorded and
+    with ``effects`` accounted for, against the nominal baseline of ``condition``.
+
+    Accounting for the effects: the sensor effects are inverted on the signals before the
+    monitoring runs (exact); leakage and entrained air are added to the chamber flow of each Eq. 7
+    point and a supply line replaces p_s by the pressure at the valve (exact for the points
+    step 3 selects); friction and mass changes do not enter Eq. 7, so they leave the estimates
+    unbiased. Returns one dict per edge: the median over windows (status ``ok``) of α̂, x̂ and e,
+    as recorded and corrected (:data:`MONITORING_SUMMARY_COLUMNS`)."""
+    from transforms.fit import fit_windows
+    from transforms.monitor import monitor, monitor_points
+
+    condition = plant.nominal_condition if condition is None else condition
+    if not records:
+        return []
+    vid = records[0].valve_id
+    mp = monitor_params_for(plant, condition, records[0].dt)
+    base = {vid: nominal_baselines(plant, condition, mp.x_hat_bound_m)}
+    recorded = monitor(_lake_frame(records), mp, base).fits
+    sensor = any(getattr(effects, a) != getattr(Effects(), a) for a in SENSOR_ATTRIBUTES)
+    res = monitor_points(_lake_frame(records, effects if sensor else None), mp)
+    points = res.points
+    if effects.has_flow_terms:
+        points = _flow_corrected_points(points, records, plant, condition, effects)
+    corrected = fit_windows(points, base, {vid: mp}, windows=res.windows)
+    out = []
+    for e in ("s1", "1r", "s2", "2r"):
+        a = recorded.filter((recorded["edge"] == e) & (recorded["status"] == "ok"))
+        b = corrected.filter((corrected["edge"] == e) & (corrected["status"] == "ok"))
+
+        def med(frame, col):
+            return float(frame[col].median()) if frame.height else float("nan")
+
+        out.append({
+            "edge": e, "n_windows": int(min(a.height, b.height)),
+            "alpha_hat_recorded": med(a, "alpha_hat"), "alpha_hat_corrected": med(b, "alpha_hat"),
+            "x_hat_m_recorded": med(a, "x_hat_m"), "x_hat_m_corrected": med(b, "x_hat_m"),
+            "e_m2_recorded": med(a, "e_m2"), "e_m2_corrected": med(b, "e_m2"),
+        })
+    return out
+
+
+# --- the valve's own condition from its commissioning window --------------------------------
+
+CONDITION_FD = (1.0e-3, 1.0e-7)
+"""Finite-difference steps of the condition fit: relative α change, underlap change [m]."""
+
+
+@dataclass(frozen=True)
+class ConditionFit:
+    """The valve condition identified on commissioning records.
+
+    Attributes
+    ----------
+    condition : ValveCondition
+        α and underlap per edge (EDGES order).
+    alpha_se, underlap_se_m : tuple of 4 float
+        Jackknife standard errors (over 1 s blocks).
+    gap_design, gap_fitted : float
+        Normalised replay gap of the commissioning records with the start and the fitted
+        condition.
+    n_records : int
+    """
+
+    condition: ValveCondition
+    alpha_se: tuple[float, float, float, float]
+    underlap_se_m: tuple[float, float, float, float]
+    gap_design: float
+    gap_fitted: float
+    n_records: int
+
+
+def _with_condition_params(cond: ValveCondition, z: np.ndarray) -> ValveCondition:
+    """z = (α scale − 1 per edge, underlap change per edge [m]) applied to ``cond``."""
+    return ValveCondition(
+        underlap_m=tuple(u + d for u, d in zip(cond.underlap_m, z[4:])),
+        alpha=tuple(a * (1.0 + s) for a, s in zip(cond.alpha, z[:4])),
+        x_l_fraction=cond.x_l_fraction,
+    )
+
+
+def fit_condition(records: list[Record], plant: PlantParams, start: ValveCondition | None = None, settings: DiscrepancySettings | None = None, iterations: int = 8) -> ConditionFit:
+    """Identify the valve's condition -- contraction coefficient and underlap of every edge, the
+    quantities the monitoring tracks -- on commissioning records by Gauss–Newton on the same
+    integrated residuals the effect selection uses (base model, no library effect).
+
+    The discrepancy workflow then judges later data against *this* valve (design data plus its
+    manufacturing deviations), so a deviation present since commissioning is not taken for a
+    library effect. (A spool sensor offset is the same as a pattern of underlap changes
+    (−, +, +, −) and a pressure transmitter error acts on the flows like α changes: what is there
+    at commissioning becomes part of the valve's condition; what develops later is found.)"""
+    settings = settings or DiscrepancySettings()
+    cond0 = plant.nominal_condition if start is None else start
+    prepared = prepare_records(records, plant, cond0, settings)
+    if not prepared:
+        raise ValueError("no commissioning record long enough")
+    base = Effects()
+    rows0 = _rows(prepared, plant, cond0, base, settings)
+    sig = _equation_sigmas(_demean_motion(rows0.y, rows0), rows0)
+    w = 1.0 / sig[rows0.eq]
+    z = np.zeros(8)
+    steps = np.array([CONDITION_FD[0]] * 4 + [CONDITION_FD[1]] * 4)
+    cont = rows0.eq < 2  # the condition enters the chamber equations only
+
+    def resid(zz):
+        return _rows(prepared, plant, _with_condition_params(cond0, zz), base, settings).y
+
+    J = None
+    for _ in range(iterations):
+        r = resid(z)
+        J = np.column_stack([(resid(z + np.eye(8)[j] * steps[j]) - r) / steps[j] for j in range(8)])
+        ok = cont & np.isfinite(r) & np.all(np.isfinite(J), axis=1)
+        Jw, rw = J[ok] * w[ok, None], r[ok] * w[ok]
+        sc = np.sqrt(np.mean(Jw * Jw, axis=0))
+        sc = np.where(sc > 0, sc, 1.0)
+        dz, *_ = np.linalg.lstsq(Jw / sc, -rw, rcond=None)
+        dz = dz / sc
+        z = z + dz
+        if np.all(np.abs(dz[:4]) < 1e-5) and np.all(np.abs(dz[4:]) < 1e-9):
+            break
+    r = resid(z)
+    sel = cont & np.isfinite(r) & np.all(np.isfinite(J), axis=1)
+    st = block_stats((-r * w)[sel], (J * w[:, None])[sel], rows0.block[sel])
+    _, _, loo = cv_losses(st, list(range(8)))
+    B = loo.shape[0]
+    se = np.sqrt((B - 1) / B * np.sum((loo - loo.mean(axis=0)) ** 2, axis=0)) / st.scale if B > 1 else np.full(8, np.inf)
+    cond = _with_condition_params(cond0, z)
+    g0 = _gaps(prepared, plant, cond0, base, settings, set())[0].gap()
+    fresh = prepare_records(records, plant, cond, settings)
+    g1 = _gaps(fresh, plant, cond, base, settings, set())[0].gap()
+    return ConditionFit(
+        condition=cond, alpha_se=tuple(float(a) for a in se[:4] * np.array(cond0.alpha)),
+        underlap_se_m=tuple(float(u) for u in se[4:]), gap_design=g0, gap_fitted=g1, n_records=len(prepared),
     )

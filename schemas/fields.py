@@ -65,15 +65,22 @@ SENSOR_FIELDS: tuple[Field, ...] = (
     Field("valve_id", pl.Utf8, "", "Valve identifier; also the hive partition key."),
     Field("date", pl.Date, "", "UTC calendar date of the sample; also the hive partition key."),
     Field("timestamp_utc", UTC_US, "", "Sample time, microseconds, UTC."),
-    Field("ps_pa", pl.Float64, "Pa", "Supply pressure.", ge=-1e5, le=6e7),
-    Field("pr_pa", pl.Float64, "Pa", "Return (tank) pressure.", ge=-1e5, le=6e7),
-    Field("p1_pa", pl.Float64, "Pa", "Head-side chamber pressure (port 1).", ge=-1e5, le=6e7),
-    Field("p2_pa", pl.Float64, "Pa", "Rod-side chamber pressure (port 2).", ge=-1e5, le=6e7),
-    Field("x_spool_m", pl.Float64, "m", "Spool position x; > 0 opens s1 and 2r.", ge=-0.02, le=0.02),
-    Field("x_cyl_m", pl.Float64, "m", "Cylinder position X; grows on extension.", ge=-0.1, le=20.0),
-    Field("x_ref_m", pl.Float64, "m", "Spool reference from the position controller.", nullable=True, ge=-0.02, le=0.02),
+    Field("ps_pa", pl.Float32, "Pa", "Supply pressure.", ge=-1e5, le=6e7),
+    Field("pr_pa", pl.Float32, "Pa", "Return (tank) pressure.", ge=-1e5, le=6e7),
+    Field("p1_pa", pl.Float32, "Pa", "Head-side chamber pressure (port 1).", ge=-1e5, le=6e7),
+    Field("p2_pa", pl.Float32, "Pa", "Rod-side chamber pressure (port 2).", ge=-1e5, le=6e7),
+    Field("x_spool_m", pl.Float32, "m", "Spool position x; > 0 opens s1 and 2r.", ge=-0.02, le=0.02),
+    Field("x_cyl_m", pl.Float32, "m", "Cylinder position X; grows on extension.", ge=-0.1, le=20.0),
+    Field("x_ref_m", pl.Float32, "m", "Spool reference from the position controller.", nullable=True, ge=-0.02, le=0.02),
 )
-"""The lake's canonical sensor frame (``lake/sensors/valve_id=…/date=…``)."""
+"""The lake's canonical sensor frame (``lake/sensors/valve_id=…/date=…``).
+
+The signals are float32: measured against float64 (``docs/ingest.md``, "Storage"), the zstd
+lake is ~15 % smaller on disk and half the size in memory, decodes ~1.8× faster per core and is
+written ~1.5× faster, while float32's round-off (≤ 6e-8 relative: ≤ 1 Pa at 200 bar, ≤ 0.03 µm
+at 0.6 m) stays below 1/1000 of a 16-bit sensor's quantisation step. Cast to Float64 before
+long accumulations.
+"""
 
 
 def polars_schema(fields: tuple[Field, ...]) -> pl.Schema:
@@ -269,3 +276,121 @@ SELECTION_FIELDS: tuple[Field, ...] = (
     Field("n_selected", pl.Int64, "", "Samples left for the edge after all rules.", ge=0),
 )
 """What each step-3 rule removed, per window and edge (table ``selection_stats``)."""
+
+# --- model discrepancy (issue 7) -----------------------------------------------------------
+
+DISCREPANCY_EFFECTS: tuple[str, ...] = (
+    "internal_leakage",
+    "external_leakage",
+    "entrained_air",
+    "spool_sensor_offset",
+    "pressure_sensor_offset",
+    "pressure_sensor_gain",
+    "supply_line_resistance",
+    "friction_change",
+    "load_mass_change",
+)
+"""The library's effect names (interfaces.md; ``model.effects.EFFECT_NAMES``)."""
+
+DISCREPANCY_STAGES = "0 = the base model; k = the base model with the effects named 1 … k (fitted parameters)."
+
+_RUN_FIELDS: tuple[Field, ...] = (
+    Field("run_id", pl.Utf8, "", "Identifier of the discrepancy run."),
+    Field("valve_id", pl.Utf8, "", "Valve identifier."),
+    Field("run_at", UTC_US, "", "When the run started (UTC)."),
+)
+
+DISCREPANCY_FINDING_FIELDS: tuple[Field, ...] = (
+    Field("valve_id", pl.Utf8, "", "Valve identifier."),
+    Field("run_at", UTC_US, "", "When the run started (UTC)."),
+    Field("effect", pl.Utf8, "", "The named effect, or none.", isin=DISCREPANCY_EFFECTS + ("none",)),
+    Field("parameter_name", pl.Utf8, "", "The effect's parameter (K_i, K_e, air_fraction, delta_x, delta_p1, delta_p2, gain_p1, gain_p2, R_s, delta_d_v, delta_m); null for none.", nullable=True),
+    Field("parameter_value", pl.Float64, "", "Its fitted value, in parameter_unit (SI); null for none.", nullable=True),
+    Field("parameter_unit", pl.Utf8, "", "Unit of parameter_value (m3/(s*Pa), -, m, Pa, Pa*s2/m6, N*s/m, kg); null for none.", nullable=True),
+    Field("gap_before", pl.Float64, "", "Normalised replay gap (RMS of the p1, p2 errors in bar and the X error in mm, docs/discrepancy.md) with the effects named before this one.", ge=0.0),
+    Field("gap_after", pl.Float64, "", "The same gap with this effect added (none: equal to gap_before).", ge=0.0),
+    Field("rank", pl.Int32, "", "1 = the effect named first (none: 1).", ge=1),
+    Field("run_id", pl.Utf8, "", "Identifier of the discrepancy run (joins the other discrepancy_* tables)."),
+    Field("parameter_ci_low", pl.Float64, "", "Lower bound of the parameter's interval (jackknife over 1 s blocks).", nullable=True),
+    Field("parameter_ci_high", pl.Float64, "", "Upper bound of the parameter's interval.", nullable=True),
+    Field("ci_level", pl.Float64, "", "Level of the interval.", ge=0.0, le=1.0),
+    Field("variant", pl.Utf8, "", "Which signal the effect concerns (p1, p2) where the name has variants; else empty."),
+    Field("cv_relative_gain", pl.Float64, "", "Share of the cross-validated residual sum of squares the effect removed when it was named.", nullable=True),
+    Field("t_stat", pl.Float64, "", "t statistic of the blocks' relative cross-validated gains.", nullable=True),
+    Field("z_score", pl.Float64, "", "|parameter − neutral| in jackknife standard errors (linearised step).", nullable=True),
+    Field("gap_p1_before_bar", pl.Float64, "bar", "RMS replay error of p1 before.", ge=0.0),
+    Field("gap_p1_after_bar", pl.Float64, "bar", "RMS replay error of p1 after.", ge=0.0),
+    Field("gap_p2_before_bar", pl.Float64, "bar", "RMS replay error of p2 before.", ge=0.0),
+    Field("gap_p2_after_bar", pl.Float64, "bar", "RMS replay error of p2 after.", ge=0.0),
+    Field("gap_x_before_mm", pl.Float64, "mm", "RMS replay error of X before.", ge=0.0),
+    Field("gap_x_after_mm", pl.Float64, "mm", "RMS replay error of X after.", ge=0.0),
+    Field("window_start", UTC_US, "", "First sample diagnosed (UTC)."),
+    Field("window_end", UTC_US, "", "Last sample diagnosed (UTC)."),
+    Field("n_records", pl.Int32, "", "Records (contiguous windows) diagnosed.", ge=1),
+    Field("plot_path", pl.Utf8, "", "Overlay picture of measured against simulated before and after (under WAREHOUSE/reports/discrepancy/).", nullable=True),
+    Field("condition_source", pl.Utf8, "", "Valve condition the model used: design (configured design data) or commissioning (α and underlap per edge fitted on the configured baseline_window).", isin=("design", "commissioning")),
+)
+"""One row per discrepancy run and named effect (table ``discrepancy_findings``, interfaces.md);
+the first nine columns are the specified ones."""
+
+DISCREPANCY_CANDIDATE_FIELDS: tuple[Field, ...] = _RUN_FIELDS + (
+    Field("effect", pl.Utf8, "", "Library effect.", isin=DISCREPANCY_EFFECTS),
+    Field("variant", pl.Utf8, "", "p1, p2 or empty."),
+    Field("parameter_name", pl.Utf8, "", "The effect's parameter."),
+    Field("parameter_unit", pl.Utf8, "", "Its unit (SI)."),
+    Field("parameter_value", pl.Float64, "", "Estimate of the linearised regression against the base model alone."),
+    Field("parameter_se", pl.Float64, "", "Its jackknife standard error.", nullable=True),
+    Field("cv_relative_gain", pl.Float64, "", "Share of the base model's cross-validated residual sum of squares it removes alone."),
+    Field("t_stat", pl.Float64, "", "t statistic of the blocks' relative gains."),
+    Field("z_score", pl.Float64, "", "|estimate| in standard errors.", nullable=True),
+    Field("significant", pl.Boolean, "", "Passes every significance rule on its own (docs/discrepancy.md)."),
+    Field("unconfirmed", pl.Boolean, "", "Selected, but adding it did not shrink the replay gap, so it was not named."),
+    Field("score_rank", pl.Int32, "", "Rank by cross-validated gain against the base model (1 = largest).", ge=1),
+)
+"""Every library candidate scored against the base model, per run (table ``discrepancy_candidates``)."""
+
+DISCREPANCY_GAP_FIELDS: tuple[Field, ...] = _RUN_FIELDS + (
+    Field("stage", pl.Int32, "", DISCREPANCY_STAGES, ge=0),
+    Field("signal", pl.Utf8, "", "Replayed signal.", isin=("p1", "p2", "X")),
+    Field("region", pl.Utf8, "", "Operating region.", isin=("all", "extending", "retracting", "standstill", "pressure_low", "pressure_mid", "pressure_high")),
+    Field("rms", pl.Float64, "", "RMS of replayed reading minus recorded signal, in unit.", nullable=True),
+    Field("unit", pl.Utf8, "", "Pa or m."),
+    Field("n_samples", pl.Int64, "", "Samples of the region.", ge=0),
+)
+"""Replay gap per stage, signal and operating region (table ``discrepancy_gaps``)."""
+
+DISCREPANCY_RESIDUAL_FIELDS: tuple[Field, ...] = _RUN_FIELDS + (
+    Field("stage", pl.Int32, "", DISCREPANCY_STAGES, ge=0),
+    Field("equation", pl.Utf8, "", "Chamber 1 or 2 continuity (Eq. 6) or the motion equation (Eq. 5).", isin=("chamber1", "chamber2", "motion")),
+    Field("region", pl.Utf8, "", "Operating region.", isin=("all", "extending", "retracting", "standstill", "pressure_low", "pressure_mid", "pressure_high")),
+    Field("rms", pl.Float64, "", "RMS of the pointwise residual (Savitzky–Golay derivatives), in unit.", nullable=True),
+    Field("mean", pl.Float64, "", "Mean of the pointwise residual, in unit.", nullable=True),
+    Field("unit", pl.Utf8, "", "m3/s (chambers) or N (motion)."),
+    Field("n_samples", pl.Int64, "", "Samples of the region.", ge=0),
+)
+"""Equation residuals per stage and operating region (table ``discrepancy_residuals``)."""
+
+DISCREPANCY_MONITORING_FIELDS: tuple[Field, ...] = _RUN_FIELDS + (
+    Field("edge", pl.Utf8, "", "Control edge.", isin=EDGES),
+    Field("effects", pl.Utf8, "", "The effects accounted for (name=value, '; '-separated), empty if none was named."),
+    Field("n_windows", pl.Int32, "", "Windows with an ok fit both ways.", ge=0),
+    Field("alpha_hat_recorded", pl.Float64, "", "Median α̂ of the monitoring on the signals as recorded (nominal baseline).", nullable=True),
+    Field("alpha_hat_corrected", pl.Float64, "", "Median α̂ with the named effects accounted for.", nullable=True),
+    Field("x_hat_mm_recorded", pl.Float64, "mm", "Median x̂ as recorded.", nullable=True),
+    Field("x_hat_mm_corrected", pl.Float64, "mm", "Median x̂ with the effects accounted for.", nullable=True),
+    Field("e_mm2_recorded", pl.Float64, "mm²", "Median e as recorded.", nullable=True),
+    Field("e_mm2_corrected", pl.Float64, "mm²", "Median e with the effects accounted for.", nullable=True),
+)
+"""What the named effects did to α̂, x̂ and e (table ``discrepancy_monitoring``)."""
+
+DISCREPANCY_CONDITION_FIELDS: tuple[Field, ...] = _RUN_FIELDS + (
+    Field("edge", pl.Utf8, "", "Control edge.", isin=EDGES),
+    Field("source", pl.Utf8, "", "design or commissioning (fitted on the baseline_window).", isin=("design", "commissioning")),
+    Field("alpha", pl.Float64, "", "Contraction coefficient α of the edge in the model.", ge=0.0),
+    Field("alpha_se", pl.Float64, "", "Its jackknife standard error (commissioning fit).", nullable=True),
+    Field("underlap_mm", pl.Float64, "mm", "Underlap of the edge in the model (its opening coordinate)."),
+    Field("underlap_se_mm", pl.Float64, "mm", "Its jackknife standard error (commissioning fit).", nullable=True),
+    Field("gap_design", pl.Float64, "", "Normalised replay gap of the commissioning records with the design condition.", nullable=True),
+    Field("gap_fitted", pl.Float64, "", "The same with the fitted condition.", nullable=True),
+)
+"""The valve condition (α, underlap per edge) the discrepancy model used (table ``discrepancy_condition``)."""

@@ -26,6 +26,10 @@ instants), so the estimate is made piecewise constant:
    (those within ``step_guard_samples`` of a step left out); segments without any take the
    level of the next segment (else the previous one).
 
+While the cylinder sticks at the start of a record, before its first observable motion, the load
+is unknown (a step may have happened before); the workflow then tries driving the replay with the
+load that holds the cylinder (:func:`replay_load`) until it moves and keeps that if it fits better.
+
 The segments also carry the motion equation's nuisance intercepts in the sparse regression
 (:mod:`transforms.discrepancy.selection`): one unknown load per segment.
 """
@@ -39,7 +43,7 @@ import numpy as np
 
 from transforms.discrepancy.settings import DiscrepancySettings
 
-__all__ = ["LoadEstimate", "estimate_load", "segment_levels", "step_filter"]
+__all__ = ["LoadEstimate", "estimate_load", "replay_load", "segment_levels", "step_filter", "stuck_spans"]
 
 
 @lru_cache(maxsize=8)
@@ -99,6 +103,9 @@ class LoadEstimate:
     brackets: np.ndarray
     valid: np.ndarray
     usable: np.ndarray
+    hold_until: int = 0
+    """A replay holds the cylinder (:func:`replay_load`) while it sticks before this sample:
+    the load before the first observable motion was found to differ from the first level."""
 
     def with_steps(self, steps: np.ndarray, f_hat: np.ndarray) -> "LoadEstimate":
         """The same estimate with the steps moved to ``steps`` (same count, increasing) and the
@@ -108,7 +115,7 @@ class LoadEstimate:
         for s in steps:
             segment[s:] += 1
         levels = segment_levels(f_hat, self.valid, segment, len(steps) + 1)
-        return LoadEstimate(segment, steps, levels, levels[segment], self.brackets, self.valid, self.usable)
+        return LoadEstimate(segment, steps, levels, levels[segment], self.brackets, self.valid, self.usable, self.hold_until)
 
 
 def segment_levels(f_hat: np.ndarray, valid: np.ndarray, segment: np.ndarray, n_segments: int) -> np.ndarray:
@@ -165,6 +172,28 @@ def _place_in_gap(j: int, idx: np.ndarray, f_hat: np.ndarray, f_point: np.ndarra
     return b
 
 
+def stuck_spans(v: np.ndarray, v_stuck: float, min_samples: int = 5) -> np.ndarray:
+    """True on runs of at least ``min_samples`` samples with |v_X| ≤ ``v_stuck``: where the
+    cylinder sticks and its load cannot be observed."""
+    m = np.isfinite(v) & (np.abs(v) <= v_stuck)
+    out = np.zeros(v.size, dtype=bool)
+    for a, b in _runs(m):
+        if b - a >= min_samples:
+            out[a:b] = True
+    return out
+
+
+def replay_load(levels_per_sample: np.ndarray, holding_force: np.ndarray, stuck: np.ndarray) -> np.ndarray:
+    """The load a replay is driven with: the segment levels, except while the measured cylinder
+    sticks, where the load cannot be observed and only decides when it breaks away: there the
+    force that holds the cylinder, m g + A1 p1 − A2 p2 (measured, F_R = 0), so the replayed
+    cylinder rests while the real one does and breaks away when the real one does."""
+    out = np.array(levels_per_sample, dtype=float, copy=True)
+    sel = stuck & np.isfinite(holding_force)
+    out[sel] = holding_force[sel]
+    return out
+
+
 def estimate_load(f_hat: np.ndarray, v: np.ndarray, settings: DiscrepancySettings, f_point: np.ndarray | None = None) -> LoadEstimate:
     """Piecewise-constant load of one record from the triangular force balance ``f_hat`` [N]
     (:func:`transforms.discrepancy.residuals.triangular_force_balance` with
@@ -198,8 +227,8 @@ def estimate_load(f_hat: np.ndarray, v: np.ndarray, settings: DiscrepancySetting
                 g = int(np.argmax(gaps)) + lo if gaps.size else j
                 if gaps.size and gaps.max() > 2 * L + 1:
                     steps.append(_place_in_gap(g, idx, f_hat, f_point, not_stuck, w))
-                    big = np.flatnonzero(gaps > 2 * L + 1) + lo
-                    brackets[steps[-1]] = (int(idx[big[0]]), int(idx[big[-1] + 1]))
+                    # where else it may lie: the whole neighbourhood of the peak
+                    brackets[steps[-1]] = (int(idx[lo]), int(idx[hi - 1]))
                 else:
                     steps.append(int(idx[j + 1]) if j + 1 < idx.size else int(idx[j]))
                 last = j

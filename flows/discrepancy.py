@@ -1,0 +1,334 @@
+"""``valvemon discrepancy``: where the model and a valve's measurements disagree, which library
+effect explains it, what adding it does to the gap and to the monitoring (issue 7).
+
+:func:`run_discrepancy` reads the valve's lake rows in [start, end), cuts them into records
+(:func:`transforms.discrepancy.records.split_records`), builds the plant model from the plant
+configuration (:func:`plant_params_for`) with the valve's condition -- fitted on its commissioning
+window (the configuration's ``baseline_window``) when there is one, else its design data
+(:func:`valve_condition`) --, runs :func:`flows.discrepancy_pipeline.diagnose` and stores, in one
+transaction,
+
+* ``discrepancy_findings`` -- one row per named effect (or one ``none`` row), interfaces.md;
+* ``discrepancy_candidates`` -- every library candidate scored against the base model;
+* ``discrepancy_gaps`` -- replay gap per model stage, signal and operating region;
+* ``discrepancy_residuals`` -- equation residuals per stage and region;
+* ``discrepancy_monitoring`` -- α̂, x̂, e per edge as recorded and with the effects accounted for;
+* ``discrepancy_condition`` -- the valve condition (α, underlap per edge) the model used;
+
+and writes the overlay pictures to ``WAREHOUSE/reports/discrepancy/``. Every run appends (its
+rows carry ``run_id`` and ``run_at``); nothing is replaced. :func:`discrepancy_flow` is the
+Prefect flow the command line runs.
+"""
+
+from __future__ import annotations
+
+import math
+import uuid
+from dataclasses import dataclass, replace
+from datetime import datetime, timezone
+from pathlib import Path
+
+import polars as pl
+from prefect import flow, task
+from prefect.cache_policies import NO_CACHE
+
+from flows.config import load_plant_config
+from flows.discrepancy_pipeline import ConditionFit, Diagnosis, diagnose, fit_condition
+from flows.errors import ValvemonError
+from flows.lake import read_lake
+from flows.warehouse_db import connect, create_table_sql, insert_frame
+from model.params import TABLE1, FluidParams, PlantParams, ValveCondition, ValveGeometry
+from schemas.fields import (
+    DISCREPANCY_CANDIDATE_FIELDS,
+    DISCREPANCY_CONDITION_FIELDS,
+    DISCREPANCY_FINDING_FIELDS,
+    DISCREPANCY_GAP_FIELDS,
+    DISCREPANCY_MONITORING_FIELDS,
+    DISCREPANCY_RESIDUAL_FIELDS,
+    polars_schema,
+)
+from schemas.plant_config import ValveSpec
+from transforms.discrepancy.records import split_records
+from transforms.discrepancy.settings import DiscrepancySettings
+
+DISCREPANCY_TABLES = {
+    "discrepancy_findings": DISCREPANCY_FINDING_FIELDS,
+    "discrepancy_candidates": DISCREPANCY_CANDIDATE_FIELDS,
+    "discrepancy_gaps": DISCREPANCY_GAP_FIELDS,
+    "discrepancy_residuals": DISCREPANCY_RESIDUAL_FIELDS,
+    "discrepancy_monitoring": DISCREPANCY_MONITORING_FIELDS,
+    "discrepancy_condition": DISCREPANCY_CONDITION_FIELDS,
+}
+CONDITION_MODES = ("auto", "design", "commissioning")
+REPORT_DIR = Path("reports") / "discrepancy"
+
+
+def plant_params_for(valve: ValveSpec, sample_rate_hz: float) -> PlantParams:
+    """The plant model of one configured valve: its design data, cylinder, volumes and fluid
+    from the configuration; what the configuration does not hold (moving mass, friction, spool
+    dynamics) from :data:`model.params.TABLE1`, the documented defaults."""
+    d = valve.design
+    geometry = ValveGeometry(
+        x_max_m=d.x_max_m, bore_radius_m=d.bore_radius_m, spool_radius_m=d.spool_radius_m,
+        taper_angle_port1_rad=d.taper_angle_port1_rad, taper_angle_port2_rad=d.taper_angle_port2_rad,
+    )
+    condition = ValveCondition(underlap_m=tuple(d.underlap_m), alpha=(d.contraction_coefficient,) * 4)
+    cylinder = replace(
+        TABLE1.cylinder, piston_diameter_m=valve.piston_diameter_m, rod_diameter_m=valve.rod_diameter_m,
+        stroke_m=valve.stroke_m, v01_m3=valve.v01_m3, v02_m3=valve.v02_m3,
+    )
+    fluid = FluidParams(bulk_modulus_pa=valve.bulk_modulus_pa, density_kg_m3=valve.density_kg_m3)
+    sensors = replace(TABLE1.sensors, sample_rate_hz=float(sample_rate_hz))
+    controller = replace(TABLE1.controller, sample_time_s=1.0 / float(sample_rate_hz))
+    return replace(TABLE1, geometry=geometry, nominal_condition=condition, cylinder=cylinder, fluid=fluid, sensors=sensors, controller=controller)
+
+
+def _utc(value: str | datetime | None) -> datetime | None:
+    """An ISO-8601 date or date-time (naive = UTC) as an aware UTC datetime."""
+    if value is None:
+        return None
+    if isinstance(value, str):
+        try:
+            value = datetime.fromisoformat(value.replace("Z", "+00:00"))
+        except ValueError:
+            raise ValvemonError(f"{value!r} is not an ISO-8601 date or date-time") from None
+    return value.replace(tzinfo=timezone.utc) if value.tzinfo is None else value.astimezone(timezone.utc)
+
+
+def ensure_discrepancy_tables(con) -> None:
+    """Create the discrepancy tables if missing."""
+    for name, fields in DISCREPANCY_TABLES.items():
+        con.execute(create_table_sql(name, fields))
+
+
+def _fmt(v: float) -> str:
+    return f"{v:.4g}"
+
+
+def effects_label(diagnosis: Diagnosis) -> str:
+    """``name[variant] parameter=value; …`` of the named effects ('' if none)."""
+    return "; ".join(f"{n.spec.key} {n.spec.parameter_name}={_fmt(n.value)} {n.spec.unit}" for n in diagnosis.named)
+
+
+def _gap_rms(diagnosis: Diagnosis, stage: int, signal: str) -> float:
+    for r in diagnosis.gap_rows:
+        if r["stage"] == stage and r["signal"] == signal and r["region"] == "all":
+            return r["rms"]
+    return float("nan")
+
+
+def _nn(v: float) -> float | None:
+    return None if v is None or not math.isfinite(v) else float(v)
+
+
+@dataclass
+class DiscrepancyReport:
+    """What one run found, for the command line."""
+
+    valve_id: str
+    run_id: str
+    n_records: int
+    findings: list[dict]
+    plots: list[Path]
+    gap_before: float
+    gap_after: float
+
+
+def valve_condition(valve: ValveSpec, plant: PlantParams, warehouse: Path, mode: str, settings: DiscrepancySettings) -> tuple[str, ValveCondition, ConditionFit | None]:
+    """The valve condition of the model: ``design`` (the configured design data), or
+    ``commissioning`` (α and underlap of every edge fitted on the lake rows of the configured
+    ``baseline_window``, :func:`flows.discrepancy_pipeline.fit_condition`); ``auto`` is
+    commissioning when the valve has a baseline_window, else design. Returns (source,
+    condition, fit or None)."""
+    if mode not in CONDITION_MODES:
+        raise ValvemonError(f"--valve-condition must be one of {', '.join(CONDITION_MODES)}, got {mode!r}")
+    if mode == "design" or (mode == "auto" and valve.baseline_window is None):
+        return "design", plant.nominal_condition, None
+    if valve.baseline_window is None:
+        raise ValvemonError(f"valve {valve.id}: --valve-condition commissioning needs a baseline_window in the plant configuration")
+    a, b = valve.baseline_window
+    rows = read_lake(warehouse, [valve.id], a, b).collect()
+    records = split_records(rows, replace(settings, max_records=max(settings.max_records, 12)))
+    if not records:
+        raise ValvemonError(f"valve {valve.id}: its baseline_window {a.isoformat()} – {b.isoformat()} holds no record of at least {settings.min_record_s:g} s in the lake")
+    fit = fit_condition(records, plant, plant.nominal_condition, settings)
+    return "commissioning", fit.condition, fit
+
+
+def _condition_rows(common: dict, source: str, cond: ValveCondition, fit: ConditionFit | None) -> list[dict]:
+    from model.params import EDGES
+
+    return [
+        {**common, "edge": e, "source": source, "alpha": cond.alpha[i], "underlap_mm": cond.underlap_m[i] * 1e3,
+         "alpha_se": None if fit is None else _nn(fit.alpha_se[i]),
+         "underlap_se_mm": None if fit is None else _nn(fit.underlap_se_m[i] * 1e3),
+         "gap_design": None if fit is None else _nn(fit.gap_design), "gap_fitted": None if fit is None else _nn(fit.gap_fitted)}
+        for i, e in enumerate(EDGES)
+    ]
+
+
+def _tables(valve_id: str, run_id: str, run_at: datetime, d: Diagnosis, plots: list[Path | None], level: float, source: str = "design", cond: ValveCondition | None = None, fit: ConditionFit | None = None) -> dict[str, pl.DataFrame]:
+    t0 = datetime.fromtimestamp(min(a for a, _ in d.records) / 1e6, tz=timezone.utc)
+    t1 = datetime.fromtimestamp(max(b for _, b in d.records) / 1e6, tz=timezone.utc)
+    common = {"run_id": run_id, "valve_id": valve_id, "run_at": run_at}
+    findings = []
+    if d.named:
+        for n, path in zip(d.named, plots):
+            k = n.rank
+            findings.append({
+                **common, "effect": n.spec.name, "parameter_name": n.spec.parameter_name, "parameter_value": n.value,
+                "parameter_unit": n.spec.unit, "gap_before": n.gap_before, "gap_after": n.gap_after, "rank": k,
+                "parameter_ci_low": n.ci_low, "parameter_ci_high": n.ci_high, "ci_level": level, "variant": n.spec.variant,
+                "cv_relative_gain": n.relative_gain, "t_stat": _nn(n.t_stat), "z_score": _nn(n.z),
+                "gap_p1_before_bar": _gap_rms(d, k - 1, "p1") / 1e5, "gap_p1_after_bar": _gap_rms(d, k, "p1") / 1e5,
+                "gap_p2_before_bar": _gap_rms(d, k - 1, "p2") / 1e5, "gap_p2_after_bar": _gap_rms(d, k, "p2") / 1e5,
+                "gap_x_before_mm": _gap_rms(d, k - 1, "X") * 1e3, "gap_x_after_mm": _gap_rms(d, k, "X") * 1e3,
+                "window_start": t0, "window_end": t1, "n_records": d.n_records, "plot_path": str(path) if path else None,
+                "condition_source": source,
+            })
+    else:
+        g = d.stage_gaps[0]
+        findings.append({
+            **common, "effect": "none", "parameter_name": None, "parameter_value": None, "parameter_unit": None,
+            "gap_before": g, "gap_after": g, "rank": 1, "parameter_ci_low": None, "parameter_ci_high": None,
+            "ci_level": level, "variant": "", "cv_relative_gain": None, "t_stat": None, "z_score": None,
+            "gap_p1_before_bar": _gap_rms(d, 0, "p1") / 1e5, "gap_p1_after_bar": _gap_rms(d, 0, "p1") / 1e5,
+            "gap_p2_before_bar": _gap_rms(d, 0, "p2") / 1e5, "gap_p2_after_bar": _gap_rms(d, 0, "p2") / 1e5,
+            "gap_x_before_mm": _gap_rms(d, 0, "X") * 1e3, "gap_x_after_mm": _gap_rms(d, 0, "X") * 1e3,
+            "window_start": t0, "window_end": t1, "n_records": d.n_records, "plot_path": str(plots[0]) if plots and plots[0] else None,
+            "condition_source": source,
+        })
+    candidates = [
+        {**common, "effect": c["effect"], "variant": c["variant"], "parameter_name": c["parameter_name"],
+         "parameter_unit": c["parameter_unit"], "parameter_value": c["linear_value"], "parameter_se": _nn(c["se"]),
+         "cv_relative_gain": c["relative_gain"], "t_stat": c["t_stat"], "z_score": _nn(c["z"]),
+         "significant": c["significant"], "unconfirmed": c["unconfirmed"], "score_rank": i + 1}
+        for i, c in enumerate(d.candidates)
+    ]
+    gaps = [{**common, **{k: r[k] for k in ("stage", "signal", "region", "unit", "n_samples")}, "rms": _nn(r["rms"])} for r in d.gap_rows]
+    residuals = [
+        {**common, **{k: r[k] for k in ("stage", "equation", "region", "unit", "n_samples")}, "rms": _nn(r["rms"]), "mean": _nn(r["mean"])}
+        for r in d.residual_rows
+    ]
+    label = effects_label(d)
+    monitoring = [
+        {**common, "edge": m["edge"], "effects": label, "n_windows": m["n_windows"],
+         "alpha_hat_recorded": _nn(m["alpha_hat_recorded"]), "alpha_hat_corrected": _nn(m["alpha_hat_corrected"]),
+         "x_hat_mm_recorded": _nn(m["x_hat_m_recorded"] * 1e3), "x_hat_mm_corrected": _nn(m["x_hat_m_corrected"] * 1e3),
+         "e_mm2_recorded": _nn(m["e_m2_recorded"] * 1e6), "e_mm2_corrected": _nn(m["e_m2_corrected"] * 1e6)}
+        for m in d.monitoring
+    ]
+    conditions = _condition_rows(common, source, cond, fit) if cond is not None else []
+    out = {}
+    for name, rows in (("discrepancy_findings", findings), ("discrepancy_candidates", candidates), ("discrepancy_gaps", gaps),
+                       ("discrepancy_residuals", residuals), ("discrepancy_monitoring", monitoring), ("discrepancy_condition", conditions)):
+        schema = polars_schema(DISCREPANCY_TABLES[name])
+        out[name] = pl.DataFrame(rows, schema=schema) if rows else pl.DataFrame(schema=schema)
+    return out
+
+
+def _plots(valve_id: str, run_id: str, d: Diagnosis, warehouse: Path) -> list[Path | None]:
+    from flows.discrepancy_plots import overlay_figure
+
+    folder = warehouse / REPORT_DIR
+    if not d.traces:
+        return [None] * max(1, len(d.named))
+    trace = d.traces[0]
+    short = run_id[:8]
+    if not d.named:
+        path = folder / f"{valve_id}_{short}_none.png"
+        return [overlay_figure(trace, 0, 0, f"{valve_id}: no library effect named (gap {d.stage_gaps[0]:.3g})", path)]
+    out = []
+    for n in d.named:
+        path = folder / f"{valve_id}_{short}_{n.rank}_{n.spec.key.replace('[', '_').replace(']', '')}.png"
+        title = (f"{valve_id}: rank {n.rank} {n.spec.key}, {n.spec.parameter_name} = {_fmt(n.value)} {n.spec.unit} "
+                 f"[{_fmt(n.ci_low)}, {_fmt(n.ci_high)}]; gap {n.gap_before:.3g} → {n.gap_after:.3g}")
+        out.append(overlay_figure(trace, n.rank - 1, n.rank, title, path))
+    return out
+
+
+def store_run(warehouse: Path, tables: dict[str, pl.DataFrame]) -> None:
+    """Append one run's rows to every discrepancy table in one transaction."""
+    with connect(warehouse) as con:
+        ensure_discrepancy_tables(con)
+        con.execute("BEGIN TRANSACTION")
+        try:
+            for name, frame in tables.items():
+                insert_frame(con, name, frame)
+            con.execute("COMMIT")
+        except BaseException:
+            con.execute("ROLLBACK")
+            raise
+
+
+def discrepancy_valve(config, valve_id: str, warehouse: Path, start: datetime | None, end: datetime | None, settings: DiscrepancySettings | None = None, condition_mode: str = "auto") -> DiscrepancyReport:
+    """Steps 1–4 for one valve over [start, end) of its lake; stores and draws the results."""
+    settings = settings or DiscrepancySettings()
+    valve = config.valve(valve_id)
+    fs = config.export.sample_rate_hz
+    settings = replace(settings, sample_period_s=1.0 / fs) if settings.sample_period_s is None else settings
+    run_at = datetime.now(timezone.utc)
+    run_id = uuid.uuid4().hex
+    lake = read_lake(warehouse, [valve.id], start, end).collect()
+    if lake.height == 0:
+        raise ValvemonError(f"valve {valve.id}: no lake data in the span; ingest its exports first")
+    records = split_records(lake, settings)
+    if not records:
+        raise ValvemonError(f"valve {valve.id}: no contiguous record of at least {settings.min_record_s:g} s in the span")
+    plant = plant_params_for(valve, fs)
+    source, cond, fit = valve_condition(valve, plant, warehouse, condition_mode, settings)
+    d = diagnose(records, plant, cond, settings)
+    plots = _plots(valve.id, run_id, d, warehouse)
+    tables = _tables(valve.id, run_id, run_at, d, plots, settings.ci_level, source, cond, fit)
+    store_run(warehouse, tables)
+    return DiscrepancyReport(
+        valve_id=valve.id, run_id=run_id, n_records=d.n_records, findings=tables["discrepancy_findings"].to_dicts(),
+        plots=[p for p in plots if p is not None], gap_before=d.gap_before, gap_after=d.gap_after, condition_source=source,
+    )
+
+
+def run_discrepancy(config_path: str | Path, warehouse: str | Path, valve_id: str, start=None, end=None, *, settings: DiscrepancySettings | None = None, condition_mode: str = "auto", runner=discrepancy_valve) -> DiscrepancyReport:
+    """Check the arguments and diagnose one valve; ``runner`` lets the flow pass its task."""
+    config = load_plant_config(config_path)
+    known = [v.id for v in config.valves]
+    if valve_id not in known:
+        raise ValvemonError(f"{config_path}: no valve {valve_id!r} in plant {config.name!r} (valves: {', '.join(known)})")
+    t0, t1 = _utc(start), _utc(end)
+    if t0 and t1 and t1 <= t0:
+        raise ValvemonError("--to must be later than --from")
+    if condition_mode not in CONDITION_MODES:
+        raise ValvemonError(f"--valve-condition must be one of {', '.join(CONDITION_MODES)}, got {condition_mode!r}")
+    return runner(config, valve_id, Path(warehouse), t0, t1, settings, condition_mode)
+
+
+@task(name="discrepancy-valve", cache_policy=NO_CACHE, persist_result=False)
+def discrepancy_valve_task(config, valve_id: str, warehouse: Path, start, end, settings=None, condition_mode: str = "auto") -> DiscrepancyReport:
+    """One valve's discrepancy workflow as a Prefect task."""
+    return discrepancy_valve(config, valve_id, warehouse, start, end, settings, condition_mode)
+
+
+@flow(name="valvemon-discrepancy", persist_result=False, validate_parameters=False)
+def discrepancy_flow(config_path: str, warehouse: str, valve_id: str, start: str | None = None, end: str | None = None, max_records: int | None = None, condition_mode: str = "auto") -> DiscrepancyReport:
+    """The Prefect flow behind ``valvemon discrepancy``."""
+    if max_records is not None and max_records < 1:
+        raise ValvemonError("--max-records must be at least 1")
+    settings = DiscrepancySettings() if max_records is None else DiscrepancySettings(max_records=max_records)
+    return run_discrepancy(config_path, warehouse, valve_id, start, end, settings=settings, condition_mode=condition_mode, runner=discrepancy_valve_task)
+
+
+def summary_lines(report: DiscrepancyReport) -> list[str]:
+    """The command line's account of a run."""
+    lines = [f"{report.valve_id}: model with the {report.condition_source} valve condition, {report.n_records} records"]
+    for f in report.findings:
+        if f["effect"] == "none":
+            lines.append(f"{report.valve_id}: no library effect named; gap {f['gap_before']:.3g}")
+        else:
+            var = f"[{f['variant']}]" if f["variant"] else ""
+            lines.append(
+                f"{report.valve_id}: #{f['rank']} {f['effect']}{var} {f['parameter_name']} = {_fmt(f['parameter_value'])} {f['parameter_unit']} "
+                f"[{_fmt(f['parameter_ci_low'])}, {_fmt(f['parameter_ci_high'])}], gap {f['gap_before']:.3g} → {f['gap_after']:.3g}"
+            )
+    for p in report.plots:
+        lines.append(f"  overlay: {p}")
+    lines.append(f"  run {report.run_id} → discrepancy_findings (and discrepancy_candidates, _gaps, _residuals, _monitoring)")
+    return lines
