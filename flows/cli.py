@@ -177,22 +177,84 @@ def query(
     run_query(sql, warehouse_dir(warehouse), fmt=fmt, out=out, live=live, max_rows=max_rows)
 
 
+DaskAddress = Annotated[
+    Optional[str],
+    typer.Option("--dask-address", help="Run the tasks on the Dask cluster whose scheduler is here (tcp://HOST:8786); see docs/orchestration.md."),
+]
+
+
 @app.command()
 def backfill(
     config: Config,
-    start: Annotated[str, typer.Option("--from", help="First date (ISO-8601).")],
-    end: Annotated[str, typer.Option("--to", help="Last date, exclusive (ISO-8601).")],
+    start: Annotated[str, typer.Option("--from", help="Start (ISO-8601 date or date-time, UTC unless an offset is given).")],
+    end: Annotated[str, typer.Option("--to", help="End, exclusive (ISO-8601).")],
     valves: Valves = None,
+    exports: Annotated[Optional[Path], typer.Option("--exports", help="Historian exports to ingest first (a folder, searched recursively, or a file); files whose name carries a date outside the span are left out.")] = None,
+    concurrency: Annotated[Optional[int], typer.Option("--concurrency", help="Units in flight at once. \\[default: 2 on threads; twice the cluster's worker threads on Dask]")] = None,
+    unit_days: Annotated[float, typer.Option("--unit-days", help="Days of one valve per monitor unit.")] = 7.0,
+    retries: Annotated[int, typer.Option("--retries", help="Prefect retries of a failed unit.")] = 2,
+    force: Annotated[bool, typer.Option("--force", help="Redo every monitor unit and re-read every file (content already in the manifest is still skipped).")] = False,
+    dask_address: DaskAddress = None,
+    dask_workers: Annotated[Optional[int], typer.Option("--dask-workers", help="Run the tasks on a temporary local Dask cluster of N worker processes.")] = None,
+    quiet: Annotated[bool, typer.Option("--quiet", help="No progress bars.")] = False,
     warehouse: Warehouse = None,
 ) -> None:
-    """Ingest + monitor over a span, resumable."""
-    _not_yet("backfill", 6)
+    """Ingest + monitor over a span, resumable: rerun the same command to continue a stopped backfill."""
+    from contextlib import ExitStack
+
+    from flows.backfill import CONCURRENCY, BackfillFailed, backfill_flow
+    from flows.config import warehouse_dir
+    from flows.dask_runner import cluster_threads, local_cluster, shared_api, task_runner
+    from flows.ingest import quiet_prefect_console
+
+    if dask_address and dask_workers:
+        raise ValvemonError("--dask-address and --dask-workers exclude each other")
+    quiet_prefect_console()
+    with ExitStack() as stack:
+        address = dask_address
+        if address or dask_workers:
+            stack.enter_context(shared_api())
+            if dask_workers:
+                address = stack.enter_context(local_cluster(dask_workers))
+            threads = cluster_threads(address)
+            n = concurrency or 2 * threads
+        else:
+            n = concurrency or CONCURRENCY
+        if n < 1:
+            raise ValvemonError("--concurrency must be at least 1")
+        run = backfill_flow.with_options(task_runner=task_runner(n, address))
+        try:
+            summary = run(
+                config_path=str(config), warehouse=str(warehouse_dir(warehouse)), start=start, end=end, valve_ids=valves,
+                exports=str(exports) if exports else None, concurrency=n, unit_days=unit_days, retries=retries, force=force,
+                show_progress=not quiet, task_runner_name=f"dask {address}" if address else f"threads ({n})",
+            )  # fmt: skip
+        except BackfillFailed as exc:
+            typer.echo(exc.summary.line())
+            raise
+    typer.echo(summary.line())
 
 
 @app.command()
-def serve(config: Config, warehouse: Warehouse = None) -> None:
-    """The nightly deployment on a Prefect server."""
-    _not_yet("serve", 6)
+def serve(
+    config: Config,
+    exports: Annotated[Path, typer.Option("--exports", help="The inbox of historian exports the nightly run ingests (new files only).")],
+    cron: Annotated[str, typer.Option("--cron", help="When the nightly run starts (cron syntax, in --timezone).")] = "30 2 * * *",
+    tz: Annotated[Optional[str], typer.Option("--timezone", help="IANA time zone of the schedule and of 'the previous day'. \\[default: the plant's plant.timezone]")] = None,
+    concurrency: Annotated[int, typer.Option("--concurrency", help="Units in flight at once in a nightly run.")] = 2,
+    dask_address: DaskAddress = None,
+    no_report: Annotated[bool, typer.Option("--no-report", help="Skip the report step.")] = False,
+    name: Annotated[Optional[str], typer.Option("--name", help="Deployment name. \\[default: PLANT-nightly]")] = None,
+    warehouse: Warehouse = None,
+) -> None:
+    """The nightly deployment on a Prefect server (PREFECT_API_URL): serves it until stopped."""
+    from flows.config import warehouse_dir
+    from flows.nightly import serve_nightly
+
+    serve_nightly(
+        config, exports, warehouse_dir(warehouse), cron=cron, timezone_name=tz, concurrency=concurrency,
+        dask_address=dask_address, report=not no_report, name=name,
+    )  # fmt: skip
 
 
 @app.command()
