@@ -217,13 +217,13 @@ def _now() -> datetime:
     return datetime.now(timezone.utc)
 
 
-def manifest_hashes(warehouse: Path) -> set[str]:
-    """Content hashes of the files the manifest holds."""
+def in_manifest(warehouse: Path, sha256: str) -> bool:
+    """Whether the manifest already holds a file with this content hash."""
     if not (Path(warehouse) / "valvemon.duckdb").exists():
-        return set()
+        return False
     with connect(warehouse) as con:
         ensure_ingest_tables(con)
-        return set(query_frame(con, "SELECT file_sha256 FROM ingest_manifest")["file_sha256"].to_list())
+        return con.execute("SELECT count(*) FROM ingest_manifest WHERE file_sha256 = ?", [sha256]).fetchone()[0] > 0
 
 
 def _table(frame: pl.DataFrame, fields) -> pl.DataFrame:
@@ -243,7 +243,7 @@ def ingest_file(path: str | Path, config: PlantConfig, warehouse: str | Path, ru
     tags = tags or TagTable.from_config(config)
     ef = read_export(path, export, tags)
     report = FileReport(str(path), ef.sha256)
-    if not force and ef.sha256 in manifest_hashes(warehouse):
+    if not force and in_manifest(warehouse, ef.sha256):
         report.skipped = True
         return report
     try:

@@ -65,15 +65,22 @@ SENSOR_FIELDS: tuple[Field, ...] = (
     Field("valve_id", pl.Utf8, "", "Valve identifier; also the hive partition key."),
     Field("date", pl.Date, "", "UTC calendar date of the sample; also the hive partition key."),
     Field("timestamp_utc", UTC_US, "", "Sample time, microseconds, UTC."),
-    Field("ps_pa", pl.Float64, "Pa", "Supply pressure.", ge=-1e5, le=6e7),
-    Field("pr_pa", pl.Float64, "Pa", "Return (tank) pressure.", ge=-1e5, le=6e7),
-    Field("p1_pa", pl.Float64, "Pa", "Head-side chamber pressure (port 1).", ge=-1e5, le=6e7),
-    Field("p2_pa", pl.Float64, "Pa", "Rod-side chamber pressure (port 2).", ge=-1e5, le=6e7),
-    Field("x_spool_m", pl.Float64, "m", "Spool position x; > 0 opens s1 and 2r.", ge=-0.02, le=0.02),
-    Field("x_cyl_m", pl.Float64, "m", "Cylinder position X; grows on extension.", ge=-0.1, le=20.0),
-    Field("x_ref_m", pl.Float64, "m", "Spool reference from the position controller.", nullable=True, ge=-0.02, le=0.02),
+    Field("ps_pa", pl.Float32, "Pa", "Supply pressure.", ge=-1e5, le=6e7),
+    Field("pr_pa", pl.Float32, "Pa", "Return (tank) pressure.", ge=-1e5, le=6e7),
+    Field("p1_pa", pl.Float32, "Pa", "Head-side chamber pressure (port 1).", ge=-1e5, le=6e7),
+    Field("p2_pa", pl.Float32, "Pa", "Rod-side chamber pressure (port 2).", ge=-1e5, le=6e7),
+    Field("x_spool_m", pl.Float32, "m", "Spool position x; > 0 opens s1 and 2r.", ge=-0.02, le=0.02),
+    Field("x_cyl_m", pl.Float32, "m", "Cylinder position X; grows on extension.", ge=-0.1, le=20.0),
+    Field("x_ref_m", pl.Float32, "m", "Spool reference from the position controller.", nullable=True, ge=-0.02, le=0.02),
 )
-"""The lake's canonical sensor frame (``lake/sensors/valve_id=…/date=…``)."""
+"""The lake's canonical sensor frame (``lake/sensors/valve_id=…/date=…``).
+
+The signals are float32: measured against float64 (``docs/ingest.md``, "Storage"), the zstd
+lake is ~15 % smaller on disk and half the size in memory, decodes ~1.8× faster per core and is
+written ~1.5× faster, while float32's round-off (≤ 6e-8 relative: ≤ 1 Pa at 200 bar, ≤ 0.03 µm
+at 0.6 m) stays below 1/1000 of a 16-bit sensor's quantisation step. Cast to Float64 before
+long accumulations.
+"""
 
 
 def polars_schema(fields: tuple[Field, ...]) -> pl.Schema:

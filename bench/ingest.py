@@ -1,0 +1,247 @@
+"""Ingest benchmark: export → lake against a bare read of the same file, and the lake's storage.
+
+Usage (figures and the exact command in BENCHMARKS.md, "Ingest"):
+
+    .venv/bin/python bench/ingest.py                 # throughput, one core
+    .venv/bin/python bench/ingest.py --storage       # lake storage study (codec, float width, row groups)
+    .venv/bin/python bench/ingest.py --seconds 200   # a smaller input
+
+Throughput: a synthetic plant export (one valve, six required tags, sampled exactly on the 1 kHz
+grid, realistic signals: smooth motion + sensor noise + 16-bit quantisation) is written as a
+long CSV (``timestamp,tag,value,quality``, ISO-8601 with ``Z``) and as a long Parquet file. For
+each, the benchmark times a plain ``polars.read_csv`` / ``polars.read_parquet`` of the file and
+the whole ingest of the file into an empty warehouse (``flows.ingest.ingest_file``: hash, read,
+parse, quarantine check, de-duplicate, grid, validate, merge, atomic zstd Parquet write,
+DuckDB manifest). Everything runs on one core (``POLARS_MAX_THREADS=1``, one Arrow thread), so
+rows/s is per core. The ratio ingest / bare read is the figure (target ≤ 2).
+
+Storage: the same signals as a lake partition, written with several codecs and float widths,
+then decoded (``polars.read_parquet`` of all columns, and a DuckDB scan), sized, and read for
+one 10 s window by a time filter, to choose the lake's codec, float width and row groups.
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("POLARS_MAX_THREADS", "1")
+os.environ.setdefault("RAYON_NUM_THREADS", "1")
+
+import argparse  # noqa: E402
+import shutil  # noqa: E402
+import sys  # noqa: E402
+import tempfile  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+import polars as pl  # noqa: E402
+import pyarrow as pa  # noqa: E402
+
+pa.set_cpu_count(1)
+pa.set_io_thread_count(1)
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from flows.config import load_plant_config  # noqa: E402
+from flows.ingest import ingest_file  # noqa: E402
+from transforms.ingest import TagTable  # noqa: E402
+
+CONFIG = Path(__file__).resolve().parents[1] / "tests" / "fixtures" / "plant_example.toml"
+TAGS = {
+    "ps": ("MILL1.V017.PS", 1e5),
+    "pr": ("MILL1.V017.PR", 1e5),
+    "p1": ("MILL1.V017.P1", 1e5),
+    "p2": ("MILL1.V017.P2", 1e5),
+    "x_spool": ("MILL1.V017.XS", 1e-3),
+    "x_cyl": ("MILL1.V017.XC", 1e-3),
+}
+START_US = 1_740_787_200_000_000  # 2025-03-01T00:00:00Z
+
+
+def signals(n: int, seed: int = 0) -> dict[str, np.ndarray]:
+    """Plant-like signals in export units (bar, mm), 1 kHz: motion + noise + 16-bit quantisation."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) / 1000.0
+    x_ref = 1.2 * np.sin(2 * np.pi * 0.37 * t) * np.sin(2 * np.pi * 0.05 * t)
+    x_spool = x_ref + 0.01 * rng.standard_normal(n)
+    x_cyl = 300 + 150 * np.cumsum(x_spool) / n * 50
+    p1 = 90 + 40 * np.tanh(x_spool) + 0.3 * rng.standard_normal(n)
+    p2 = 110 - 40 * np.tanh(x_spool) + 0.3 * rng.standard_normal(n)
+    ps = 210 + 0.5 * np.sin(2 * np.pi * 3.1 * t) + 0.2 * rng.standard_normal(n)
+    pr = 2.0 + 0.05 * rng.standard_normal(n)
+
+    def q(x: np.ndarray, full_scale: float) -> np.ndarray:  # 16-bit ADC over the sensor's range
+        step = full_scale / 65536
+        return np.round(x / step) * step
+
+    return {"ps": q(ps, 400), "pr": q(pr, 400), "p1": q(p1, 400), "p2": q(p2, 400), "x_spool": q(x_spool, 7), "x_cyl": q(x_cyl, 1000)}
+
+
+def long_frame(n: int) -> pl.DataFrame:
+    """A long export, time-major (all tags of one instant together), as historians write it."""
+    sig = signals(n)
+    ts = pl.Series("timestamp", START_US + np.arange(n, dtype=np.int64) * 1000).cast(pl.Datetime("us", "UTC"))
+    parts = [pl.DataFrame({"timestamp": ts, "tag": TAGS[s][0], "value": sig[s], "quality": "Good", "k": np.arange(n), "j": j}) for j, s in enumerate(TAGS)]
+    return pl.concat(parts).sort(["k", "j"]).drop("k", "j")
+
+
+def write_inputs(folder: Path, n: int) -> dict[str, Path]:
+    df = long_frame(n)
+    csv = folder / "export_long.csv"
+    df.with_columns(pl.col("timestamp").dt.strftime("%Y-%m-%dT%H:%M:%S%.3fZ")).write_csv(csv, float_precision=None)
+    pq_path = folder / "export_long.parquet"
+    df.write_parquet(pq_path, compression="zstd")
+    return {"csv": csv, "parquet": pq_path}
+
+
+def timed(f, repeat: int) -> float:
+    """CPU seconds of this process for ``f()``, the least of ``repeat`` runs.
+
+    CPU time rather than wall time: the figures are per core, and other processes on a shared
+    machine then disturb them much less; the least of several runs drops the remaining noise.
+    """
+    times = []
+    for _ in range(repeat):
+        t0 = time.process_time()
+        f()
+        times.append(time.process_time() - t0)
+    return min(times)
+
+
+def throughput(seconds: int, repeat: int) -> None:
+    n = seconds * 1000
+    config = load_plant_config(CONFIG)
+    tags = TagTable.from_config(config)
+    with tempfile.TemporaryDirectory(prefix="valvemon-bench-") as tmp:
+        tmp = Path(tmp)
+        inputs = write_inputs(tmp, n)
+        rows = 6 * n
+        print(f"input: {n:,} instants × 6 tags = {rows:,} long rows; one core (POLARS_MAX_THREADS={os.environ['POLARS_MAX_THREADS']})")
+        print(f"{'file':<10}{'size MB':>9}{'bare read s':>13}{'ingest s':>10}{'ratio':>7}{'bare Mrows/s':>14}{'ingest Mrows/s':>16}{'lake rows':>11}")
+        for kind, path in inputs.items():
+            bare = (lambda: pl.read_csv(path)) if kind == "csv" else (lambda: pl.read_parquet(path))
+            t_bare = timed(bare, repeat)
+            wh = tmp / f"wh_{kind}"
+
+            def ingest() -> None:
+                shutil.rmtree(wh, ignore_errors=True)
+                r = ingest_file(path, config, wh, "bench", tags=tags)
+                assert r.rows_out == n, r
+
+            t_ing = timed(ingest, repeat)
+            print(f"{kind:<10}{path.stat().st_size / 1e6:>9.1f}{t_bare:>13.3f}{t_ing:>10.3f}{t_ing / t_bare:>7.2f}{rows / t_bare / 1e6:>14.2f}{rows / t_ing / 1e6:>16.2f}{n:>11,}")
+
+
+def lake_day(days: int, seed: int = 1) -> pl.DataFrame:
+    """Lake content shaped like the archive: per day 24 hourly windows of 10 s at 1 kHz.
+
+    Values go through the export's text (7 significant digits in bar / mm) and are then
+    converted to SI, as the ingest does: their float64 mantissas are full of noise.
+    """
+    n_win = 24 * days
+    n = n_win * 10_000
+    sig = signals(n, seed)
+    starts = START_US + np.arange(n_win, dtype=np.int64) * 3_600_000_000
+    t_us = (starts[:, None] + np.arange(10_000, dtype=np.int64)[None, :] * 1000).ravel()
+
+    def text_round(x: np.ndarray) -> np.ndarray:  # what 4 decimals in the export's text leave
+        return np.round(x, 4)
+
+    frame = pl.DataFrame(
+        {
+            "valve_id": "V017",
+            "timestamp_utc": pl.Series(t_us).cast(pl.Datetime("us", "UTC")),
+            **{f"{s}_pa": text_round(sig[s]) * 1e5 for s in ("ps", "pr", "p1", "p2")},
+            "x_spool_m": text_round(sig["x_spool"]) * 1e-3,
+            "x_cyl_m": text_round(sig["x_cyl"]) * 1e-3,
+            "x_ref_m": pl.repeat(None, n, dtype=pl.Float64, eager=True),
+        }
+    ).with_columns(date=pl.col("timestamp_utc").dt.date())
+    from schemas.fields import SENSOR_FIELDS, polars_schema
+
+    return frame.select(polars_schema(SENSOR_FIELDS).names())
+
+
+def storage(seconds: int, repeat: int) -> None:
+    """Lake storage variants: size, write time, decode rate, one-window read."""
+    import duckdb
+    import pyarrow.parquet as pq
+
+    from flows.lake import row_group_bounds
+
+    days = max(seconds // 240, 1)
+    frame = lake_day(days)
+    n = frame.height
+    t_us = frame["timestamp_utc"].to_physical().to_numpy()
+    channels = ["timestamp_utc", "ps_pa", "pr_pa", "p1_pa", "p2_pa", "x_spool_m", "x_cyl_m"]
+    value_cols = [c for c in frame.columns if c.endswith(("_pa", "_m"))]
+    print(f"lake: {days} day(s) of 24 hourly 10 s windows at 1 kHz = {n:,} rows, one file; values via 4-decimal export text → SI")
+    print("rows per CPU second (one core): polars.read_parquet of timestamp + six channels, of all 10 columns;")
+    print("duckdb SELECT sum() of the six channels (1 thread); window = polars scan with a time filter for one 10 s window")
+    print(f"{'variant':<36}{'B/row':>7}{'write s':>9}{'6ch M/s':>9}{'all M/s':>9}{'duckdb M/s':>12}{'window ms':>11}")
+    variants = [
+        ("float64 zstd-1", pl.Float64, "zstd", 1, False, "window"),
+        ("float64 zstd-3", pl.Float64, "zstd", 3, False, "window"),
+        ("float64 zstd-1 byte_stream_split", pl.Float64, "zstd", 1, True, "window"),
+        ("float64 lz4", pl.Float64, "lz4", None, False, "window"),
+        ("float64 snappy", pl.Float64, "snappy", None, False, "window"),
+        ("float64 uncompressed", pl.Float64, "none", None, False, "window"),
+        ("float32 zstd-1", pl.Float32, "zstd", 1, False, "window"),
+        ("float32 zstd-1 byte_stream_split", pl.Float32, "zstd", 1, True, "window"),
+        ("float32 lz4", pl.Float32, "lz4", None, False, "window"),
+        ("float32 uncompressed", pl.Float32, "none", None, False, "window"),
+        ("float64 zstd-1, 1 row group", pl.Float64, "zstd", 1, False, "one"),
+        ("float64 zstd-1, 1 window/row group", pl.Float64, "zstd", 1, False, "each"),
+    ]
+    w0 = frame["timestamp_utc"][n // 2 - (n // 2) % 10_000]
+    w1 = frame["timestamp_utc"][n // 2 - (n // 2) % 10_000 + 9_999]
+    with tempfile.TemporaryDirectory(prefix="valvemon-bench-") as tmp:
+        for name, dtype, codec, level, bss, groups in variants:
+            f = frame.with_columns(pl.col(value_cols).cast(dtype))
+            table = f.to_arrow()
+            path = Path(tmp) / f"{name.replace(' ', '_').replace('/', '_')}.parquet"
+            if groups == "window":
+                bounds = row_group_bounds(t_us, 5000)
+            elif groups == "one":
+                bounds = [(0, n)]
+            else:
+                bounds = row_group_bounds(t_us, 5000, min_rows=1)
+
+            def write() -> None:
+                with pq.ParquetWriter(
+                    path, table.schema, compression=codec, compression_level=level, use_dictionary=["valve_id", "date"],
+                    write_statistics=["timestamp_utc", "valve_id", "date"], use_byte_stream_split=value_cols if bss else False,
+                ) as w:
+                    for a, b in bounds:
+                        w.write_table(table.slice(a, b - a), row_group_size=b - a)
+
+            t_w = timed(write, repeat)
+            size = path.stat().st_size
+            t_6 = timed(lambda: pl.read_parquet(path, columns=channels), repeat)
+            t_all = timed(lambda: pl.read_parquet(path), repeat)
+            con = duckdb.connect()
+            con.execute("SET threads = 1")
+            q = f"SELECT {', '.join(f'sum({c})' for c in channels[1:])} FROM read_parquet('{path}')"
+            t_db = timed(lambda: con.execute(q).fetchall(), repeat)
+            con.close()
+            t_win = timed(lambda: pl.scan_parquet(path).filter(pl.col("timestamp_utc").is_between(w0, w1)).collect(), repeat)
+            print(f"{name:<36}{size / n:>7.1f}{t_w:>9.3f}{n / t_6 / 1e6:>9.1f}{n / t_all / 1e6:>9.1f}{n / t_db / 1e6:>12.1f}{t_win * 1e3:>11.2f}")
+        print("\nfloat32 round-off against the signal's quantisation step (16-bit over the sensor range):")
+        for c, step in (("ps_pa", 400e5 / 65536), ("p1_pa", 400e5 / 65536), ("x_spool_m", 7e-3 / 65536), ("x_cyl_m", 1.0 / 65536)):
+            v = frame[c].to_numpy()
+            err = np.abs(v.astype(np.float32).astype(np.float64) - v).max()
+            print(f"  {c:<10} max |float32 - float64| = {err:.3g}   quantisation step = {step:.3g}   ratio = {err / step:.2g}")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--seconds", type=int, default=1000, help="length of the synthetic export at 1 kHz [s] (default 1000: 6 M long rows)")
+    ap.add_argument("--repeat", type=int, default=3, help="repetitions per measurement (median)")
+    ap.add_argument("--storage", action="store_true", help="run the lake storage study instead")
+    args = ap.parse_args()
+    (storage if args.storage else throughput)(args.seconds, args.repeat)
+
+
+if __name__ == "__main__":
+    main()
