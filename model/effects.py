@@ -36,7 +36,7 @@ compressed polytropically (exponent n = 1.4) with the fluid, adds its compliance
 
     h(p) = (P_ATM / (p + P_ATM))^(1/n) / (n (p + P_ATM))       (p gauge) [1/Pa]
 
-(eps = 1 % makes the fluid about 30 % softer at 30 bar and 2 % softer at 150 bar.)
+(eps = 1 % makes the fluid about 23 % softer at 30 bar and 2 % softer at 150 bar.)
 
 Spool sensor offset: the valve's inner position loop regulates the LVDT reading, so in closed
 loop the spool settles at x_ref - delta_x, and the recorded x is the true x + delta_x.

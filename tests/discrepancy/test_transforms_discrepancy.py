@@ -1,0 +1,160 @@
+"""transforms.discrepancy: records, residuals, the load estimate, the selection and the gaps."""
+
+import ast
+from pathlib import Path
+
+import numpy as np
+import polars as pl
+import pytest
+
+import transforms.discrepancy as td
+from model import TABLE1, measure, simulate_windows
+from model.effects import Effects, equation_terms
+from transforms.discrepancy import (
+    DiscrepancySettings,
+    GapAccumulator,
+    Record,
+    block_stats,
+    demean_by_group,
+    estimate_load,
+    forward_select,
+    interval_edges,
+    interval_residuals,
+    normalised_gap,
+    prepare_record,
+    split_records,
+)
+from transforms.discrepancy.load import step_filter
+from transforms.discrepancy.residuals import triangular_force_balance
+
+from .simdata import simulate_lake
+
+
+def test_transforms_discrepancy_imports_only_schemas_and_transforms():
+    for path in Path(td.__file__).parent.glob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+                assert node.module.split(".")[0] not in {"model", "flows", "prefect", "duckdb"}, (path.name, node.module)
+            if isinstance(node, ast.Import):
+                for a in node.names:
+                    assert a.name.split(".")[0] not in {"model", "flows", "prefect", "duckdb"}, (path.name, a.name)
+
+
+def test_split_records_cuts_at_gaps_and_lengths():
+    lake = simulate_lake(None, n_windows=3, window_s=3.0, seed=0)
+    s = DiscrepancySettings(min_record_s=1.5, max_record_s=2.0)
+    recs = split_records(lake, s)
+    assert len(recs) == 3 and all(r.n == 2000 for r in recs)  # the 1 s rest of each window is too short
+    recs = split_records(lake, DiscrepancySettings(min_record_s=1.0, max_record_s=2.0))
+    assert [r.n for r in recs] == [2000, 1000] * 3
+    assert recs[1].start_us - recs[0].start_us == 2_000_000
+    assert len(split_records(lake, DiscrepancySettings(max_records=2, min_record_s=1.0, max_record_s=2.0))) == 2
+    assert split_records(lake.head(0), s) == []
+    with pytest.raises(ValueError):
+        split_records(pl.concat([lake, lake.with_columns(pl.lit("V2").alias("valve_id"))]), s)
+
+
+def test_step_filter_ignores_quadratics_and_measures_jumps():
+    t = np.arange(400.0)
+    f = 3.0 + 0.5 * t - 0.002 * t**2
+    j = step_filter(f, 40)
+    assert np.nanmax(np.abs(j)) < 1e-8
+    g = f + np.where(t >= 200, 1000.0, 0.0)
+    j = step_filter(g, 40)
+    assert np.nanargmax(np.abs(j)) == 199 and j[199] == pytest.approx(1000.0, rel=1e-9)
+
+
+def _exact_record(seed=7, effects=None, seconds=10.0):
+    res = simulate_windows(TABLE1, [TABLE1.nominal_condition], seconds, seed=seed, effects=effects)
+    raw = {"ps": res.ps_pa[0], "pr": res.pr_pa[0], "p1": res.p1_pa[0], "p2": res.p2_pa[0], "x": res.x_m[0], "X": res.X_m[0]}
+    return res, prepare_record(Record("V", 0, 0, 1e-3, raw), DiscrepancySettings())
+
+
+def test_integrated_residuals_vanish_on_exact_states_and_show_a_hidden_leak():
+    s = DiscrepancySettings()
+    for fx, expect_zero in ((None, True), (Effects(internal_leakage_m3_s_pa=2e-12), False)):
+        res, rec = _exact_record(effects=fx)
+        terms = equation_terms({"x": rec.raw["x"], "p1": rec.raw["p1"], "p2": rec.raw["p2"], "ps": rec.raw["ps"], "pr": rec.raw["pr"], "X": rec.raw["X"], "v": res.vX_m_s[0]}, TABLE1, None, None, 1e4)
+        e = interval_edges(rec.n - 10, 20, 10)
+        ir = interval_residuals(terms, rec.raw["X"], TABLE1.cylinder.A1, TABLE1.cylinder.A2, 1e-3, e, s.interval_smoothing)
+        ok = np.isfinite(ir.r1)
+        leak = 2e-12 * np.abs(res.p1_pa[0] - res.p2_pa[0]).mean()
+        if expect_zero:
+            assert np.sqrt(np.mean(ir.r1[ok] ** 2)) < 0.01 * leak  # integration error only
+            assert np.sqrt(np.mean(ir.r2[ok] ** 2)) < 0.01 * leak
+        else:  # r1 = K_i (p1 - p2) averaged over the interval, r2 = -r1
+            assert np.mean(ir.r1[ok]) == pytest.approx(-leak, rel=0.05)
+            np.testing.assert_allclose(ir.r2[ok], -ir.r1[ok], rtol=0.05, atol=0.02 * leak)
+
+
+def test_triangular_force_balance_is_the_load_and_steps_are_found():
+    res, rec = _exact_record(seed=1)
+    terms = equation_terms({"x": rec.raw["x"], "p1": rec.raw["p1"], "p2": rec.raw["p2"], "ps": rec.raw["ps"], "pr": rec.raw["pr"], "X": rec.raw["X"], "v": res.vX_m_s[0]}, TABLE1, None, None, 1e4)
+    f = triangular_force_balance(terms["force"], rec.raw["X"], terms["mass"], 1e-3, 20)
+    # moving over the whole triangle (no sticking inside it), no load step inside it
+    moving = np.convolve(np.abs(res.vX_m_s[0]) > 0.01, np.ones(41), "same") == 41
+    F = res.F_l_n[0]
+    flat = moving & (np.convolve(np.diff(F, prepend=F[0]) != 0, np.ones(41), "same") == 0) & np.isfinite(f)
+    assert np.max(np.abs(f[flat] - F[flat])) < 60.0  # N, against a load of ±15 kN
+    est = estimate_load(f, rec.sg["v"], DiscrepancySettings())
+    true_steps = np.flatnonzero(np.diff(F)) + 1
+    moving_steps = [k for k in true_steps if abs(res.vX_m_s[0][k]) > 0.03]
+    for k in moving_steps:
+        assert np.min(np.abs(est.steps - k)) <= 3
+
+
+def test_demean_by_group():
+    v = np.array([1.0, 3.0, 10.0, 14.0, 5.0])
+    g = np.array([0, 0, 1, 1, 2])
+    np.testing.assert_allclose(demean_by_group(v, g), [-1, 1, -2, 2, 0])
+    M = np.column_stack([v, 2 * v])
+    np.testing.assert_allclose(demean_by_group(M, g)[:, 1], 2 * demean_by_group(v, g))
+
+
+def _synthetic(theta, n_blocks=30, n=200, seed=0, noise=1.0):
+    rng = np.random.default_rng(seed)
+    Phi = rng.normal(size=(n_blocks * n, 4))
+    Phi[:, 3] = Phi[:, 2] + 0.3 * rng.normal(size=n_blocks * n)  # a correlated decoy
+    y = Phi @ np.asarray(theta, float) + noise * rng.normal(size=n_blocks * n)
+    return block_stats(y, Phi, np.repeat(np.arange(n_blocks), n))
+
+
+def test_forward_select_names_the_true_column_and_nothing_on_noise():
+    kw = dict(max_effects=3, min_t_stat=4.0, min_relative_gain=0.02, min_z=5.0)
+    sel = forward_select(_synthetic([0, 0, 0.5, 0]), [0, 1, 2, 3], **kw)
+    assert [c.column for c in sel.named] == [2]
+    assert sel.final_theta[0] == pytest.approx(0.5, abs=0.05)
+    lo, hi = sel.named[0].interval(sel.n_blocks, 0.95)
+    assert lo < 0.5 < hi
+    sel = forward_select(_synthetic([0.4, 0, 0, 0.6], seed=1), [0, 1, 2, 3], **kw)
+    assert [c.column for c in sel.named] == [3, 0]
+    for seed in range(5):
+        assert forward_select(_synthetic([0, 0, 0, 0], seed=seed), [0, 1, 2, 3], **kw).named == []
+    # a physical sign constraint: a negative coefficient is not named
+    sel = forward_select(_synthetic([0, -0.5, 0, 0], seed=2), [0, 1, 2, 3], positive=frozenset({1}), **kw)
+    assert sel.named == [] and sel.first_step[1].theta < 0
+
+
+def test_gap_accumulator_and_normalised_gap():
+    acc = GapAccumulator()
+    regions = {"all": np.array([True, True, True, False]), "standstill": np.array([True, False, False, False])}
+    acc.add("p1", np.array([1e5, -1e5, 1e5, np.nan]), regions)
+    acc.add("p2", np.array([0.0, 0.0, 0.0, 0.0]), regions)
+    acc.add("X", np.array([1e-3, 1e-3, -1e-3, 1e-3]), regions)
+    assert acc.rms("p1") == pytest.approx(1e5)
+    assert acc.rms("X", "standstill") == pytest.approx(1e-3)
+    assert acc.gap() == pytest.approx(np.sqrt(2 / 3))
+    assert normalised_gap({"p1": 0.0, "p2": 0.0, "X": 3e-3}) == pytest.approx(np.sqrt(3.0))
+    assert {(r["signal"], r["region"]) for r in acc.rows()} == {(s, r) for s in ("p1", "p2", "X") for r in regions}
+
+
+def test_operating_regions_partition_motion():
+    res = simulate_windows(TABLE1, [TABLE1.nominal_condition], 5.0, seed=0)
+    m = measure(res, TABLE1.sensors, np.random.default_rng(0))
+    rec = prepare_record(Record("V", 0, 0, 1e-3, {"ps": m.ps[0], "pr": m.pr[0], "p1": m.p1[0], "p2": m.p2[0], "x": m.x_spool[0], "X": m.x_cyl[0]}), DiscrepancySettings())
+    reg = td.operating_regions(rec.sg["v"], rec.sg["p1"], rec.sg["p2"], rec.sg["ps"], DiscrepancySettings())
+    motion = reg["extending"].astype(int) + reg["retracting"] + reg["standstill"]
+    assert np.array_equal(motion, reg["all"].astype(int))
+    level = reg["pressure_low"].astype(int) + reg["pressure_mid"] + reg["pressure_high"]
+    assert np.array_equal(level, reg["all"].astype(int))
+    assert reg["extending"].any() and reg["retracting"].any() and reg["standstill"].any()
