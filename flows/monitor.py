@@ -4,20 +4,26 @@ For every valve of the plant, :func:`run_monitor`
 
 1. builds its :class:`~transforms.params.MonitorParams` from the plant configuration;
 2. makes sure a baseline characteristic Â exists per edge (table ``baselines``): the step-4a fit
-   of the valve's commissioning window when the configuration names one (checked against the
+   of the valve's commissioning window when the configuration names one
+   (:func:`transforms.monitor.commissioning_baseline`: nominal-shaped, checked against the
    nominal Eq. 3 characteristic, step 5a), otherwise the nominal α_nominal·A(u) (paper
-   Sec. 5.1). A baseline whose definition changed (other design data, another window) is stored
-   as a new version; an unchanged one is reused;
+   Sec. 5.1). A baseline whose definition changed (other design data, another window, other
+   method settings) is stored as a new version; an unchanged one is reused;
 3. reads the lake in chunks of days (cut at a gap, so no window is split), runs steps 2–4b
-   (:func:`transforms.monitor.monitor`) and replaces the chunk's rows of ``edge_fits`` and
-   ``selection_stats`` in one transaction: a rerun replaces, never duplicates, and a run killed
-   halfway leaves every chunk either as before or complete.
+   (:func:`transforms.monitor.monitor`, with the closed-edge leakage correction that follows
+   each window's own estimates, built from the nominal characteristic and the baseline's state
+   α_b, x_b against it) and replaces the chunk's rows of ``edge_fits`` and ``selection_stats``
+   in one transaction: a rerun replaces, never duplicates, and a run killed halfway leaves
+   every chunk either as before or complete.
+
+docs/monitoring.md describes the algorithm, its defaults and its measured accuracy.
 
 :func:`monitor_flow` is the Prefect flow the command line runs (one task per valve).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from dataclasses import dataclass, field
 from datetime import date, datetime, timedelta, timezone
@@ -36,8 +42,8 @@ from flows.warehouse_db import connect, create_table_sql, insert_frame, query_fr
 from model.area import edge_area
 from schemas.fields import BASELINE_FIELDS, EDGE_FIT_FIELDS, EDGES, SELECTION_FIELDS, polars_schema
 from schemas.plant_config import PlantConfig, ValveSpec
-from transforms.characteristic import Characteristic, fit_characteristic, plausibility
-from transforms.monitor import monitor, monitor_points
+from transforms.characteristic import Characteristic, scaled_shifted
+from transforms.monitor import MonitorResult, commissioning_baseline, monitor
 from transforms.params import MonitorParams
 
 MONITOR_TABLES = {
@@ -97,9 +103,21 @@ def _design_definition(valve: ValveSpec) -> dict:
     }  # fmt: skip
 
 
+BASELINE_METHOD = "carrier-shaped step 4a, closed-edge leakage corrected"
+"""How baselines are built now (part of their definition: a change of method makes new versions)."""
+
+
+def _method_settings() -> dict:
+    """The algorithm's settings (:class:`MonitorParams` defaults without the design data, which
+    :func:`monitor_params` takes from the configuration, and the sample period)."""
+    design = {"piston_area_m2", "annulus_area_m2", "v01_m3", "v02_m3", "bulk_modulus_pa", "density_kg_m3", "underlap_m", "x_max_m", "sample_period_s"}
+    return {f.name: f.default for f in dataclasses.fields(MonitorParams) if f.name not in design}
+
+
 def baseline_definition(valve: ValveSpec) -> str:
-    """What a valve's baseline is built from; when it changes, a new baseline version is made."""
-    d: dict = {"design": _design_definition(valve)}
+    """What a valve's baseline is built from (design data, commissioning window, the method and
+    the algorithm's settings); when it changes, a new baseline version is made."""
+    d: dict = {"design": _design_definition(valve), "method": BASELINE_METHOD, "settings": _method_settings()}
     if valve.baseline_window is not None:
         d["window"] = [t.isoformat() for t in valve.baseline_window]
     return json.dumps(d, sort_keys=True)
@@ -114,6 +132,20 @@ class Baseline:
     source: str
     plausible: bool
     reasons: str
+    leakage: Characteristic | None = None
+    """α·A of the edge over the whole stroke at the baseline state (what the other edge of its
+    port sees leaking): the nominal characteristic scaled and shifted by the stored
+    ``alpha_vs_nominal``, ``x_vs_nominal_mm`` (:meth:`from_row`)."""
+
+    @classmethod
+    def from_row(cls, valve: ValveSpec, params: MonitorParams, row: dict) -> Baseline:
+        """From a row of table ``baselines`` (as a dict)."""
+        return cls(
+            Characteristic.from_arrays(np.array(row["knots_u_mm"]) * 1e-3, np.array(row["values_mm2"]) * 1e-6),
+            row["version"], row["source"], row["plausible"], row["plausibility_reasons"],
+            scaled_shifted(nominal_characteristic(valve, row["edge"], params.x_hat_bound_m),
+                           row["alpha_vs_nominal"], row["x_vs_nominal_mm"] * 1e-3),
+        )  # fmt: skip
 
 
 def _baseline_rows(valve: ValveSpec, params: MonitorParams, warehouse: Path, versions: dict[str, int]) -> pl.DataFrame:
@@ -134,20 +166,18 @@ def _baseline_rows(valve: ValveSpec, params: MonitorParams, warehouse: Path, ver
                 f"valve {valve.id}: its baseline_window {start.isoformat()} – {end.isoformat()} holds no lake data; "
                 "ingest the commissioning exports first or remove baseline_window to use the nominal characteristic"
             )
-        points = monitor_points(lake, params).points
+        fitted = commissioning_baseline(lake, params, nominal)
         for e in EDGES:
-            p = points.filter(pl.col("edge") == e)
-            if p.height < params.min_points:
+            b = fitted[e]
+            if b.characteristic is None:
                 raise ValvemonError(
-                    f"valve {valve.id}, edge {e}: the baseline_window yields {p.height} opening-area points, "
-                    f"at least {params.min_points} are needed for the initial characteristic (step 4a)"
+                    f"valve {valve.id}, edge {e}: the baseline_window yields {b.n_points} opening-area points"
+                    + (f" over {(b.u_range_m[1] - b.u_range_m[0]) * 1e3:.3f} mm of spool travel" if b.n_points else "")
+                    + f", at least {params.min_points} points over {params.min_knot_spacing_m * 1e3:g} mm are needed"
+                    " for the initial characteristic (step 4a)"
                 )
-            c = fit_characteristic(
-                p["u_m"].to_numpy(), p["area_m2"].to_numpy(), max_knots=params.max_knots,
-                min_spacing_m=params.min_knot_spacing_m, points_per_interval=params.points_per_knot_interval,
-            )  # fmt: skip
-            check = plausibility(c, nominal[e])
-            rows.append((e, "commissioning", c, p.height, check.ok, "; ".join(check.reasons), check.alpha_vs_nominal, check.x_hat_vs_nominal_m))
+            check = b.plausibility
+            rows.append((e, "commissioning", b.characteristic, b.n_points, check.ok, "; ".join(check.reasons), b.alpha_vs_nominal, b.x_vs_nominal_m))
     return pl.DataFrame(
         {
             "valve_id": [valve.id] * len(rows),
@@ -189,13 +219,18 @@ def ensure_baselines(valve: ValveSpec, params: MonitorParams, warehouse: Path) -
         with connect(warehouse) as con:
             ensure_monitor_tables(con)
             insert_frame(con, "baselines", current)
-    return {
-        r["edge"]: Baseline(
-            Characteristic.from_arrays(np.array(r["knots_u_mm"]) * 1e-3, np.array(r["values_mm2"]) * 1e-6),
-            r["version"], r["source"], r["plausible"], r["plausibility_reasons"],
-        )  # fmt: skip
-        for r in current.iter_rows(named=True)
-    }
+    return {r["edge"]: Baseline.from_row(valve, params, r) for r in current.iter_rows(named=True)}
+
+
+def monitor_rows(valve: ValveSpec, params: MonitorParams, baselines: dict[str, Baseline], rows: pl.DataFrame) -> MonitorResult:
+    """Steps 2–4b on some of the valve's lake rows against its baselines, with the closed-edge
+    leakage correction the baselines were built with (what every monitoring path must call)."""
+    chars = {valve.id: {e: b.characteristic for e, b in baselines.items()}}
+    leaks = {e: b.leakage for e, b in baselines.items()}
+    if any(v is None for v in leaks.values()):
+        leaks = {e: scaled_shifted(nominal_characteristic(valve, e, params.x_hat_bound_m), 1.0, 0.0) if v is None else v
+                 for e, v in leaks.items()}  # fmt: skip
+    return monitor(rows, params, chars, leakage={valve.id: leaks})
 
 
 def _utc(value: str | date | datetime | None) -> datetime | None:
@@ -211,9 +246,13 @@ def _utc(value: str | date | datetime | None) -> datetime | None:
     return value.replace(tzinfo=timezone.utc) if value.tzinfo is None else value.astimezone(timezone.utc)
 
 
-def lake_chunks(warehouse: Path, valve_id: str, gap_s: float, start: datetime | None, end: datetime | None, days: int = CHUNK_DAYS) -> Iterator[pl.DataFrame]:
-    """The valve's lake rows in [start, end), ``days`` partitions at a time, each chunk ending at a
-    gap: a contiguous run of samples that reaches the end of a chunk is carried into the next."""
+def lake_chunks(warehouse: Path, valve_id: str, gap_s: float, start: datetime | None, end: datetime | None, days: int | None = None) -> Iterator[pl.DataFrame]:
+    """The valve's lake rows in [start, end), ``days`` partitions at a time (default
+    :data:`CHUNK_DAYS`), each chunk ending at a gap: a contiguous run of samples that reaches
+    the end of a chunk is carried into the next."""
+    days = CHUNK_DAYS if days is None else int(days)
+    if days < 1:
+        raise ValueError(f"chunk days must be >= 1, got {days}")
     dates = sorted({d for _, d, _ in list_partitions(warehouse, [valve_id], start, end)})
     carry = None
     for i in range(0, len(dates), days):
@@ -297,16 +336,18 @@ class ValveReport:
     status_counts: dict[str, int] = field(default_factory=dict)
 
 
-def monitor_valve(config: PlantConfig, valve_id: str, warehouse: Path, start: datetime | None = None, end: datetime | None = None) -> ValveReport:
+def monitor_valve(
+    config: PlantConfig, valve_id: str, warehouse: Path, start: datetime | None = None, end: datetime | None = None,
+    *, chunk_days: int | None = None,
+) -> ValveReport:
     """Steps 2–6 for one valve over [start, end) of its lake; see the module docstring."""
     valve = config.valve(valve_id)
     params = monitor_params(valve, config.export.sample_rate_hz)
     baselines = ensure_baselines(valve, params, warehouse)
     report = ValveReport(valve_id, baseline_source=baselines["s1"].source, baseline_plausible=all(b.plausible for b in baselines.values()))
-    chars = {valve.id: {e: b.characteristic for e, b in baselines.items()}}
     gap_s = params.gap_limit_periods * params.sample_period_s
-    for rows in lake_chunks(warehouse, valve.id, gap_s, start, end):
-        res = monitor(rows, params, chars)
+    for rows in lake_chunks(warehouse, valve.id, gap_s, start, end, chunk_days):
+        res = monitor_rows(valve, params, baselines, rows)
         now = datetime.now(timezone.utc)
         fits = _fits_table(res.fits, valve, baselines, now)
         selection = res.selection.select([f.name for f in SELECTION_FIELDS]).cast(dict(polars_schema(SELECTION_FIELDS)))
@@ -327,8 +368,11 @@ def run_monitor(
     end: str | date | datetime | None = None,
     *,
     valve_runner: Callable[..., ValveReport] = monitor_valve,
+    chunk_days: int | None = None,
 ) -> list[ValveReport]:
-    """Monitor the plant's valves (or ``valve_ids``); ``valve_runner`` lets the flow pass its task."""
+    """Monitor the plant's valves (or ``valve_ids``); ``valve_runner`` lets the flow pass its task.
+    ``chunk_days``: lake days read at once per valve (default :data:`CHUNK_DAYS`; the fits do not
+    depend on it)."""
     config = load_plant_config(config_path)
     warehouse = Path(warehouse)
     known = [v.id for v in config.valves]
@@ -338,7 +382,9 @@ def run_monitor(
     t0, t1 = _utc(start), _utc(end)
     if t0 and t1 and t1 <= t0:
         raise ValvemonError("--to must be later than --from")
-    return [valve_runner(config, v, warehouse, t0, t1) for v in (valve_ids or known)]
+    if chunk_days is None:
+        return [valve_runner(config, v, warehouse, t0, t1) for v in (valve_ids or known)]
+    return [valve_runner(config, v, warehouse, t0, t1, chunk_days=chunk_days) for v in (valve_ids or known)]
 
 
 @task(name="monitor-valve", cache_policy=NO_CACHE, persist_result=False)

@@ -201,30 +201,35 @@ def _newton(u, a, jc, s, e, kn, kv, ks, k0, k1, tab, toff, tlo, tinv, tn, x, lo,
 
 
 @numba.njit(cache=True)
-def _fit_one(u, a, jc, s, e, kn, kv, ks, k0, k1, tab, toff, tlo, tinv, tn, xb, n_grid, sub_max, xtol, maxiter):
-    """Returns (x̂, code, passes, sums at x̂ or zeros)."""
+def _fit_one(u, a, jc, s, e, kn, kv, ks, k0, k1, tab, toff, tlo, tinv, tn, xb, n_grid, sub_max, xtol, maxiter, x_start):
+    """Returns (x̂, code, passes, sums at x̂ or zeros). A finite ``x_start`` (a previous optimum
+    of nearly the same population) replaces the coarse grid: Newton starts there, bracketed by
+    one grid step on either side (moved on like any bracket if the optimum lies beyond)."""
     zero = (0.0, 0.0, 0.0, 0.0)
     n = e - s
     stride = max(1, n // sub_max)
     saa = 0.0
-    saa_sub = 0.0
     for i in range(s, e):
         saa += a[i] * a[i]
-    for i in range(s, e, stride):
-        saa_sub += a[i] * a[i]
-    # 1. coarse grid on a strided subsample
-    best_g = -1
-    best_f = np.inf
     step = 2.0 * xb / (n_grid - 1)
-    for g in range(n_grid):
-        xg = -xb + g * step
-        f, fp, fpp, al, good = _profile(u, a, jc, s, e, stride, kn, kv, ks, k0, k1, tab, toff, tlo, tinv, tn, xg, 0, saa_sub)
-        if good and f < best_f:
-            best_f = f
-            best_g = g
-    if best_g < 0:
-        return 0.0, _DEGENERATE, 0, zero
-    x0 = -xb + best_g * step
+    if np.isfinite(x_start):
+        x0 = min(max(x_start, -xb), xb)
+    else:
+        saa_sub = 0.0
+        for i in range(s, e, stride):
+            saa_sub += a[i] * a[i]
+        # 1. coarse grid on a strided subsample
+        best_g = -1
+        best_f = np.inf
+        for g in range(n_grid):
+            xg = -xb + g * step
+            f, fp, fpp, al, good = _profile(u, a, jc, s, e, stride, kn, kv, ks, k0, k1, tab, toff, tlo, tinv, tn, xg, 0, saa_sub)
+            if good and f < best_f:
+                best_f = f
+                best_g = g
+        if best_g < 0:
+            return 0.0, _DEGENERATE, 0, zero
+        x0 = -xb + best_g * step
     lo = max(-xb, x0 - step)
     hi = min(xb, x0 + step)
     # 2. Newton on the full population inside the grid bracket; if it ends on a bracket edge that
@@ -255,7 +260,7 @@ def _fit_one(u, a, jc, s, e, kn, kv, ks, k0, k1, tab, toff, tlo, tinv, tn, xb, n
 
 
 @numba.njit(cache=True)
-def _fit_groups(u, a, offsets, kstart, kend, kn, kv, ks, tab, tstart, tlo, tinv, tn, xbound, active, n_grid, sub_max, xtol, maxiter):
+def _fit_groups(u, a, offsets, kstart, kend, kn, kv, ks, tab, tstart, tlo, tinv, tn, xbound, active, n_grid, sub_max, xtol, maxiter, x_start):
     g_n = offsets.shape[0] - 1
     alpha = np.full(g_n, np.nan)
     xhat = np.full(g_n, np.nan)
@@ -275,7 +280,7 @@ def _fit_groups(u, a, offsets, kstart, kend, kn, kv, ks, tab, tstart, tlo, tinv,
         k0 = kstart[g]
         k1 = kend[g]
         toff, tlo_g, tinv_g, tn_g = tstart[g], tlo[g], tinv[g], tn[g]
-        x, c, p, sums = _fit_one(u, a, jc, s, e, kn, kv, ks, k0, k1, tab, toff, tlo_g, tinv_g, tn_g, xbound[g], n_grid, sub_max, xtol, maxiter)
+        x, c, p, sums = _fit_one(u, a, jc, s, e, kn, kv, ks, k0, k1, tab, toff, tlo_g, tinv_g, tn_g, xbound[g], n_grid, sub_max, xtol, maxiter, x_start[g])
         iters[g] = p
         code[g] = c
         if c == _DEGENERATE:
@@ -399,10 +404,15 @@ def fit_arrays(
     sub_max: int = 96,
     xtol_m: float = 1e-9,
     maxiter: int = 60,
+    x_start_m: np.ndarray | None = None,
 ) -> dict[str, np.ndarray]:
     """Eq. 8 for G populations stored contiguously: points ``offsets[g]:offsets[g+1]`` of
     ``u``/``area`` belong to population g, whose baseline is ``characteristics[g]``
     (None = no baseline). Settings may be scalars or per-population arrays.
+
+    ``x_start_m`` (per population, NaN = none): warm start from a previous optimum of nearly the
+    same points (the leakage refinement of :func:`transforms.monitor.monitor`); the coarse grid
+    is skipped for those populations.
 
     Returns per population: ``status`` (str), ``n_points``, ``u_min_m``, ``u_max_m``,
     ``alpha_hat``, ``x_hat_m``, ``e_m2``, CI bounds, ``ci_inflation``, ``iterations``.
@@ -450,6 +460,7 @@ def fit_arrays(
         u, area, offsets, pk.kstart, pk.kend, pk.kn, pk.kv, pk.ks, pk.tab, pk.tstart, pk.tlo, pk.tinv, pk.tn,
         x_bound, active.astype(np.bool_),
         int(n_grid), int(sub_max), float(xtol_m), int(maxiter),
+        np.full(g_n, np.nan) if x_start_m is None else _as_group_array(x_start_m, g_n, np.float64),
     )
     status[code == _DEGENERATE] = "degenerate"
     status[code == _AT_BOUND] = "x_hat_at_bound"
@@ -588,10 +599,14 @@ def fit_groups(
     offsets: np.ndarray,
     baselines: Mapping[str, Mapping[str, Characteristic]],
     params: Mapping[str, MonitorParams],
+    *,
+    x_start_m: np.ndarray | None = None,
+    sort: bool = True,
 ) -> pl.DataFrame:
     """Eq. 8 for populations laid out contiguously: ``groups`` (``valve_id, window_id,
     window_start, window_end, edge``) row g owns the points ``offsets[g]:offsets[g + 1]`` of
-    ``u``/``area``. Returns :data:`FIT_COLUMNS`, sorted by valve, window and edge."""
+    ``u``/``area``. Returns :data:`FIT_COLUMNS`, sorted by valve, window and edge (in the order
+    of ``groups`` when not ``sort``). ``x_start_m``: warm starts (:func:`fit_arrays`)."""
     valve_ids = groups["valve_id"].to_list()
     edge_ids = groups["edge"].to_list()
     g_n = groups.height
@@ -609,8 +624,11 @@ def fit_groups(
         min_points=np.array([per_valve[v].min_points for v in valve_ids], dtype=np.int64).reshape(g_n),
         min_coverage_m=np.array([per_valve[v].min_coverage_m for v in valve_ids]).reshape(g_n),
         ci_level=ci_level,
+        x_start_m=x_start_m,
     )
     out = groups.with_columns(pl.Series(name, col) for name, col in res.items())
+    if not sort:
+        return out.select(FIT_COLUMNS)
     edge_rank = {e: i for i, e in enumerate(EDGES)}
     return out.select(FIT_COLUMNS).sort(
         pl.col("valve_id"),

@@ -18,14 +18,29 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 import polars as pl
 
-from transforms.characteristic import Characteristic
+from transforms.characteristic import (
+    Characteristic,
+    Plausibility,
+    carrier_fit,
+    fit_characteristic,
+    plausibility,
+    scaled_shifted,
+)
 from transforms.derivatives import add_savgol, savgol_exprs
-from transforms.fit import fit_groups, fit_windows
+from transforms.fit import FIT_COLUMNS, fit_groups
 from transforms.params import EDGES, MonitorParams
-from transforms.points import DEFAULT_SIGNALS, EDGE_SIGN, POINT_COLUMNS, opening_area_points, points_arrays
+from transforms.points import (
+    DEFAULT_SIGNALS,
+    EDGE_SIGN,
+    OPPOSITE_EDGE,
+    POINT_COLUMNS,
+    opening_area_points,
+    points_arrays,
+)
 from transforms.selection import (
     SELECTED_CODE,
     add_selection_flags,
@@ -36,7 +51,15 @@ from transforms.selection import (
 )
 from transforms.windows import assign_windows, infer_sample_period_s, window_arrays, window_table
 
-__all__ = ["LAKE_COLUMNS", "MonitorResult", "monitor", "monitor_points", "prepare_samples"]
+__all__ = [
+    "LAKE_COLUMNS",
+    "BaselineFit",
+    "MonitorResult",
+    "commissioning_baseline",
+    "monitor",
+    "monitor_points",
+    "prepare_samples",
+]
 
 LAKE_COLUMNS = ("valve_id", "timestamp_utc", "ps_pa", "pr_pa", "p1_pa", "p2_pa", "x_spool_m", "x_cyl_m")
 """Lake columns the algorithm reads (others are ignored)."""
@@ -125,16 +148,28 @@ def _time_sorted(lake_v: pl.DataFrame) -> pl.DataFrame:
     return lake_v
 
 
-def _valve_polars(lake_v, valve_id, p, leakage):
+def _valve_polars(lake_v, valve_id, p, leakage, with_ratio):
     framed = prepare_samples(_time_sorted(lake_v), p)
     points = opening_area_points(
         framed, p, selected={e: pl.col(selected_column(e)) for e in EDGES},
-        leakage=None if leakage is None else leakage.get(valve_id),
+        leakage=None if leakage is None else leakage.get(valve_id), with_ratio=with_ratio,
     )
-    return points, selection_stats(framed), window_table(framed), None
+    windows = window_table(framed)
+    ratio = None
+    if with_ratio:
+        ratio = points["leak_ratio"].to_numpy()
+        points = points.drop("leak_ratio")
+    # the populations in the order of `points` (edge-major, windows in time order), as the
+    # compiled path lays them out
+    counts = points.group_by("edge", "window_id").len()
+    groups = pl.concat(
+        [windows.select("valve_id", "window_id", "window_start", "window_end", pl.lit(edge).alias("edge")) for edge in EDGES]
+    )
+    sizes = groups.join(counts, on=["edge", "window_id"], how="left", maintain_order="left")["len"].fill_null(0)
+    return points, selection_stats(framed), windows, (groups, sizes.to_numpy()), ratio
 
 
-def _valve_numba(lake_v, valve_id, p, leakage):
+def _valve_numba(lake_v, valve_id, p, leakage, with_ratio):
     lake_v = _time_sorted(lake_v)
     dt = p.sample_period_s or infer_sample_period_s(lake_v)
     n = lake_v.height
@@ -168,8 +203,8 @@ def _valve_numba(lake_v, valve_id, p, leakage):
     codes, flagged, removed, selected, _ = selection_codes(arrays, win, n_windows, p, valid=valid)
     stats = stats_frame(valve_id, windows, flagged, removed, selected)
 
-    idx, area, offs = points_arrays(
-        arrays, codes, SELECTED_CODE, p, leakage=None if leakage is None else leakage.get(valve_id)
+    idx, area, offs, ratio = points_arrays(
+        arrays, codes, SELECTED_CODE, p, leakage=None if leakage is None else leakage.get(valve_id), with_ratio=with_ratio
     )
     sign = np.concatenate([np.full(offs[e + 1] - offs[e], float(EDGE_SIGN[edge])) for e, edge in enumerate(EDGES)])
     pw = win[idx]
@@ -190,10 +225,10 @@ def _valve_numba(lake_v, valve_id, p, leakage):
     groups = pl.concat(
         [windows.select("valve_id", "window_id", "window_start", "window_end", pl.lit(edge).alias("edge")) for edge in EDGES]
     )
-    return points, stats, windows, (groups, selected.T.reshape(-1))
+    return points, stats, windows, (groups, selected.T.reshape(-1)), (ratio if with_ratio else None)
 
 
-def _monitor_points(lake, params, leakage, engine):
+def _monitor_points(lake, params, leakage, engine, with_ratio=False):
     if engine not in ("numba", "polars"):
         raise ValueError(f"engine must be 'numba' or 'polars', got {engine!r}")
     missing = [c for c in LAKE_COLUMNS if c not in lake.columns]
@@ -201,13 +236,14 @@ def _monitor_points(lake, params, leakage, engine):
         raise ValueError(f"lake frame lacks columns {missing}")
     lake, slices = _valve_slices(lake)
     run = _valve_numba if engine == "numba" else _valve_polars
-    points, stats, windows, layouts = [], [], [], []
+    points, stats, windows, layouts, ratios = [], [], [], [], []
     for valve_id, off, length in slices:
-        pts, st, wt, layout = run(lake.slice(off, length), valve_id, _params_for(params, valve_id), leakage)
+        pts, st, wt, layout, ratio = run(lake.slice(off, length), valve_id, _params_for(params, valve_id), leakage, with_ratio)
         points.append(pts)
         stats.append(st)
         windows.append(wt)
         layouts.append(layout)
+        ratios.append(ratio)
     if not slices:  # no rows: empty frames with the right schemas
         p = params if isinstance(params, MonitorParams) else next(iter(params.values()), None)
         if p is None:
@@ -216,19 +252,20 @@ def _monitor_points(lake, params, leakage, engine):
         stats.append(selection_stats(framed))
         windows.append(window_table(framed))
         points.append(opening_area_points(framed, p, selected={e: pl.col(selected_column(e)) for e in EDGES}))
-        layouts.append(None)
+        layouts.append((pl.DataFrame(schema={"valve_id": pl.Utf8, "window_id": pl.UInt32, "window_start": _UTC_US,
+                                             "window_end": _UTC_US, "edge": pl.Utf8}), np.zeros(0, dtype=np.int64)))
+        ratios.append(np.zeros(0) if with_ratio else None)
     res = MonitorResult(
         points=pl.concat(points, how="vertical").select(POINT_COLUMNS),
         selection=pl.concat(stats, how="vertical"),
         fits=pl.DataFrame(),
         windows=pl.concat(windows, how="vertical"),
     )
-    layout = None
-    if all(lay is not None for lay in layouts):
-        groups = pl.concat([lay[0] for lay in layouts], how="vertical")
-        sizes = np.concatenate([lay[1] for lay in layouts]).astype(np.int64)
-        layout = (groups, np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64))
-    return res, layout
+    groups = pl.concat([lay[0] for lay in layouts], how="vertical")
+    sizes = np.concatenate([lay[1] for lay in layouts]).astype(np.int64)
+    layout = (groups, np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64))
+    ratio = np.concatenate(ratios) if with_ratio else None
+    return res, layout, ratio
 
 
 def monitor_points(
@@ -255,21 +292,234 @@ def monitor(
     baselines: Mapping[str, Mapping[str, Characteristic]],
     *,
     leakage: Mapping[str, Mapping[str, Characteristic]] | None = None,
+    leakage_passes: int | None = None,
     engine: str = "numba",
 ) -> MonitorResult:
     """Steps 2–4b: lake rows of one or more valves → points, selection statistics and fits.
 
     ``params``: one :class:`MonitorParams` per valve (or one for all); ``baselines[valve][edge]``:
     Â per edge (the commissioning fit or the nominal characteristic). A window/edge without a
-    usable population still gets a fit row with its status. ``leakage``, ``engine``: as in
-    :func:`monitor_points` (the baselines must have been built with the same ``leakage``).
+    usable population still gets a fit row with its status. ``engine``: as in
+    :func:`monitor_points`.
+
+    ``leakage[valve][edge]``: α·A of each edge *at its baseline state* over the whole stroke
+    (closed branch included: the nominal Eq. 3 characteristic for a nominal baseline,
+    α_b·nominal(u + x_b) for a commissioning baseline, :class:`BaselineFit`). When given, every
+    point is corrected for the flow through the closed edge o of its port
+    (:mod:`transforms.points`), and the correction follows each window's own state of o:
+    after a first fit with o at its baseline state, o's leakage is rebuilt from o's estimate in
+    the same window, α̂_o·L_o(u + x̂_o) (a fit that is not ``ok`` but has ≥ 50 points gives a
+    scale-only estimate, none the baseline state), and the window is fitted again, warm-started;
+    ``leakage_passes`` times (default: the largest ``leakage_passes`` of the valves' params).
+    The returned points carry the corrected areas. The baselines must have been built with the
+    same correction (:func:`commissioning_baseline`).
     """
-    res, layout = _monitor_points(lake, params, leakage, engine)
-    valves = res.windows["valve_id"].unique().to_list()
-    pmap = {v: _params_for(params, v) for v in valves}
-    if layout is not None:  # the compiled path knows the populations' layout already
-        groups, offsets = layout
+    if leakage is None:
+        res, (groups, offsets), _ = _monitor_points(lake, params, None, engine)
+        pmap = {v: _params_for(params, v) for v in res.windows["valve_id"].unique().to_list()}
         fits = fit_groups(groups, res.points["u_m"].to_numpy(), res.points["area_m2"].to_numpy(), offsets, baselines, pmap)
-    else:
-        fits = fit_windows(res.points, baselines, pmap, windows=res.windows)
-    return MonitorResult(points=res.points, selection=res.selection, fits=fits, windows=res.windows)
+        return MonitorResult(points=res.points, selection=res.selection, fits=fits, windows=res.windows)
+
+    res, (groups, offsets), ratio = _monitor_points(lake, params, None, engine, with_ratio=True)
+    pmap = {v: _params_for(params, v) for v in res.windows["valve_id"].unique().to_list()}
+    if leakage_passes is None:
+        leakage_passes = max((p.leakage_passes for p in pmap.values()), default=1)
+    u = res.points["u_m"].to_numpy()
+    plain = res.points["area_m2"].to_numpy()
+    g_n = groups.height
+    valve_ids = groups["valve_id"].to_list()
+    edge_ids = groups["edge"].to_list()
+    # the characteristic each population's closed edge leaks through, and that edge's population
+    chars = [leakage.get(v, {}).get(OPPOSITE_EDGE[e]) for v, e in zip(valve_ids, edge_ids, strict=True)]
+    opposite = _opposite_groups(groups)
+    packed = _LeakPacked(chars)
+    scale = np.ones(g_n)
+    shift = np.zeros(g_n)
+    area = np.empty_like(plain)
+    _leak_correct(u, plain, ratio, offsets, scale, shift, packed.kstart, packed.kend, packed.kn, packed.kv, packed.ks, area)
+    fits = fit_groups(groups, u, area, offsets, baselines, pmap, sort=False)
+    for _ in range(int(leakage_passes)):
+        own_a, own_x = _edge_states(fits, u, area, offsets, baselines, valve_ids, edge_ids)
+        scale, shift = own_a[opposite], own_x[opposite]
+        _leak_correct(u, plain, ratio, offsets, scale, shift, packed.kstart, packed.kend, packed.kn, packed.kv, packed.ks, area)
+        x0 = fits["x_hat_m"].to_numpy().copy()
+        fits = fit_groups(groups, u, area, offsets, baselines, pmap, x_start_m=x0, sort=False)
+    edge_rank = {e: i for i, e in enumerate(EDGES)}
+    fits = fits.sort(
+        pl.col("valve_id"), pl.col("window_start"), pl.col("window_id"),
+        pl.col("edge").replace_strict(edge_rank, return_dtype=pl.Int8), maintain_order=True,
+    ).select(FIT_COLUMNS)  # fmt: skip
+    points = res.points.with_columns(pl.Series("area_m2", area))
+    return MonitorResult(points=points, selection=res.selection, fits=fits, windows=res.windows)
+
+
+# --------------------------------------------------------------------------------------------
+# closed-edge leakage that follows each window's estimates
+# --------------------------------------------------------------------------------------------
+
+SCALE_ONLY_MIN_POINTS = 50
+"""A population whose fit is not ``ok`` but has at least this many points still gives its edge's
+leakage a scale-only estimate (Σ A Â / Σ Â² at x̂ = 0). Near the closed branch this is nearly
+as good as the full estimate: a narrow population confounds α̂ and x̂ along α̂·(u + x̂ + const)
+≈ const, and the leakage ∝ α/(|u| − x) is nearly invariant along that line."""
+
+
+def _opposite_groups(groups: pl.DataFrame) -> np.ndarray:
+    """Row of the population of the same valve and window whose edge is the closed edge of the
+    same port (every window has a row per edge)."""
+    g = groups.select("valve_id", "window_id", "edge").with_row_index("_g")
+    other = g.with_columns(pl.col("edge").replace_strict(OPPOSITE_EDGE, return_dtype=pl.Utf8))
+    joined = other.join(g, on=["valve_id", "window_id", "edge"], how="left", maintain_order="left")
+    return joined["_g_right"].to_numpy().astype(np.int64)
+
+
+class _LeakPacked:
+    """Per-population leakage characteristics concatenated (None = no correction: zero)."""
+
+    def __init__(self, chars):
+        index: dict[int, int] = {}
+        kn, kv, starts, ends = [], [], [], []
+        pos = 0
+        g_n = len(chars)
+        self.kstart = np.zeros(g_n, dtype=np.int64)
+        self.kend = np.zeros(g_n, dtype=np.int64)
+        zero = Characteristic(np.array([-1.0, 1.0]), np.zeros(2))
+        for gi, c in enumerate(chars):
+            c = zero if c is None else c
+            key = id(c)
+            if key not in index:
+                index[key] = len(starts)
+                kn.append(c.knots_u_m)
+                kv.append(c.values_m2)
+                starts.append(pos)
+                pos += c.knots_u_m.shape[0]
+                ends.append(pos)
+            ci = index[key]
+            self.kstart[gi], self.kend[gi] = starts[ci], ends[ci]
+        self.kn = np.concatenate(kn) if kn else np.array([-1.0, 1.0])
+        self.kv = np.concatenate(kv) if kv else np.zeros(2)
+        self.ks = np.zeros_like(self.kn)
+        for s0, s1 in zip(starts, ends, strict=True):
+            d = np.diff(self.kv[s0:s1]) / np.diff(self.kn[s0:s1])
+            self.ks[s0 : s1 - 1] = d
+            self.ks[s1 - 1] = d[-1]
+
+
+@numba.njit(cache=True)
+def _leak_correct(u, plain, ratio, offsets, scale, shift, kstart, kend, kn, kv, ks, out):
+    """out_i = plain_i − a_g·L_g(−u_i + x_g)·ratio_i for the points of each population g, L_g
+    piecewise linear (linear beyond its end knots); the segment is walked from the previous
+    point's (points are in time order, so the walk is 0–1 steps)."""
+    for g in range(offsets.shape[0] - 1):
+        s = offsets[g]
+        e = offsets[g + 1]
+        if e == s:
+            continue
+        k0 = kstart[g]
+        k1 = kend[g]
+        a = scale[g]
+        x = shift[g]
+        j = k0
+        for i in range(s, e):
+            t = x - u[i]
+            while j > k0 and t < kn[j]:
+                j -= 1
+            while j < k1 - 2 and t >= kn[j + 1]:
+                j += 1
+            out[i] = plain[i] - a * (kv[j] + ks[j] * (t - kn[j])) * ratio[i]
+
+
+def _edge_states(fits, u, area, offsets, baselines, valve_ids, edge_ids):
+    """Each population's own state relative to its baseline, (scale, shift): the fit where it is
+    ``ok``, else a scale-only estimate (:data:`SCALE_ONLY_MIN_POINTS`), else (1, 0)."""
+    status = fits["status"].to_numpy()
+    a = fits["alpha_hat"].to_numpy().copy()
+    x = fits["x_hat_m"].to_numpy().copy()
+    ok = (status == "ok") & np.isfinite(a) & np.isfinite(x)
+    a[~ok] = 1.0
+    x[~ok] = 0.0
+    n = np.diff(offsets)
+    for g in np.flatnonzero(~ok & (n >= SCALE_ONLY_MIN_POINTS)):
+        base = baselines.get(valve_ids[g], {}).get(edge_ids[g])
+        if base is None:
+            continue
+        b = base.evaluate(u[offsets[g] : offsets[g + 1]])
+        bb = float(b @ b)
+        s = float(area[offsets[g] : offsets[g + 1]] @ b) / bb if bb > 0 else float("nan")
+        if np.isfinite(s) and s > 0:
+            a[g] = s
+    return a, x
+
+
+# --------------------------------------------------------------------------------------------
+# step 4a + 5a on a commissioning window
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class BaselineFit:
+    """Step 4a/5a result for one edge of a commissioning window."""
+
+    edge: str
+    characteristic: Characteristic | None
+    """Â (None: fewer than ``min_points`` points or too narrow to place two knots)."""
+    n_points: int
+    u_range_m: tuple[float, float]
+    """Range of the points' u (NaN without points)."""
+    alpha_vs_nominal: float
+    x_vs_nominal_m: float
+    """Eq. 8 of the points onto the nominal characteristic: the edge's commissioning state."""
+    leakage: Characteristic
+    """α·A of this edge over the whole stroke at commissioning, α_b·nominal(u + x_b): what the
+    other edge of its port sees leaking (the ``leakage`` argument of :func:`monitor`)."""
+    plausibility: Plausibility | None
+    """Step 5a against the nominal characteristic over ``u_range_m``."""
+
+
+def commissioning_baseline(
+    lake: pl.DataFrame,
+    params: MonitorParams,
+    nominal: Mapping[str, Characteristic],
+    *,
+    leakage: bool = True,
+    leakage_passes: int | None = None,
+    engine: str = "numba",
+) -> dict[str, BaselineFit]:
+    """Steps 2–4a and 5a on one valve's commissioning rows: Â per edge and its plausibility.
+
+    Â is :func:`transforms.characteristic.fit_characteristic` with the nominal characteristic as
+    carrier (the points' knots, sampled every ``params.baseline_grid_m``, widened by the fit's
+    search bound). With ``leakage`` (the default, and what :func:`monitor` then must use too)
+    the points are corrected for the closed edge's flow, first at its nominal state, then
+    ``leakage_passes`` times (default ``params.leakage_passes``) at the state that edge's own
+    points give (Eq. 8 onto the nominal: α_b, x_b).
+    """
+    valve_ids = lake["valve_id"].unique().to_list()
+    if len(valve_ids) != 1:
+        raise ValueError(f"commissioning_baseline needs the rows of one valve, got {len(valve_ids)}")
+    vid = valve_ids[0]
+    passes = params.leakage_passes if leakage_passes is None else int(leakage_passes)
+    state = {e: (1.0, 0.0) for e in EDGES}
+    out: dict[str, BaselineFit] = {}
+    for it in range(1 + (passes if leakage else 0)):
+        leak = {e: scaled_shifted(nominal[e], *state[e]) for e in EDGES}
+        pts = monitor_points(lake, params, leakage={vid: leak} if leakage else None, engine=engine).points
+        new_state = {}
+        for e in EDGES:
+            p = pts.filter(pl.col("edge") == e)
+            u, a = p["u_m"].to_numpy(), p["area_m2"].to_numpy()
+            n = u.shape[0]
+            rng = (float(u.min()), float(u.max())) if n else (float("nan"), float("nan"))
+            ab, xb = carrier_fit(u, a, nominal[e], x_search_m=params.x_hat_bound_m) if n >= 3 else (1.0, 0.0)
+            new_state[e] = (ab, xb)
+            char = check = None
+            if n >= params.min_points and rng[1] - rng[0] >= params.min_knot_spacing_m:
+                char = fit_characteristic(
+                    u, a, max_knots=params.max_knots, min_spacing_m=params.min_knot_spacing_m,
+                    points_per_interval=params.points_per_knot_interval, carrier=nominal[e],
+                    extend_m=params.x_hat_bound_m, grid_step_m=params.baseline_grid_m,
+                )  # fmt: skip
+                check = plausibility(char, nominal[e], u_range=rng, x_search_m=params.x_hat_bound_m)
+            out[e] = BaselineFit(e, char, n, rng, ab, xb, scaled_shifted(nominal[e], ab, xb), check)
+        state = new_state
+    return out

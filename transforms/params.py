@@ -143,11 +143,17 @@ class MonitorParams:
     max_knots: int = 12
     min_knot_spacing_m: float = 0.1e-3
     points_per_knot_interval: int = 200
+    baseline_grid_m: float = 0.05e-3
+    """Sampling step of a carrier-shaped step-4a characteristic (transforms.characteristic)."""
+    leakage_passes: int = 1
+    """Refits with the closed edge's leakage rebuilt from its own estimate (0: its baseline state only)."""
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "underlap_m", _edge_tuple(self.underlap_m, "underlap_m"))
+        if not (isinstance(self.leakage_passes, int) and self.leakage_passes >= 0):
+            raise ValueError(f"leakage_passes must be an integer >= 0, got {self.leakage_passes}")
         for f in fields(self):
-            if f.name == "underlap_m":
+            if f.name in ("underlap_m", "leakage_passes"):
                 continue
             v = getattr(self, f.name)
             if v is None:

@@ -48,6 +48,7 @@ __all__ = [
     "area_expr",
     "characteristic_expr",
     "edge_dp_expr",
+    "leak_ratio_expr",
     "opening_area_points",
     "opening_coordinate_expr",
     "points_arrays",
@@ -120,6 +121,15 @@ def opening_coordinate_expr(edge: str, signals: Signals = DEFAULT_SIGNALS) -> pl
     return x if EDGE_SIGN[edge] > 0 else -x
 
 
+def leak_ratio_expr(edge: str, signals: Signals = DEFAULT_SIGNALS) -> pl.Expr:
+    """sign(Δp_o) sqrt|Δp_o| / (sign(Δp_e) sqrt|Δp_e|), o the closed edge of the same port:
+    the closed-edge term of :func:`area_expr` is ``L(−u) ·`` this, for any characteristic L."""
+    _check_edge(edge)
+    dp = edge_dp_expr(edge, signals)
+    dpo = edge_dp_expr(OPPOSITE_EDGE[edge], signals)
+    return (dpo.sign() * dpo.abs().sqrt()) / (dp.sign() * dp.abs().sqrt())
+
+
 def characteristic_expr(characteristic: Characteristic, u: pl.Expr) -> pl.Expr:
     """A piecewise-linear characteristic evaluated on an expression (numpy inside a batch)."""
     return u.map_batches(
@@ -161,8 +171,10 @@ def opening_area_points(
     signals: Signals = DEFAULT_SIGNALS,
     edges: tuple[str, ...] = EDGES,
     leakage: Mapping[str, Characteristic] | None = None,
+    with_ratio: bool = False,
 ) -> pl.DataFrame | pl.LazyFrame:
-    """Long frame of points ``valve_id, window_id, window_start, timestamp_utc, edge, u_m, area_m2``.
+    """Long frame of points ``valve_id, window_id, window_start, timestamp_utc, edge, u_m, area_m2``
+    (and ``leak_ratio``, :func:`leak_ratio_expr`, when ``with_ratio``).
 
     ``selected[edge]`` is a boolean expression choosing the rows that become the edge's points
     (from :func:`transforms.selection.selected_expr`); without it every row with a derivative
@@ -185,6 +197,7 @@ def opening_area_points(
                     edge, params, signals,
                     leakage=None if leakage is None else leakage[OPPOSITE_EDGE[edge]],
                 ).alias("area_m2"),
+                *([leak_ratio_expr(edge, signals).alias("leak_ratio")] if with_ratio else []),
             )
         )
     return pl.concat(parts, how="vertical")
@@ -216,13 +229,14 @@ def _pwl(kn, kv, k0, k1, t):
 
 
 @numba.njit(cache=True)
-def _points_kernel(codes, n_selected, selected_code, ps, pr, p1, p2, x, xc, dp1, dp2, v, c, lkn, lkv, loff, use_leak):
+def _points_kernel(codes, n_selected, selected_code, ps, pr, p1, p2, x, xc, dp1, dp2, v, c, lkn, lkv, loff, use_leak, want_ratio):
     sq, beta, a1, a2, v01, v02 = c[0], c[1], c[2], c[3], c[4], c[5]
     offsets = np.zeros(5, dtype=np.int64)
     for e in range(4):
         offsets[e + 1] = offsets[e] + n_selected[e]
     idx = np.empty(offsets[4], dtype=np.int64)
     area = np.empty(offsets[4], dtype=np.float64)
+    ratio = np.empty(offsets[4] if want_ratio else 0, dtype=np.float64)
     cursor = offsets[:4].copy()
     for i in range(x.shape[0]):
         for e in range(4):
@@ -242,6 +256,8 @@ def _points_kernel(codes, n_selected, selected_code, ps, pr, p1, p2, x, xc, dp1,
                 dp, dpo, other, sign_u = p2[i] - pr[i], p2[i] - ps[i], 2, 1.0
             den = np.sign(dp) * np.sqrt(abs(dp))
             k = cursor[e]
+            if want_ratio:
+                ratio[k] = np.sign(dpo) * np.sqrt(abs(dpo)) / den
             if use_leak:
                 leak = _pwl(lkn, lkv, loff[other], loff[other + 1], -sign_u * x[i])
                 area[k] = (sq * num / beta - leak * np.sign(dpo) * np.sqrt(abs(dpo))) / den
@@ -249,7 +265,7 @@ def _points_kernel(codes, n_selected, selected_code, ps, pr, p1, p2, x, xc, dp1,
                 area[k] = (sq * num) / (beta * den)
             idx[k] = i
             cursor[e] = k + 1
-    return idx, area, offsets
+    return idx, area, offsets, ratio
 
 
 def points_arrays(
@@ -259,13 +275,16 @@ def points_arrays(
     params: MonitorParams,
     *,
     leakage: Mapping[str, Characteristic] | None = None,
+    with_ratio: bool = False,
 ):
     """Eq. 7 (and its siblings) for the rows whose ``codes[:, e]`` equal ``selected_code``
     (:func:`transforms.selection.selection_codes`), in one compiled pass per edge.
 
-    Returns ``(idx, area, offsets)``: row indices and α·A of edge e in
+    Returns ``(idx, area, offsets, ratio)``: row indices and α·A of edge e in
     ``offsets[e]:offsets[e + 1]`` (edges in :data:`EDGES` order, rows in input order).
-    Same formulas as :func:`area_expr`, same optional closed-edge correction.
+    Same formulas as :func:`area_expr`, same optional closed-edge correction. ``ratio`` (empty
+    unless ``with_ratio``): :func:`leak_ratio_expr` per point, so that any closed-edge
+    characteristic L can be subtracted later as ``area − L(−u)·ratio``.
     """
     s = DEFAULT_SIGNALS
     n_sel = (codes == selected_code).sum(axis=0).astype(np.int64)
@@ -286,5 +305,5 @@ def points_arrays(
         codes, n_sel, int(selected_code),
         *(np.ascontiguousarray(arrays[k], dtype=np.float64) for k in (
             s.ps, s.pr, s.p1, s.p2, s.x_spool, s.x_cyl, s.dp1_dt, s.dp2_dt, s.v_cyl)),
-        c, lkn, lkv, loff, leakage is not None,
+        c, lkn, lkv, loff, leakage is not None, bool(with_ratio),
     )
