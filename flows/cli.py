@@ -272,6 +272,7 @@ def discrepancy(
     from flows.config import warehouse_dir
     from flows.ingest import quiet_prefect_console
 
+    discrepancy_flows.check_arguments(config, valve, start, end, valve_condition, max_records)  # fail fast, before Prefect starts
     quiet_prefect_console()
     report = discrepancy_flows.discrepancy_flow(
         config_path=str(config), warehouse=str(warehouse_dir(warehouse)), valve_id=valve, start=start, end=end, max_records=max_records,

@@ -37,7 +37,7 @@ from flows.discrepancy_pipeline import ConditionFit, Diagnosis, diagnose, fit_co
 from flows.errors import ValvemonError
 from flows.lake import read_lake
 from flows.warehouse_db import connect, create_table_sql, insert_frame
-from model.params import TABLE1, FluidParams, PlantParams, ValveCondition, ValveGeometry
+from model.params import PlantParams, ValveCondition
 from schemas.fields import (
     DISCREPANCY_CANDIDATE_FIELDS,
     DISCREPANCY_CONDITION_FIELDS,
@@ -63,24 +63,14 @@ CONDITION_MODES = ("auto", "design", "commissioning")
 REPORT_DIR = Path("reports") / "discrepancy"
 
 
-def plant_params_for(valve: ValveSpec, sample_rate_hz: float) -> PlantParams:
-    """The plant model of one configured valve: its design data, cylinder, volumes and fluid
-    from the configuration; what the configuration does not hold (moving mass, friction, spool
-    dynamics) from :data:`model.params.TABLE1`, the documented defaults."""
-    d = valve.design
-    geometry = ValveGeometry(
-        x_max_m=d.x_max_m, bore_radius_m=d.bore_radius_m, spool_radius_m=d.spool_radius_m,
-        taper_angle_port1_rad=d.taper_angle_port1_rad, taper_angle_port2_rad=d.taper_angle_port2_rad,
-    )
-    condition = ValveCondition(underlap_m=tuple(d.underlap_m), alpha=(d.contraction_coefficient,) * 4)
-    cylinder = replace(
-        TABLE1.cylinder, piston_diameter_m=valve.piston_diameter_m, rod_diameter_m=valve.rod_diameter_m,
-        stroke_m=valve.stroke_m, v01_m3=valve.v01_m3, v02_m3=valve.v02_m3,
-    )
-    fluid = FluidParams(bulk_modulus_pa=valve.bulk_modulus_pa, density_kg_m3=valve.density_kg_m3)
-    sensors = replace(TABLE1.sensors, sample_rate_hz=float(sample_rate_hz))
-    controller = replace(TABLE1.controller, sample_time_s=1.0 / float(sample_rate_hz))
-    return replace(TABLE1, geometry=geometry, nominal_condition=condition, cylinder=cylinder, fluid=fluid, sensors=sensors, controller=controller)
+def plant_params_for(valve: ValveSpec, export) -> PlantParams:
+    """The plant model of one configured valve, built as ``valvemon simulate`` builds it
+    (:func:`flows.archive.plant_params_for_valve`): design data, cylinder, volumes and fluid from
+    the configuration, the sample rate from ``export``; what the configuration does not hold
+    (moving mass, friction, spool dynamics) from :data:`model.params.TABLE1`."""
+    from flows.archive import plant_params_for_valve
+
+    return plant_params_for_valve(valve, export)
 
 
 def _utc(value: str | datetime | None) -> datetime | None:
@@ -132,6 +122,7 @@ class DiscrepancyReport:
     plots: list[Path]
     gap_before: float
     gap_after: float
+    condition_source: str = "design"
 
 
 def valve_condition(valve: ValveSpec, plant: PlantParams, warehouse: Path, mode: str, settings: DiscrepancySettings) -> tuple[str, ValveCondition, ConditionFit | None]:
@@ -275,7 +266,7 @@ def discrepancy_valve(config, valve_id: str, warehouse: Path, start: datetime | 
     records = split_records(lake, settings)
     if not records:
         raise ValvemonError(f"valve {valve.id}: no contiguous record of at least {settings.min_record_s:g} s in the span")
-    plant = plant_params_for(valve, fs)
+    plant = plant_params_for(valve, config.export)
     source, cond, fit = valve_condition(valve, plant, warehouse, condition_mode, settings)
     d = diagnose(records, plant, cond, settings)
     plots = _plots(valve.id, run_id, d, warehouse)
@@ -287,8 +278,9 @@ def discrepancy_valve(config, valve_id: str, warehouse: Path, start: datetime | 
     )
 
 
-def run_discrepancy(config_path: str | Path, warehouse: str | Path, valve_id: str, start=None, end=None, *, settings: DiscrepancySettings | None = None, condition_mode: str = "auto", runner=discrepancy_valve) -> DiscrepancyReport:
-    """Check the arguments and diagnose one valve; ``runner`` lets the flow pass its task."""
+def check_arguments(config_path: str | Path, valve_id: str, start=None, end=None, condition_mode: str = "auto", max_records: int | None = None):
+    """The checks that need no data: the configuration, the valve, the span and the options.
+    Returns the configuration and the span (UTC)."""
     config = load_plant_config(config_path)
     known = [v.id for v in config.valves]
     if valve_id not in known:
@@ -298,6 +290,16 @@ def run_discrepancy(config_path: str | Path, warehouse: str | Path, valve_id: st
         raise ValvemonError("--to must be later than --from")
     if condition_mode not in CONDITION_MODES:
         raise ValvemonError(f"--valve-condition must be one of {', '.join(CONDITION_MODES)}, got {condition_mode!r}")
+    if condition_mode == "commissioning" and config.valve(valve_id).baseline_window is None:
+        raise ValvemonError(f"valve {valve_id}: --valve-condition commissioning needs a baseline_window in the plant configuration")
+    if max_records is not None and max_records < 1:
+        raise ValvemonError("--max-records must be at least 1")
+    return config, t0, t1
+
+
+def run_discrepancy(config_path: str | Path, warehouse: str | Path, valve_id: str, start=None, end=None, *, settings: DiscrepancySettings | None = None, condition_mode: str = "auto", runner=discrepancy_valve) -> DiscrepancyReport:
+    """Check the arguments and diagnose one valve; ``runner`` lets the flow pass its task."""
+    config, t0, t1 = check_arguments(config_path, valve_id, start, end, condition_mode, settings.max_records if settings else None)
     return runner(config, valve_id, Path(warehouse), t0, t1, settings, condition_mode)
 
 
@@ -310,8 +312,7 @@ def discrepancy_valve_task(config, valve_id: str, warehouse: Path, start, end, s
 @flow(name="valvemon-discrepancy", persist_result=False, validate_parameters=False)
 def discrepancy_flow(config_path: str, warehouse: str, valve_id: str, start: str | None = None, end: str | None = None, max_records: int | None = None, condition_mode: str = "auto") -> DiscrepancyReport:
     """The Prefect flow behind ``valvemon discrepancy``."""
-    if max_records is not None and max_records < 1:
-        raise ValvemonError("--max-records must be at least 1")
+    check_arguments(config_path, valve_id, start, end, condition_mode, max_records)
     settings = DiscrepancySettings() if max_records is None else DiscrepancySettings(max_records=max_records)
     return run_discrepancy(config_path, warehouse, valve_id, start, end, settings=settings, condition_mode=condition_mode, runner=discrepancy_valve_task)
 

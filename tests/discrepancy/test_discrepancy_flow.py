@@ -1,0 +1,108 @@
+"""``valvemon discrepancy`` end to end: a warehouse whose lake holds a valve with a hidden effect,
+the Prefect flow, the warehouse tables and the overlay pictures; the command line's checks."""
+
+from datetime import datetime, timedelta, timezone
+from pathlib import Path
+
+import duckdb
+import polars as pl
+import pytest
+from typer.testing import CliRunner
+
+from flows.cli import app
+from flows.discrepancy import DISCREPANCY_TABLES, discrepancy_flow, plant_params_for
+from flows.errors import ValvemonError
+from flows.lake import partition_path, write_partition
+from flows.warehouse_db import db_path
+from model.effects import Effects
+from schemas.fields import DISCREPANCY_FINDING_FIELDS
+from schemas.plant_config import ConfigError
+
+from .simdata import simulate_lake
+
+FIXTURE = Path(__file__).resolve().parents[1] / "fixtures" / "plant_example.toml"
+VALVE = "V017"
+START = datetime(2025, 3, 2, tzinfo=timezone.utc)
+
+
+def _write_lake(warehouse: Path, frame: pl.DataFrame) -> None:
+    for (day,), part in frame.partition_by("date", as_dict=True).items():
+        write_partition(partition_path(warehouse, VALVE, day), part.sort("timestamp_utc"))
+
+
+def _config(tmp_path: Path, baseline_window: bool) -> Path:
+    text = FIXTURE.read_text()
+    if baseline_window:
+        text = text.replace(
+            'density_kg_m3 = 870\n',
+            f'density_kg_m3 = 870\nbaseline_window = {{ start = "{START.isoformat()}", end = "{(START + timedelta(hours=3)).isoformat()}" }}\n',
+            1,
+        )
+    path = tmp_path / "plant.toml"
+    path.write_text(text)
+    return path
+
+
+def test_plant_model_from_the_configuration():
+    from flows.config import load_plant_config
+    from model import TABLE1
+
+    cfg = load_plant_config(FIXTURE)
+    plant = plant_params_for(cfg.valve(VALVE), cfg.export)
+    assert plant.cylinder.A1 == pytest.approx(TABLE1.cylinder.A1)
+    assert plant.nominal_condition.alpha == (0.675,) * 4
+    assert plant.sensors.sample_rate_hz == cfg.export.sample_rate_hz
+
+
+def test_flow_names_the_hidden_effect_and_stores_everything(tmp_path, prefect_server):
+    warehouse = tmp_path / "wh"
+    # commissioning: 3 clean hourly windows; afterwards 3 windows with a leaking rod seal
+    clean = simulate_lake(None, n_windows=3, seed=60, valve_id=VALVE, start=START)
+    leak = simulate_lake(Effects(external_leakage_m3_s_pa=1e-12), n_windows=3, seed=61, valve_id=VALVE, start=START + timedelta(hours=6))
+    _write_lake(warehouse, pl.concat([clean, leak]))
+    config = _config(tmp_path, baseline_window=True)
+    report = discrepancy_flow(str(config), str(warehouse), VALVE, start=(START + timedelta(hours=5)).isoformat())
+    assert report.condition_source == "commissioning" and report.n_records == 3
+    assert [f["effect"] for f in report.findings] == ["external_leakage"]
+    f = report.findings[0]
+    assert f["parameter_name"] == "K_e" and f["parameter_unit"] == "m3/(s*Pa)" and f["rank"] == 1
+    assert f["parameter_value"] == pytest.approx(1e-12, rel=0.05)
+    assert f["gap_after"] * 3 <= f["gap_before"]
+    assert all(p.exists() and p.parent == warehouse / "reports" / "discrepancy" for p in report.plots)
+    with duckdb.connect(str(db_path(warehouse)), read_only=True) as con:
+        cols = [r[0] for r in con.execute("DESCRIBE discrepancy_findings").fetchall()]
+        assert cols[:9] == ["valve_id", "run_at", "effect", "parameter_name", "parameter_value", "parameter_unit", "gap_before", "gap_after", "rank"]
+        assert cols == [fl.name for fl in DISCREPANCY_FINDING_FIELDS]
+        counts = {t: con.execute(f"SELECT count(*) FROM {t} WHERE run_id = ?", [report.run_id]).fetchone()[0] for t in DISCREPANCY_TABLES}
+        assert counts["discrepancy_findings"] == 1 and counts["discrepancy_candidates"] == 11
+        assert counts["discrepancy_monitoring"] == 4 and counts["discrepancy_condition"] == 4
+        assert counts["discrepancy_gaps"] == 2 * 3 * 7 and counts["discrepancy_residuals"] == 2 * 3 * 7
+        src = con.execute("SELECT DISTINCT source FROM discrepancy_condition WHERE run_id = ?", [report.run_id]).fetchall()
+        assert src == [("commissioning",)]
+
+
+def test_flow_without_effect_writes_none(tmp_path, prefect_server):
+    warehouse = tmp_path / "wh"
+    _write_lake(warehouse, simulate_lake(None, n_windows=2, seed=62, valve_id=VALVE, start=START))
+    report = discrepancy_flow(str(_config(tmp_path, False)), str(warehouse), VALVE)
+    assert report.condition_source == "design"
+    assert [f["effect"] for f in report.findings] == ["none"]
+    f = report.findings[0]
+    assert f["rank"] == 1 and f["parameter_name"] is None and f["gap_before"] == f["gap_after"] < 0.2
+    assert len(report.plots) == 1 and report.plots[0].name.endswith("_none.png")
+
+
+def test_cli_checks_before_starting_prefect(tmp_path):
+    runner = CliRunner()
+    config = _config(tmp_path, False)
+    cases = [
+        (["discrepancy", "--config", str(config), "--valve", "NOPE"], "no valve 'NOPE'"),
+        (["discrepancy", "--config", str(config), "--valve", VALVE, "--from", "2025-03-02", "--to", "2025-03-01"], "--to must be later"),
+        (["discrepancy", "--config", str(config), "--valve", VALVE, "--valve-condition", "commissioning"], "needs a baseline_window"),
+        (["discrepancy", "--config", str(config), "--valve", VALVE, "--valve-condition", "guess"], "--valve-condition must be one of"),
+        (["discrepancy", "--config", str(config), "--valve", VALVE, "--from", "yesterday"], "not an ISO-8601"),
+    ]
+    for args, message in cases:
+        result = runner.invoke(app, args + ["--warehouse", str(tmp_path / "wh")])
+        assert result.exit_code != 0
+        assert isinstance(result.exception, (ValvemonError, ConfigError)) and message in str(result.exception), (args, result.exception)
