@@ -1,5 +1,6 @@
 """Simulated lake frames: the model's closed loop through its sensors, as the lake holds them."""
 
+import dataclasses
 from datetime import datetime, timedelta, timezone
 
 import numpy as np
@@ -11,9 +12,16 @@ from transforms.params import MonitorParams
 START = datetime(2025, 1, 1, tzinfo=timezone.utc)
 
 
-def simulated_lake(conditions: list[ValveCondition], seed: int, valve_id: str = "V1", duration_s: float = 10.0, sensors=None) -> pl.DataFrame:
-    """One 10 s window per condition, an hour apart, with Table 1 sensors (noise, quantisation)."""
-    res = simulate_windows(TABLE1, conditions, duration_s, seed)
+def simulated_lake(
+    conditions: list[ValveCondition], seed: int, valve_id: str = "V1", duration_s: float = 10.0, sensors=None, trajectory=None
+) -> pl.DataFrame:
+    """One 10 s window per condition, an hour apart, with Table 1 sensors (noise, quantisation).
+
+    ``trajectory``: a :class:`model.TrajectoryParams` instead of Table 1's default moves.
+    Window i draws its inputs from (seed, i) alone, so two condition lists give the same
+    reference trajectories, loads and supply (twins)."""
+    plant = TABLE1 if trajectory is None else dataclasses.replace(TABLE1, trajectory=trajectory)
+    res = simulate_windows(plant, conditions, duration_s, seed)
     m = measure(res, sensors or TABLE1.sensors, np.random.default_rng(seed))
     n_w, n_s = m.p1.shape
     t0 = np.array([int((START + timedelta(hours=i)).timestamp() * 1e6) for i in range(n_w)])
