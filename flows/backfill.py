@@ -75,13 +75,12 @@ from flows.monitor import (
     baseline_definition,
     ensure_monitor_tables,
     monitor_params,
+    monitor_rows,
 )
 from flows.warehouse_db import connect, ensure_ingest_tables, insert_frame, query_frame
 from schemas.fields import EDGE_FIT_FIELDS, EDGES, SELECTION_FIELDS, polars_schema
 from schemas.plant_config import ConfigError, PlantConfig
-from transforms.characteristic import Characteristic
 from transforms.ingest import Grid, IngestError, TagTable, merge_partition, process_export, tags_by_column
-from transforms.monitor import monitor
 
 UNIT_DAYS = 7
 """Days of one valve per monitor unit: a week of hourly 10 s windows at 1 kHz is 1.7 M lake rows."""
@@ -377,7 +376,7 @@ def monitor_unit(config: PlantConfig, unit: MonitorUnit, baselines: dict[str, Ba
     selection_schema = polars_schema(SELECTION_FIELDS)
     if rows.height == 0:
         return MonitorOutcome(unit, pl.DataFrame(schema=polars_schema(EDGE_FIT_FIELDS)), pl.DataFrame(schema=selection_schema), 0, 0)
-    res = monitor(rows, params, {valve.id: {e: b.characteristic for e, b in baselines.items()}})
+    res = monitor_rows(valve, params, baselines, rows)
     fits = _fits_table(res.fits, valve, baselines, _now())
     selection = res.selection.select([f.name for f in SELECTION_FIELDS]).cast(dict(selection_schema))
     return MonitorOutcome(unit, fits, selection, res.windows.height, rows.height)
@@ -574,14 +573,10 @@ def unit_fingerprint(signature: str, parts: dict[date, tuple[int, int]], unit: M
     return hashlib.sha256((signature + "|" + ";".join(lake)).encode()).hexdigest()
 
 
-def _baselines_from_rows(rows: pl.DataFrame) -> dict[str, Baseline]:
-    return {
-        r["edge"]: Baseline(
-            Characteristic.from_arrays(np.array(r["knots_u_mm"]) * 1e-3, np.array(r["values_mm2"]) * 1e-6),
-            r["version"], r["source"], r["plausible"], r["plausibility_reasons"],
-        )  # fmt: skip
-        for r in rows.iter_rows(named=True)
-    }
+def _baselines_from_rows(config: PlantConfig, valve_id: str, rows: pl.DataFrame) -> dict[str, Baseline]:
+    valve = config.valve(valve_id)
+    params = monitor_params(valve, config.export.sample_rate_hz)
+    return {r["edge"]: Baseline.from_row(valve, params, r) for r in rows.iter_rows(named=True)}
 
 
 @contextmanager
@@ -818,14 +813,17 @@ def _monitor_phase(config, warehouse, valves, summary, concurrency, opts, unit_d
     for v in needed:
         rows = latest[v].filter(pl.col("definition") == baseline_definition(config.valve(v)))
         if rows.height == len(EDGES):
-            baselines[v] = _baselines_from_rows(rows)
+            baselines[v] = _baselines_from_rows(config, v, rows)
+        elif v not in make or not any(f[0] == f"baseline {v}" for f in summary.failures):
+            summary.failures.append((f"baseline {v}", "no stored baseline matches the valve's current definition"))
     signatures = {v: _valve_signature(config, v, b) for v, b in baselines.items()}
 
     progress = _progress_rows(warehouse)
     todo = []
     for u in units:
         if u.valve_id not in baselines:
-            continue  # its baseline failed: reported above
+            summary.units_failed += 1  # its baseline failed: reported above
+            continue
         fp = unit_fingerprint(signatures[u.valve_id], stats[u.valve_id], u)
         done = progress.get(("monitor", u.key))
         if done and done["fingerprint"] == fp and not force:
