@@ -88,12 +88,12 @@ def sniff_format(path: Path, head: bytes) -> str:
     return "csv"
 
 
-def _csv_options(export: ExportSpec) -> dict:
+def _csv_options(export: ExportSpec, encoding: str = "utf8") -> dict:
     return {
         "separator": export.separator,
         "decimal_comma": export.decimal == ",",
         "infer_schema": False,
-        "encoding": "utf8-lossy",
+        "encoding": encoding,
         "quote_char": '"',
     }
 
@@ -109,22 +109,26 @@ def read_csv_export(data: bytes, export: ExportSpec, tags: TagTable | None = Non
     """A CSV export's bytes (decompressed) → frame in file order.
 
     Value columns are read as Float64 and, in the long layout, the tag column as an Enum of
-    the plant's tags and the quality column as Categorical (the fast path). Only if that fails
-    (a cell that is no number, a tag the plant does not have) are those columns read again as
-    text, so that quarantine and the error message can show what the file says.
+    the plant's tags (the fast path). Only if that fails (a cell that is no number, a tag the
+    plant does not have, bytes that are not UTF-8) is the file read again with those columns
+    as text (invalid UTF-8 replaced), so that quarantine and the error message can show what
+    the file says.
     """
     opts = _csv_options(export)
-    header = pl.read_csv(data, n_rows=0, **opts).columns
+    try:
+        header = pl.read_csv(data, n_rows=0, **opts).columns
+    except pl.exceptions.ComputeError:
+        opts = _csv_options(export, "utf8-lossy")  # not UTF-8 (e.g. Latin-1 headers): keep going
+        header = pl.read_csv(data, n_rows=0, **opts).columns
     values = _value_columns(header, export)
     overrides: dict[str, pl.DataType] = {c: pl.Float64 for c in values}
     if export.layout == "long" and tags is not None and export.tag_column in header:
         overrides[export.tag_column] = tags.enum
-    if export.quality_column and export.quality_column in header:
-        overrides[export.quality_column] = pl.Categorical()
     try:
         return pl.read_csv(data, schema_overrides=overrides, **opts)
     except pl.exceptions.ComputeError:
-        pass  # a value that is no number, or a tag the plant does not have: the careful path
+        pass  # a value that is no number, a tag the plant does not have, bad UTF-8: the careful path
+    opts = _csv_options(export, "utf8-lossy")
     overrides.pop(export.tag_column, None)
     df = pl.read_csv(data, schema_overrides=overrides, ignore_errors=True, **opts)
     suspicious = [c for c in values if df[c].null_count()]
@@ -172,9 +176,9 @@ def read_export(path: Path, export: ExportSpec, tags: TagTable | None = None) ->
                     data = gzip.decompress(raw)
                 except (EOFError, gzip.BadGzipFile, zlib.error) as exc:
                     raise ValvemonError(f"{path}: truncated or corrupt gzip file ({exc})") from None
-                if not data.strip():
+                if not data or data.isspace():
                     raise ValvemonError(f"{path}: empty file inside the gzip (expected a {export.layout} export with a header line)")
-            if not data.strip():
+            if not data or data.isspace():
                 raise ValvemonError(f"{path}: empty file (expected a {export.layout} export with a header line)")
             df = read_csv_export(data, export, tags)
             first_line = 2

@@ -195,8 +195,8 @@ def parse_timestamps(
             raise _first_failure(text, ok, lines, fmt, tags)
         return out
     if fmt == "iso8601":
-        first = text.drop_nulls()
-        candidates = _iso_formats(first[0]) if len(first) else []
+        present = text.is_not_null()
+        candidates = _iso_formats(text[int(present.arg_max())]) if present.any() else []
         if candidates:
             fast = _arrow_iso(text, zoned=candidates[0][1])
             if fast is not None:
