@@ -214,3 +214,30 @@ def test_folder_argument_finds_exports_recursively(plant, tmp_path):
     report = ingest(cfg, tmp_path / "exports", tmp_path / "wh")
     assert report.files_seen == 1 and report.files_ingested == 1
     assert_frame_equal(lake(tmp_path / "wh"), base_lake())
+
+
+def test_wide_quality_column_quarantines_the_whole_row(plant, tmp_path):
+    cfg, _ = plant(**(WIDE | dict(timestamp_column="timestamp", quality_column="q", good_quality=["Good"])))
+    lines = (DATA / "base_wide.csv").read_text().splitlines()
+    rows = [lines[0] + ",q"] + [r + (",Bad" if i == 2 else ",Good") for i, r in enumerate(lines[1:])]
+    path = tmp_path / "wide_q.csv"
+    path.write_text("\n".join(rows) + "\n")
+    report = ingest(cfg, path, tmp_path / "wh")
+    want = dict(BASE)
+    for s, v in BASE.items():  # second 2 is interpolated from seconds 1 and 3
+        want[s] = [v[0], v[1], (v[1] + v[3]) / 2, v[3], v[4]]
+    assert_frame_equal(lake(tmp_path / "wh"), expected_lake([T0 + timedelta(seconds=i) for i in range(5)], want), check_exact=False, rel_tol=2e-7)
+    q = table(tmp_path / "wh", "quarantine")
+    assert report.quarantined == 6 and set(q["reason"]) == {"bad_quality"} and set(q["line"]) == {4}
+
+
+def test_text_that_is_not_utf8_is_read_and_quarantined(plant, tmp_path):
+    """A Latin-1 digital state ("Störung") in a UTF-8 export: the file is still read."""
+    cfg, _ = plant()
+    path = tmp_path / "latin1.csv"
+    raw = (DATA / "base_long.csv").read_bytes() + "2025-03-01T12:00:05.000Z,MILL1.V017.PS,Störung,Good\n".encode("latin-1")
+    path.write_bytes(raw)
+    report = ingest(cfg, path, tmp_path / "wh")
+    assert_frame_equal(lake(tmp_path / "wh"), base_lake())
+    q = table(tmp_path / "wh", "quarantine").row(0, named=True)
+    assert report.quarantined == 1 and q["line"] == 32 and q["reason"] == "non_numeric" and q["value_raw"].startswith("St")
