@@ -247,9 +247,33 @@ def _utc(value: str | date | datetime | None) -> datetime | None:
 
 
 def lake_chunks(warehouse: Path, valve_id: str, gap_s: float, start: datetime | None, end: datetime | None, days: int | None = None) -> Iterator[pl.DataFrame]:
-    """The valve's lake rows in [start, end), ``days`` partitions at a time (default
-    :data:`CHUNK_DAYS`), each chunk ending at a gap: a contiguous run of samples that reaches
-    the end of a chunk is carried into the next."""
+    """The valve's lake rows, ``days`` partitions at a time (default :data:`CHUNK_DAYS`), each
+    chunk ending at a gap: a contiguous run of samples (a window) that reaches the end of a chunk
+    is carried into the next, so no window is ever split.
+
+    With ``start``/``end`` the chunks hold the windows that *start* in [start, end), whole: a
+    window that began before ``start`` is left out (it belongs to an earlier span), one that
+    starts before ``end`` is read to its end (the lake is read a day beyond both bounds)."""
+    if start is None and end is None:
+        yield from _gap_chunks(warehouse, valve_id, gap_s, None, None, days)
+        return
+    read_lo = start - timedelta(days=1) if start is not None else None
+    read_hi = end + timedelta(days=1) if end is not None else None
+    for rows in _gap_chunks(warehouse, valve_id, gap_s, read_lo, read_hi, days):
+        new_run = pl.col("timestamp_utc").diff().dt.total_microseconds().fill_null(0) > gap_s * 1e6
+        run_start = pl.col("timestamp_utc").first().over(new_run.cum_sum())
+        keep = pl.lit(True)
+        if start is not None:
+            keep = keep & (run_start >= start)
+        if end is not None:
+            keep = keep & (run_start < end)
+        rows = rows.filter(keep)
+        if rows.height:
+            yield rows
+
+
+def _gap_chunks(warehouse: Path, valve_id: str, gap_s: float, start: datetime | None, end: datetime | None, days: int | None) -> Iterator[pl.DataFrame]:
+    """:func:`lake_chunks` for rows in [start, end) (runs cut at the bounds)."""
     days = CHUNK_DAYS if days is None else int(days)
     if days < 1:
         raise ValueError(f"chunk days must be >= 1, got {days}")
@@ -304,7 +328,7 @@ def _fits_table(fits: pl.DataFrame, valve: ValveSpec, baselines: dict[str, Basel
         (pl.col("u_max_m") * 1e3).alias("u_max_mm"),
         pl.col("edge").replace_strict(version, return_dtype=pl.Int32).alias("baseline_version"),
         pl.lit(now, dtype=pl.Datetime("us", "UTC")).alias("monitored_at"),
-    ).cast(dict(polars_schema(EDGE_FIT_FIELDS)))
+    ).cast(dict(polars_schema(EDGE_FIT_FIELDS))).with_columns(pl.col(pl.Float64).fill_nan(None))  # no estimate: NULL
 
 
 def store_chunk(warehouse: Path, valve_id: str, lo: datetime, hi: datetime, fits: pl.DataFrame, selection: pl.DataFrame) -> None:
