@@ -89,9 +89,16 @@ def _utc(value: str | datetime | None) -> datetime | None:
 
 
 def ensure_discrepancy_tables(con) -> None:
-    """Create the discrepancy tables if missing."""
+    """Create the discrepancy tables if missing, and add columns a newer registry names to a
+    table an older version created (null for the old runs)."""
+    from flows.warehouse_db import duckdb_type
+
     for name, fields in DISCREPANCY_TABLES.items():
         con.execute(create_table_sql(name, fields))
+        have = {r[0] for r in con.execute(f"DESCRIBE {name}").fetchall()}
+        for f in fields:
+            if f.name not in have:
+                con.execute(f'ALTER TABLE {name} ADD COLUMN "{f.name}" {duckdb_type(f.dtype)}')
 
 
 def _fmt(v: float) -> str:
@@ -179,6 +186,7 @@ def _tables(valve_id: str, run_id: str, run_at: datetime, d: Diagnosis, plots: l
                 "gap_x_before_mm": _gap_rms(d, k - 1, "X") * 1e3, "gap_x_after_mm": _gap_rms(d, k, "X") * 1e3,
                 "window_start": t0, "window_end": t1, "n_records": d.n_records, "plot_path": str(path) if path else None,
                 "condition_source": source, "gap_explained": _nn(1.0 - (n.gap_after / n.gap_before) ** 2) if n.gap_before > 0 else None,
+                "alternative_effect": n.alternative.key if n.alternative else None, "alternative_t": _nn(n.alternative_t),
             })
     else:
         g = d.stage_gaps[0]
@@ -190,7 +198,7 @@ def _tables(valve_id: str, run_id: str, run_at: datetime, d: Diagnosis, plots: l
             "gap_p2_before_bar": _gap_rms(d, 0, "p2") / 1e5, "gap_p2_after_bar": _gap_rms(d, 0, "p2") / 1e5,
             "gap_x_before_mm": _gap_rms(d, 0, "X") * 1e3, "gap_x_after_mm": _gap_rms(d, 0, "X") * 1e3,
             "window_start": t0, "window_end": t1, "n_records": d.n_records, "plot_path": str(plots[0]) if plots and plots[0] else None,
-            "condition_source": source, "gap_explained": None,
+            "condition_source": source, "gap_explained": None, "alternative_effect": None, "alternative_t": None,
         })
     candidates = [
         {**common, "effect": c["effect"], "variant": c["variant"], "parameter_name": c["parameter_name"],
@@ -333,6 +341,8 @@ def summary_lines(report: DiscrepancyReport) -> list[str]:
                 f"[{_fmt(f['parameter_ci_low'])}, {_fmt(f['parameter_ci_high'])}], gap {f['gap_before']:.3g} → {f['gap_after']:.3g} "
                 f"({f['gap_explained']:.0%} of the squared gap)"
             )
+            if f["alternative_effect"]:
+                lines.append(f"    hard to tell from {f['alternative_effect']} on these data (advantage t = {f['alternative_t']:.2g})")
     if report.gap_after > NOISE_GAP:
         hint = (" (is the valve's condition right? --valve-condition commissioning fits it on the configured baseline_window)"
                 if report.condition_source == "design" else "")

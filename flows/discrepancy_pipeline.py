@@ -404,6 +404,15 @@ class NamedEffect:
     z: float
     gap_before: float
     gap_after: float
+    alternative: EffectSpec | None = None
+    """The runner-up when it was hard to tell apart (advantage t < AMBIGUITY_T), else None."""
+    alternative_t: float = float("inf")
+    """t statistic of this effect's blockwise advantage over the runner-up."""
+
+
+AMBIGUITY_T = 2.0
+"""Below this t statistic of its advantage over the runner-up, a named effect is reported with
+the runner-up as its alternative."""
 
 
 @dataclass
@@ -533,6 +542,7 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
     # addition does not shrink the replay gap is not confirmed: it and the later ones are dropped
     # and the rest refined again
     named_sel = list(sel.named)
+    rival_of = {cs.column: rv for cs, rv in zip(sel.named, sel.rivals)}
     # the base model's replay, and which records to keep for the plots
     acc0, kept0 = _gaps(prepared, plant, condition, base, settings, set(range(len(prepared))))
     per_rec = [
@@ -573,7 +583,9 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
     named = []
     for k, (spec, cs) in enumerate(zip(named_specs, named_sel)):
         val = spec.value(refined)
+        rcol, rt = rival_of.get(cs.column, (None, float("inf")))
         named.append(NamedEffect(
+            alternative=specs[rcol] if (rcol is not None and rt < AMBIGUITY_T) else None, alternative_t=rt,
             rank=k + 1, spec=spec, value=val, ci_low=val - q * float(se[k]), ci_high=val + q * float(se[k]),
             linear_value=cs.theta + spec.neutral, relative_gain=cs.relative_gain, t_stat=cs.t_stat, z=cs.z,
             gap_before=stage_gaps[k], gap_after=stage_gaps[k + 1],

@@ -328,6 +328,8 @@ DISCREPANCY_FINDING_FIELDS: tuple[Field, ...] = (
     Field("window_end", UTC_US, "", "Last sample diagnosed (UTC)."),
     Field("n_records", pl.Int32, "", "Records (contiguous windows) diagnosed.", ge=1),
     Field("plot_path", pl.Utf8, "", "Overlay picture of measured against simulated before and after (under WAREHOUSE/reports/discrepancy/).", nullable=True),
+    Field("alternative_effect", pl.Utf8, "", "The runner-up (name[variant]) when this effect was hard to tell from it on the data (t of its blockwise advantage < 2); null otherwise.", nullable=True),
+    Field("alternative_t", pl.Float64, "", "t statistic of this effect's blockwise cross-validated advantage over the runner-up.", nullable=True),
     Field("gap_explained", pl.Float64, "", "1 − gap_after² / gap_before²: the share of the squared gap this effect removed (a named effect that leaves most of the gap explains little of the disagreement).", nullable=True),
     Field("condition_source", pl.Utf8, "", "Valve condition the model used: design (configured design data) or commissioning (α and underlap per edge fitted on the configured baseline_window).", isin=("design", "commissioning")),
 )

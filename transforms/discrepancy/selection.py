@@ -24,6 +24,9 @@ Forward selection (a greedy sparse regression, one candidate = one coefficient):
    (d) it has the physical sign where the parameter has one (leakage, air, line resistance ≥ 0).
 3. The significant candidate with the largest Σ d_b joins S (its rank is the step number); stop
    when none is significant or ``max_effects`` are named. No candidate at step 1 means ``none``.
+   The runner-up of each step is kept with the t statistic of the winner's blockwise advantage
+   over it: a small t means the two are hard to tell apart on these data (e.g. a small
+   transmitter gain and the same transmitter's offset over a narrow pressure range).
 
 The thresholds are set for no false naming on the model's own noise (tests/discrepancy, the
 null case over several seeds, and the sweep in ``bench/discrepancy_limits.py``).
@@ -222,6 +225,9 @@ class SelectionResult:
     final_se: np.ndarray
     n_blocks: int
     null_loss: float
+    rivals: list[tuple[int | None, float]] = None  # type: ignore[assignment]
+    """Per named column: (the runner-up's column, t statistic of the named one's advantage over
+    it, blockwise relative CV losses); (None, inf) without a runner-up."""
 
 
 def forward_select(st: BlockStats, candidates: list[int], *, max_effects: int, min_t_stat: float, min_relative_gain: float, min_z: float, positive: frozenset[int] = frozenset()) -> SelectionResult:
@@ -230,6 +236,7 @@ def forward_select(st: BlockStats, candidates: list[int], *, max_effects: int, m
     kw = dict(min_t_stat=min_t_stat, min_relative_gain=min_relative_gain, min_z=min_z, positive=frozenset(positive))
     base: list[int] = []
     named: list[CandidateScore] = []
+    rivals: list[tuple[int | None, float]] = []
     first = score_candidates(st, [], candidates, **kw)
     scores = first
     while len(base) < max_effects:
@@ -237,6 +244,18 @@ def forward_select(st: BlockStats, candidates: list[int], *, max_effects: int, m
         if not sig:
             break
         best = max(sig, key=lambda s: s.gain)
+        others = [s for s in scores if s.column != best.column]
+        if others:
+            rival = max(others, key=lambda s: s.gain)
+            base_loss, _, _ = cv_losses(st, base)
+            lb, _, _ = cv_losses(st, base + [best.column])
+            lr, _, _ = cv_losses(st, base + [rival.column])
+            rd = (lr - lb) / np.where(base_loss > 0, base_loss, 1.0)
+            sd = float(rd.std(ddof=1)) if rd.size > 1 else np.inf
+            t = float(rd.mean() / (sd / np.sqrt(rd.size))) if sd > 0 else np.inf
+            rivals.append((rival.column, t))
+        else:
+            rivals.append((None, float("inf")))
         named.append(best)
         base.append(best.column)
         scores = score_candidates(st, base, [c for c in candidates if c not in base], **kw)
@@ -246,4 +265,4 @@ def forward_select(st: BlockStats, candidates: list[int], *, max_effects: int, m
         se = _jackknife_se(loo) / st.scale[base]
     else:
         th, se = np.zeros(0), np.zeros(0)
-    return SelectionResult(named=named, first_step=first, final_theta=th, final_se=se, n_blocks=st.n_blocks, null_loss=float(st.s.sum()))
+    return SelectionResult(named=named, first_step=first, final_theta=th, final_se=se, n_blocks=st.n_blocks, null_loss=float(st.s.sum()), rivals=rivals)
