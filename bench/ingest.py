@@ -75,7 +75,8 @@ def signals(n: int, seed: int = 0) -> dict[str, np.ndarray]:
         step = full_scale / 65536
         return np.round(x / step) * step
 
-    return {"ps": q(ps, 400), "pr": q(pr, 400), "p1": q(p1, 400), "p2": q(p2, 400), "x_spool": q(x_spool, 7), "x_cyl": q(x_cyl, 1000)}
+    out = {"ps": q(ps, 400), "pr": q(pr, 400), "p1": q(p1, 400), "p2": q(p2, 400), "x_spool": q(x_spool, 7), "x_cyl": q(x_cyl, 1000)}
+    return {k: np.round(v, 4) for k, v in out.items()}  # 4 decimals, as the export writes them
 
 
 def long_frame(n: int) -> pl.DataFrame:
@@ -89,7 +90,7 @@ def long_frame(n: int) -> pl.DataFrame:
 def write_inputs(folder: Path, n: int) -> dict[str, Path]:
     df = long_frame(n)
     csv = folder / "export_long.csv"
-    df.with_columns(pl.col("timestamp").dt.strftime("%Y-%m-%dT%H:%M:%S%.3fZ")).write_csv(csv, float_precision=None)
+    df.with_columns(pl.col("timestamp").dt.strftime("%Y-%m-%dT%H:%M:%S%.3fZ")).write_csv(csv)
     pq_path = folder / "export_long.parquet"
     df.write_parquet(pq_path, compression="zstd")
     return {"csv": csv, "parquet": pq_path}
@@ -118,6 +119,7 @@ def throughput(seconds: int, repeat: int) -> None:
         inputs = write_inputs(tmp, n)
         rows = 6 * n
         print(f"input: {n:,} instants × 6 tags = {rows:,} long rows; one core (POLARS_MAX_THREADS={os.environ['POLARS_MAX_THREADS']})")
+        stages: dict[str, dict[str, float]] = {}
         print(f"{'file':<10}{'size MB':>9}{'bare read s':>13}{'ingest s':>10}{'ratio':>7}{'bare Mrows/s':>14}{'ingest Mrows/s':>16}{'lake rows':>11}")
         for kind, path in inputs.items():
             bare = (lambda: pl.read_csv(path)) if kind == "csv" else (lambda: pl.read_parquet(path))
@@ -131,6 +133,61 @@ def throughput(seconds: int, repeat: int) -> None:
 
             t_ing = timed(ingest, repeat)
             print(f"{kind:<10}{path.stat().st_size / 1e6:>9.1f}{t_bare:>13.3f}{t_ing:>10.3f}{t_ing / t_bare:>7.2f}{rows / t_bare / 1e6:>14.2f}{rows / t_ing / 1e6:>16.2f}{n:>11,}")
+            stages[kind] = _stages(lambda: ingest(), repeat)
+        print("\nwhere the ingest's CPU time goes (s, least of the repeats per stage):")
+        names = list(next(iter(stages.values())))
+        print(f"{'stage':<44}" + "".join(f"{k:>10}" for k in stages))
+        for name in names:
+            print(f"{name:<44}" + "".join(f"{stages[k][name]:>10.3f}" for k in stages))
+
+
+STAGES = [
+    ("flows.ingest", "read_export", "read file + SHA-256 + CSV/Parquet decode"),
+    ("transforms.ingest.export", "samples_of", "samples: tags, timestamps, values, quarantine"),
+    ("transforms.ingest.samples", "parse_timestamps", "  of which: timestamps to UTC"),
+    ("transforms.ingest.export", "validate_raw_rows", "pandera: raw rows"),
+    ("transforms.ingest.export", "prepare_tag", "sort + duplicates per tag"),
+    ("transforms.ingest.export", "to_grid", "grid + gaps per tag"),
+    ("transforms.ingest.export", "assemble_valve", "assemble valve frame"),
+    ("transforms.ingest.export", "validate_sensor_frame", "pandera: sensor frame"),
+    ("flows.ingest", "process_export", "process_export (all of the above but reading)"),
+    ("flows.ingest", "read_partition", "read existing partition"),
+    ("flows.ingest", "write_partition", "write partition (zstd, fsync, rename)"),
+    ("flows.ingest", "record_file", "DuckDB manifest, quarantine, gaps"),
+]
+
+
+def _stages(run, repeat: int) -> dict[str, float]:
+    """CPU time per stage of ``run()``, by wrapping the stage functions where they are looked up."""
+    import importlib
+
+    best: dict[str, float] = {}
+    for _ in range(repeat):
+        acc: dict[str, float] = {label: 0.0 for _, _, label in STAGES}
+        saved = []
+        for mod_name, fn, label in STAGES:
+            mod = importlib.import_module(mod_name)
+            f = getattr(mod, fn)
+            saved.append((mod, fn, f))
+
+            def wrapped(*a, _f=f, _label=label, **k):
+                t0 = time.process_time()
+                try:
+                    return _f(*a, **k)
+                finally:
+                    acc[_label] += time.process_time() - t0
+
+            setattr(mod, fn, wrapped)
+        try:
+            t0 = time.process_time()
+            run()
+            acc["total"] = time.process_time() - t0
+        finally:
+            for mod, fn, f in saved:
+                setattr(mod, fn, f)
+        for k, v in acc.items():
+            best[k] = min(best.get(k, v), v)
+    return best
 
 
 def lake_day(days: int, seed: int = 1) -> pl.DataFrame:
