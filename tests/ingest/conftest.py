@@ -40,10 +40,13 @@ FACTOR = {"ps": 1e5, "pr": 1e5, "p1": 1e5, "p2": 1e5, "x_spool": 1e-3, "x_cyl": 
 COLUMN = {"ps": "ps_pa", "pr": "pr_pa", "p1": "p1_pa", "p2": "p2_pa", "x_spool": "x_spool_m", "x_cyl": "x_cyl_m", "x_ref": "x_ref_m"}
 
 
-def write_plant(folder: Path, name: str = "plant.toml", **export) -> Path:
-    """The example plant with ``[export]`` keys replaced (a value None removes the key)."""
+def write_plant(folder: Path, name: str = "plant.toml", units: dict[str, str] | None = None, **export) -> Path:
+    """The example plant with ``[export]`` keys replaced (a value None removes the key) and,
+    optionally, other units for some signals (``units={"x_spool": "%"}``)."""
     raw = tomllib.loads(EXAMPLE.read_text())
     raw["export"].update({"sample_rate_hz": 1.0, "max_gap_s": 2.5})
+    for signal, unit in (units or {}).items():
+        raw["valves"][0]["tags"][signal]["unit"] = unit
     for k, v in export.items():
         if v is None:
             raw["export"].pop(k, None)
@@ -106,8 +109,8 @@ def run_cli(args: list[str], monkeypatch, capsys) -> tuple[int, str, str]:
 def plant(tmp_path):
     """``plant(**export_overrides) -> (config path, PlantConfig)``."""
 
-    def make(name: str = "plant.toml", **export):
-        path = write_plant(tmp_path, name, **export)
+    def make(name: str = "plant.toml", units: dict[str, str] | None = None, **export):
+        path = write_plant(tmp_path, name, units, **export)
         return path, load_plant_config(path)
 
     return make

@@ -241,3 +241,16 @@ def test_text_that_is_not_utf8_is_read_and_quarantined(plant, tmp_path):
     assert_frame_equal(lake(tmp_path / "wh"), base_lake())
     q = table(tmp_path / "wh", "quarantine").row(0, named=True)
     assert report.quarantined == 1 and q["line"] == 32 and q["reason"] == "non_numeric" and q["value_raw"].startswith("St")
+
+
+def test_units_from_the_configuration_including_percent_of_x_max(plant, tmp_path):
+    """psi, MPa, kPa, Pa, µm, m and the spool position in % of x_max (3.5 mm)."""
+    units = {"ps": "psi", "pr": "MPa", "p1": "kPa", "p2": "Pa", "x_spool": "%", "x_cyl": "um"}
+    cfg, _ = plant(units=units)
+    ingest(cfg, DATA / "base_long.csv", tmp_path / "wh")
+    got = lake(tmp_path / "wh")
+    factor = {"ps": 6894.757293168361, "pr": 1e6, "p1": 1e3, "p2": 1.0, "x_spool": 3.5e-3 / 100, "x_cyl": 1e-6}
+    for signal, column in [("ps", "ps_pa"), ("pr", "pr_pa"), ("p1", "p1_pa"), ("p2", "p2_pa"), ("x_spool", "x_spool_m"), ("x_cyl", "x_cyl_m")]:
+        want = pl.Series([v * factor[signal] for v in BASE[signal]]).cast(got[column].dtype)
+        assert got[column].to_list() == want.to_list(), signal
+    assert got["x_spool_m"][4] == pytest.approx(0.5 / 100 * 3.5e-3, rel=1e-7)  # 0.5 % of 3.5 mm
