@@ -113,6 +113,7 @@ def ingest(
     import flows.ingest as ingest_flows
     from flows.config import warehouse_dir
 
+    ingest_flows.preflight(config, paths)  # a bad configuration or path fails before Prefect starts
     ingest_flows.quiet_prefect_console()
     counts = ingest_flows.ingest_flow(
         config_path=str(config),

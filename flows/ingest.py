@@ -428,6 +428,19 @@ def _store_run(warehouse: Path, row: pl.DataFrame) -> None:
 FileRunner = Callable[..., FileReport]
 
 
+def preflight(config_path: str | Path, paths: list[str | Path]) -> tuple[PlantConfig, list[Path]]:
+    """The configuration (with a grid the lake can hold) and the export files, or the error.
+
+    Cheap; the command line calls it before the Prefect flow starts, so a typo costs no server.
+    """
+    config = load_plant_config(config_path)
+    try:
+        Grid.from_export(config.export.sample_rate_hz, config.export.max_gap_s)
+    except IngestError as exc:
+        raise ConfigError(f"{config_path}: {exc}") from None
+    return config, discover_files(paths)
+
+
 def run_ingest(
     config_path: str | Path,
     paths: list[str | Path],
@@ -463,12 +476,7 @@ def run_ingest(
         stored with status ``failed`` and the message.
     """
     warehouse = Path(warehouse)
-    config = load_plant_config(config_path)
-    try:
-        Grid.from_export(config.export.sample_rate_hz, config.export.max_gap_s)
-    except IngestError as exc:
-        raise ConfigError(f"{config_path}: {exc}") from None
-    files = discover_files(paths)
+    config, files = preflight(config_path, paths)
     runner = file_runner or ingest_file
     tags = TagTable.from_config(config)
     summary = RunSummary(run_id=f"{_now():%Y%m%dT%H%M%SZ}-{uuid.uuid4().hex[:8]}", files_seen=len(files))
