@@ -11,7 +11,10 @@ and selection counts) and step 4b (fits). Polars and numba are limited to one th
 process is pinned to one CPU where the OS allows it.
 
     .venv/bin/python bench/monitor_throughput.py [--windows 100] [--duration 10] [--repeats 7]
-        [--baseline nominal|commissioning] [--engine numba|polars]
+        [--baseline nominal|commissioning] [--engine numba|polars] [--no-leakage]
+
+By default the closed-edge leakage correction runs as in production (flows/monitor.py): the
+nominal characteristic as each edge's baseline-state leakage, one refinement pass.
 """
 
 from __future__ import annotations
@@ -101,6 +104,7 @@ def main(argv=None) -> int:
     ap.add_argument("--engine", choices=("numba", "polars"), default="numba")
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--no-pin", action="store_true", help="do not pin the process to one CPU")
+    ap.add_argument("--no-leakage", action="store_true", help="without the closed-edge leakage correction")
     a = ap.parse_args(argv)
 
     pinned = "no"
@@ -122,12 +126,13 @@ def main(argv=None) -> int:
         for e in EDGES:
             d = pts.filter(pl.col("edge") == e)
             base["V001"][e] = fit_characteristic(d["u_m"], d["area_m2"], max_knots=p.max_knots)
-    res = monitor(lake, p, base, engine=a.engine)  # warm-up (numba cache load/compile)
+    leak = None if a.no_leakage else {"V001": nominal()}
+    res = monitor(lake, p, base, engine=a.engine, leakage=leak)  # warm-up (numba cache load/compile)
 
     wall, cpu, cpu_pts, cpu_fit = [], [], [], []
     for _ in range(a.repeats):
         c0, w0 = time.process_time(), time.perf_counter()
-        res = monitor(lake, p, base, engine=a.engine)
+        res = monitor(lake, p, base, engine=a.engine, leakage=leak)
         wall.append(time.perf_counter() - w0)
         cpu.append(time.process_time() - c0)
         c0 = time.process_time()
@@ -143,7 +148,7 @@ def main(argv=None) -> int:
     med, best = statistics.median(cpu), min(cpu)
     print(f"lake rows            {rows:,} ({a.windows} windows x {a.duration:g} s at 1 kHz; simulated in {t_sim:.1f} s)")
     print(f"points               {npts:,} ({npts / rows:.2f} per row); fits {res.fits.height} rows, {ok} ok")
-    print(f"baseline, engine     {a.baseline}, {a.engine}")
+    print(f"baseline, engine     {a.baseline}, {a.engine}, leakage {'off' if leak is None else 'on'}")
     print(f"threads              polars {pl.thread_pool_size()}, pinned: {pinned}, load average {os.getloadavg()[0]:.1f}")
     print(f"monitor() CPU        median {med * 1e3:7.1f} ms, best {best * 1e3:7.1f} ms  ({a.repeats} repeats)")
     print(f"monitor() wall       median {statistics.median(wall) * 1e3:7.1f} ms")

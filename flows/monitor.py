@@ -224,13 +224,14 @@ def ensure_baselines(valve: ValveSpec, params: MonitorParams, warehouse: Path) -
 
 def monitor_rows(valve: ValveSpec, params: MonitorParams, baselines: dict[str, Baseline], rows: pl.DataFrame) -> MonitorResult:
     """Steps 2–4b on some of the valve's lake rows against its baselines, with the closed-edge
-    leakage correction the baselines were built with (what every monitoring path must call)."""
+    leakage correction the baselines were built with (what every monitoring path must call).
+    The result carries no points frame (the flows store fits and counts only)."""
     chars = {valve.id: {e: b.characteristic for e, b in baselines.items()}}
     leaks = {e: b.leakage for e, b in baselines.items()}
     if any(v is None for v in leaks.values()):
         leaks = {e: scaled_shifted(nominal_characteristic(valve, e, params.x_hat_bound_m), 1.0, 0.0) if v is None else v
                  for e, v in leaks.items()}  # fmt: skip
-    return monitor(rows, params, chars, leakage={valve.id: leaks})
+    return monitor(rows, params, chars, leakage={valve.id: leaks}, points=False)
 
 
 def _utc(value: str | date | datetime | None) -> datetime | None:

@@ -23,6 +23,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from functools import lru_cache
 
+import numba
 import numpy as np
 import polars as pl
 from scipy.signal import savgol_coeffs
@@ -30,6 +31,7 @@ from scipy.signal import savgol_coeffs
 __all__ = [
     "DEFAULT_OUTPUTS",
     "add_savgol",
+    "savgol_arrays",
     "savgol_exprs",
     "savgol_valid",
     "savgol_weights",
@@ -133,3 +135,66 @@ def add_savgol(
             valid=valid,
         )
     return framed.with_columns(savgol_valid(window).alias("_sg_valid")).with_columns(exprs).drop("_sg_valid")
+
+
+# --------------------------------------------------------------------------------------------
+# compiled path (used by transforms.monitor for throughput)
+# --------------------------------------------------------------------------------------------
+
+
+@numba.njit(cache=True)
+def _savgol_kernel(x, w0, w1, scale1, smooth, deriv, want_smooth):
+    """Blocks of 512 outputs accumulated in local buffers: the stencil loop outside, a
+    contiguous (vectorised) loop over the block inside; each output sums its stencil in the same
+    order as polars' weighted rolling_sum (oldest sample first), so the two agree bit for bit."""
+    n = x.shape[0]
+    m = w1.shape[0]
+    h = m // 2
+    for i in range(min(h, n)):
+        smooth[i] = np.nan
+        deriv[i] = np.nan
+    for i in range(max(n - h, h), n):
+        smooth[i] = np.nan
+        deriv[i] = np.nan
+    block = 512
+    acc0 = np.empty(block)
+    acc1 = np.empty(block)
+    for b0 in range(h, n - h, block):
+        b1 = min(b0 + block, n - h)
+        length = b1 - b0
+        acc0[:length] = 0.0
+        acc1[:length] = 0.0
+        for k in range(m):
+            a0 = w0[k]
+            a1 = w1[k]
+            xs = x[b0 - h + k : b1 - h + k]
+            if want_smooth:
+                for i in range(length):
+                    v = xs[i]
+                    acc0[i] += a0 * v
+                    acc1[i] += a1 * v
+            else:
+                for i in range(length):
+                    acc1[i] += a1 * xs[i]
+        if want_smooth:
+            smooth[b0:b1] = acc0[:length]
+        for i in range(length):
+            deriv[b0 + i] = acc1[i] * scale1
+
+
+def savgol_arrays(x: np.ndarray, *, window: int, order: int, sample_period_s: float, smooth: bool = True):
+    """The plain weighted sums of :func:`savgol_exprs` with ``mask=False`` over a float array,
+    in one compiled pass: (smoothed or None, first derivative), NaN in the first and last h
+    entries and wherever the stencil touches a NaN (the validity is the caller's, as there)."""
+    if sample_period_s <= 0:
+        raise ValueError("sample_period_s must be > 0")
+    x = np.ascontiguousarray(x, dtype=np.float64)
+    w0 = np.array(_weights(window, order, 0))
+    w1 = np.array(_weights(window, order, 1))
+    out0 = np.empty_like(x) if smooth else np.empty(0)
+    out1 = np.empty_like(x)
+    if smooth:
+        _savgol_kernel(x, w0, w1, 1.0 / sample_period_s, out0, out1, True)
+    else:
+        _savgol_kernel(x, w0, w1, 1.0 / sample_period_s, np.empty_like(x), out1, False)
+    return (out0 if smooth else None), out1

@@ -260,7 +260,7 @@ def _fit_one(u, a, jc, s, e, kn, kv, ks, k0, k1, tab, toff, tlo, tinv, tn, xb, n
 
 
 @numba.njit(cache=True)
-def _fit_groups(u, a, offsets, kstart, kend, kn, kv, ks, tab, tstart, tlo, tinv, tn, xbound, active, n_grid, sub_max, xtol, maxiter, x_start):
+def _fit_groups(u, a, offsets, kstart, kend, kn, kv, ks, tab, tstart, tlo, tinv, tn, xbound, active, n_grid, sub_max, xtol, maxiter, x_start, residuals):
     g_n = offsets.shape[0] - 1
     alpha = np.full(g_n, np.nan)
     xhat = np.full(g_n, np.nan)
@@ -294,6 +294,10 @@ def _fit_groups(u, a, offsets, kstart, kend, kn, kv, ks, tab, tstart, tlo, tinv,
             code[g] = _DEGENERATE
             continue
         al = sa / sb
+        alpha[g] = al
+        xhat[g] = x
+        if not residuals:
+            continue
         r2 = 0.0
         r11 = 0.0
         prev = 0.0
@@ -304,8 +308,6 @@ def _fit_groups(u, a, offsets, kstart, kend, kn, kv, ks, tab, tstart, tlo, tinv,
             if i > s:
                 r11 += r * prev
             prev = r
-        alpha[g] = al
-        xhat[g] = x
         ssr[g] = r2
         shh[g] = sb
         shd[g] = al * sbd
@@ -405,6 +407,7 @@ def fit_arrays(
     xtol_m: float = 1e-9,
     maxiter: int = 60,
     x_start_m: np.ndarray | None = None,
+    residuals: bool = True,
 ) -> dict[str, np.ndarray]:
     """Eq. 8 for G populations stored contiguously: points ``offsets[g]:offsets[g+1]`` of
     ``u``/``area`` belong to population g, whose baseline is ``characteristics[g]``
@@ -412,7 +415,8 @@ def fit_arrays(
 
     ``x_start_m`` (per population, NaN = none): warm start from a previous optimum of nearly the
     same points (the leakage refinement of :func:`transforms.monitor.monitor`); the coarse grid
-    is skipped for those populations.
+    is skipped for those populations. ``residuals=False`` skips the pass over the residuals:
+    α̂ and x̂ only (e, the confidence intervals and ``ci_inflation`` are NaN).
 
     Returns per population: ``status`` (str), ``n_points``, ``u_min_m``, ``u_max_m``,
     ``alpha_hat``, ``x_hat_m``, ``e_m2``, CI bounds, ``ci_inflation``, ``iterations``.
@@ -461,6 +465,7 @@ def fit_arrays(
         x_bound, active.astype(np.bool_),
         int(n_grid), int(sub_max), float(xtol_m), int(maxiter),
         np.full(g_n, np.nan) if x_start_m is None else _as_group_array(x_start_m, g_n, np.float64),
+        bool(residuals),
     )
     status[code == _DEGENERATE] = "degenerate"
     status[code == _AT_BOUND] = "x_hat_at_bound"
@@ -478,7 +483,7 @@ def fit_arrays(
         tq = stats.t.ppf(0.5 + ci_level / 2.0, dof)
         half_a = tq * infl * np.sqrt(var_a)
         half_x = tq * infl * np.sqrt(var_x)
-    fitted = np.isfinite(alpha)
+    fitted = np.isfinite(alpha) & np.isfinite(ssr)
     infl = np.where(fitted, infl, np.nan)
     return {
         "status": status.astype(str),
@@ -602,11 +607,14 @@ def fit_groups(
     *,
     x_start_m: np.ndarray | None = None,
     sort: bool = True,
+    quick: bool = False,
 ) -> pl.DataFrame:
     """Eq. 8 for populations laid out contiguously: ``groups`` (``valve_id, window_id,
     window_start, window_end, edge``) row g owns the points ``offsets[g]:offsets[g + 1]`` of
     ``u``/``area``. Returns :data:`FIT_COLUMNS`, sorted by valve, window and edge (in the order
-    of ``groups`` when not ``sort``). ``x_start_m``: warm starts (:func:`fit_arrays`)."""
+    of ``groups`` when not ``sort``). ``x_start_m``: warm starts (:func:`fit_arrays`).
+    ``quick``: α̂ and x̂ to 0.1 µm, no residual pass (e and the intervals NaN): a first estimate
+    that a refit will polish."""
     valve_ids = groups["valve_id"].to_list()
     edge_ids = groups["edge"].to_list()
     g_n = groups.height
@@ -625,6 +633,8 @@ def fit_groups(
         min_coverage_m=np.array([per_valve[v].min_coverage_m for v in valve_ids]).reshape(g_n),
         ci_level=ci_level,
         x_start_m=x_start_m,
+        xtol_m=1e-7 if quick else 1e-9,
+        residuals=not quick,
     )
     out = groups.with_columns(pl.Series(name, col) for name, col in res.items())
     if not sort:

@@ -30,8 +30,8 @@ from transforms.characteristic import (
     plausibility,
     scaled_shifted,
 )
-from transforms.derivatives import add_savgol, savgol_exprs
-from transforms.fit import FIT_COLUMNS, fit_groups
+from transforms.derivatives import add_savgol, savgol_arrays
+from transforms.fit import fit_arrays, fit_groups
 from transforms.params import EDGES, MonitorParams
 from transforms.points import (
     DEFAULT_SIGNALS,
@@ -148,7 +148,31 @@ def _time_sorted(lake_v: pl.DataFrame) -> pl.DataFrame:
     return lake_v
 
 
-def _valve_polars(lake_v, valve_id, p, leakage, with_ratio):
+@dataclass
+class _ValvePoints:
+    """One valve's steps 2–3 and Eq. 7: the point arrays in fit layout, the frames around them."""
+
+    u: np.ndarray
+    area: np.ndarray
+    ratio: np.ndarray | None
+    """:func:`transforms.points.leak_ratio_expr` per point (when asked for)."""
+    points: pl.DataFrame | None
+    """:data:`POINT_COLUMNS` (when asked for; the arrays above are its ``u_m``, ``area_m2``)."""
+    stats: pl.DataFrame
+    windows: pl.DataFrame
+    groups: pl.DataFrame
+    """valve_id, window_id, window_start, window_end, edge: the populations, edge-major, windows in
+    time order; population g owns ``sizes[g]`` consecutive points."""
+    sizes: np.ndarray
+
+
+def _groups(windows: pl.DataFrame) -> pl.DataFrame:
+    return pl.concat(
+        [windows.select("valve_id", "window_id", "window_start", "window_end", pl.lit(edge).alias("edge")) for edge in EDGES]
+    )
+
+
+def _valve_polars(lake_v, valve_id, p, leakage, with_ratio, want_points):
     framed = prepare_samples(_time_sorted(lake_v), p)
     points = opening_area_points(
         framed, p, selected={e: pl.col(selected_column(e)) for e in EDGES},
@@ -162,14 +186,18 @@ def _valve_polars(lake_v, valve_id, p, leakage, with_ratio):
     # the populations in the order of `points` (edge-major, windows in time order), as the
     # compiled path lays them out
     counts = points.group_by("edge", "window_id").len()
-    groups = pl.concat(
-        [windows.select("valve_id", "window_id", "window_start", "window_end", pl.lit(edge).alias("edge")) for edge in EDGES]
-    )
+    groups = _groups(windows)
     sizes = groups.join(counts, on=["edge", "window_id"], how="left", maintain_order="left")["len"].fill_null(0)
-    return points, selection_stats(framed), windows, (groups, sizes.to_numpy()), ratio
+    return _ValvePoints(
+        points["u_m"].to_numpy(), points["area_m2"].to_numpy(), ratio, points.select(POINT_COLUMNS),
+        selection_stats(framed), windows, groups, sizes.to_numpy().astype(np.int64),
+    )  # fmt: skip
 
 
-def _valve_numba(lake_v, valve_id, p, leakage, with_ratio):
+_SIGNALS_F64 = ("ps_pa", "pr_pa", "p1_pa", "p2_pa", "x_spool_m", "x_cyl_m")
+
+
+def _valve_numba(lake_v, valve_id, p, leakage, with_ratio, want_points):
     lake_v = _time_sorted(lake_v)
     dt = p.sample_period_s or infer_sample_period_s(lake_v)
     n = lake_v.height
@@ -189,46 +217,57 @@ def _valve_numba(lake_v, valve_id, p, leakage, with_ratio):
             "n_samples": pl.Series(last - first + 1, dtype=pl.Int64),
         }
     )
-    # Savitzky–Golay as weighted rolling sums over the whole column; the validity comes from
-    # window_arrays and is applied in the selection kernel (no per-row masking pass here)
-    sg: list[pl.Expr] = []
+    # the signals once as float64 (the lake may store float32; nulls become NaN), then
+    # Savitzky–Golay as plain weighted sums over the whole column in one compiled pass per
+    # signal; the validity comes from window_arrays and is applied in the selection kernel
+    arrays = {c: lake_v[c].cast(pl.Float64).fill_null(float("nan")).to_numpy() for c in _SIGNALS_F64}
     for column, (smooth_name, deriv_name) in _SG_OUTPUTS.items():
-        sg += savgol_exprs(column, window=p.savgol_window, order=p.savgol_order, sample_period_s=dt,
-                           smooth_name=smooth_name, deriv_name=deriv_name, mask=False,
-                           nulls=lake_v[column].null_count() > 0)
-    # NaN in the first/last h rows (never valid anyway): null-free columns convert without a copy
-    derived = lake_v.select(e.fill_null(float("nan")) for e in sg)
-    arrays = {c: lake_v[c].to_numpy() for c in ("ps_pa", "pr_pa", "x_spool_m", "x_cyl_m")}
-    arrays.update({c: derived[c].to_numpy() for c in derived.columns})
+        sm, de = savgol_arrays(arrays[column], window=p.savgol_window, order=p.savgol_order, sample_period_s=dt,
+                               smooth=smooth_name is not None)  # fmt: skip
+        if smooth_name is not None:
+            arrays[smooth_name] = sm
+        arrays[deriv_name] = de
     codes, flagged, removed, selected, _ = selection_codes(arrays, win, n_windows, p, valid=valid)
     stats = stats_frame(valve_id, windows, flagged, removed, selected)
 
     idx, area, offs, ratio = points_arrays(
         arrays, codes, SELECTED_CODE, p, leakage=None if leakage is None else leakage.get(valve_id), with_ratio=with_ratio
     )
-    sign = np.concatenate([np.full(offs[e + 1] - offs[e], float(EDGE_SIGN[edge])) for e, edge in enumerate(EDGES)])
-    pw = win[idx]
-    points = pl.DataFrame(
-        {
-            "valve_id": pl.repeat(valve_id, idx.shape[0], eager=True, dtype=pl.Utf8),
-            "window_id": pl.Series(pw, dtype=pl.UInt32),
-            "window_start": pl.Series(ts[first][pw]).cast(_UTC_US),
-            "timestamp_utc": pl.Series(ts[idx]).cast(_UTC_US),
-            "edge": pl.concat(
-                [pl.repeat(edge, int(offs[e + 1] - offs[e]), eager=True, dtype=pl.Utf8) for e, edge in enumerate(EDGES)]
-            ),
-            "u_m": sign * arrays[DEFAULT_SIGNALS.x_spool][idx],
-            "area_m2": area,
-        }
-    )
-    # the fit populations in the order of `points`: edge-major, windows in time order
-    groups = pl.concat(
-        [windows.select("valve_id", "window_id", "window_start", "window_end", pl.lit(edge).alias("edge")) for edge in EDGES]
-    )
-    return points, stats, windows, (groups, selected.T.reshape(-1)), (ratio if with_ratio else None)
+    x = arrays[DEFAULT_SIGNALS.x_spool][idx]
+    u = np.concatenate([x[offs[e] : offs[e + 1]] * float(EDGE_SIGN[edge]) for e, edge in enumerate(EDGES)])
+    points = None
+    if want_points:
+        pw = win[idx]
+        points = pl.DataFrame(
+            {
+                "valve_id": pl.repeat(valve_id, idx.shape[0], eager=True, dtype=pl.Utf8),
+                "window_id": pl.Series(pw, dtype=pl.UInt32),
+                "window_start": pl.Series(ts[first][pw]).cast(_UTC_US),
+                "timestamp_utc": pl.Series(ts[idx]).cast(_UTC_US),
+                "edge": pl.concat(
+                    [pl.repeat(edge, int(offs[e + 1] - offs[e]), eager=True, dtype=pl.Utf8) for e, edge in enumerate(EDGES)]
+                ),
+                "u_m": u,
+                "area_m2": area,
+            }
+        )
+    # the fit populations in the order of the points: edge-major, windows in time order
+    return _ValvePoints(u, area, ratio if with_ratio else None, points, stats, windows, _groups(windows), selected.T.reshape(-1).astype(np.int64))
 
 
-def _monitor_points(lake, params, leakage, engine, with_ratio=False):
+@dataclass
+class _Points:
+    """All valves' :class:`_ValvePoints` concatenated, with the fit layout."""
+
+    result: MonitorResult
+    u: np.ndarray
+    area: np.ndarray
+    ratio: np.ndarray | None
+    groups: pl.DataFrame
+    offsets: np.ndarray
+
+
+def _monitor_points(lake, params, leakage, engine, with_ratio=False, want_points=True) -> _Points:
     if engine not in ("numba", "polars"):
         raise ValueError(f"engine must be 'numba' or 'polars', got {engine!r}")
     missing = [c for c in LAKE_COLUMNS if c not in lake.columns]
@@ -236,36 +275,36 @@ def _monitor_points(lake, params, leakage, engine, with_ratio=False):
         raise ValueError(f"lake frame lacks columns {missing}")
     lake, slices = _valve_slices(lake)
     run = _valve_numba if engine == "numba" else _valve_polars
-    points, stats, windows, layouts, ratios = [], [], [], [], []
-    for valve_id, off, length in slices:
-        pts, st, wt, layout, ratio = run(lake.slice(off, length), valve_id, _params_for(params, valve_id), leakage, with_ratio)
-        points.append(pts)
-        stats.append(st)
-        windows.append(wt)
-        layouts.append(layout)
-        ratios.append(ratio)
-    if not slices:  # no rows: empty frames with the right schemas
+    parts = [run(lake.slice(off, length), vid, _params_for(params, vid), leakage, with_ratio, want_points) for vid, off, length in slices]
+    if not parts:  # no rows: empty frames with the right schemas
         p = params if isinstance(params, MonitorParams) else next(iter(params.values()), None)
         if p is None:
             raise ValueError("empty lake frame and no MonitorParams")
         framed = prepare_samples(lake.head(0), p, sample_period_s=p.sample_period_s or 1e-3)
-        stats.append(selection_stats(framed))
-        windows.append(window_table(framed))
-        points.append(opening_area_points(framed, p, selected={e: pl.col(selected_column(e)) for e in EDGES}))
-        layouts.append((pl.DataFrame(schema={"valve_id": pl.Utf8, "window_id": pl.UInt32, "window_start": _UTC_US,
-                                             "window_end": _UTC_US, "edge": pl.Utf8}), np.zeros(0, dtype=np.int64)))
-        ratios.append(np.zeros(0) if with_ratio else None)
+        empty = opening_area_points(framed, p, selected={e: pl.col(selected_column(e)) for e in EDGES}).select(POINT_COLUMNS)
+        windows = window_table(framed)
+        parts = [_ValvePoints(np.zeros(0), np.zeros(0), np.zeros(0) if with_ratio else None, empty, selection_stats(framed),
+                              windows, _groups(windows), np.zeros(0, dtype=np.int64))]  # fmt: skip
+    if want_points:
+        points = pl.concat([q.points for q in parts], how="vertical")
+    else:
+        points = pl.DataFrame(schema={"valve_id": pl.Utf8, "window_id": pl.UInt32, "window_start": _UTC_US,
+                                      "timestamp_utc": _UTC_US, "edge": pl.Utf8, "u_m": pl.Float64, "area_m2": pl.Float64})  # fmt: skip
     res = MonitorResult(
-        points=pl.concat(points, how="vertical").select(POINT_COLUMNS),
-        selection=pl.concat(stats, how="vertical"),
+        points=points,
+        selection=pl.concat([q.stats for q in parts], how="vertical"),
         fits=pl.DataFrame(),
-        windows=pl.concat(windows, how="vertical"),
+        windows=pl.concat([q.windows for q in parts], how="vertical"),
     )
-    groups = pl.concat([lay[0] for lay in layouts], how="vertical")
-    sizes = np.concatenate([lay[1] for lay in layouts]).astype(np.int64)
-    layout = (groups, np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64))
-    ratio = np.concatenate(ratios) if with_ratio else None
-    return res, layout, ratio
+    sizes = np.concatenate([q.sizes for q in parts]).astype(np.int64)
+    return _Points(
+        res,
+        np.concatenate([q.u for q in parts]),
+        np.concatenate([q.area for q in parts]),
+        np.concatenate([q.ratio for q in parts]) if with_ratio else None,
+        pl.concat([q.groups for q in parts], how="vertical"),
+        np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64),
+    )
 
 
 def monitor_points(
@@ -283,7 +322,7 @@ def monitor_points(
     (:func:`transforms.points.area_expr`) for that valve. ``engine``: ``"numba"`` (default) or
     ``"polars"`` (module docstring).
     """
-    return _monitor_points(lake, params, leakage, engine)[0]
+    return _monitor_points(lake, params, leakage, engine).result
 
 
 def monitor(
@@ -294,13 +333,15 @@ def monitor(
     leakage: Mapping[str, Mapping[str, Characteristic]] | None = None,
     leakage_passes: int | None = None,
     engine: str = "numba",
+    points: bool = True,
 ) -> MonitorResult:
     """Steps 2–4b: lake rows of one or more valves → points, selection statistics and fits.
 
     ``params``: one :class:`MonitorParams` per valve (or one for all); ``baselines[valve][edge]``:
     Â per edge (the commissioning fit or the nominal characteristic). A window/edge without a
     usable population still gets a fit row with its status. ``engine``: as in
-    :func:`monitor_points`.
+    :func:`monitor_points`. ``points=False`` skips building the points frame (``points`` is then
+    empty; the fits are the same): what the flows do, which store only fits and counts.
 
     ``leakage[valve][edge]``: α·A of each edge *at its baseline state* over the whole stroke
     (closed branch included: the nominal Eq. 3 characteristic for a nominal baseline,
@@ -314,18 +355,16 @@ def monitor(
     The returned points carry the corrected areas. The baselines must have been built with the
     same correction (:func:`commissioning_baseline`).
     """
+    pts = _monitor_points(lake, params, None, engine, with_ratio=leakage is not None, want_points=points)
+    res, groups, offsets, u, plain = pts.result, pts.groups, pts.offsets, pts.u, pts.area
+    pmap = {v: _params_for(params, v) for v in res.windows["valve_id"].unique().to_list()}
     if leakage is None:
-        res, (groups, offsets), _ = _monitor_points(lake, params, None, engine)
-        pmap = {v: _params_for(params, v) for v in res.windows["valve_id"].unique().to_list()}
-        fits = fit_groups(groups, res.points["u_m"].to_numpy(), res.points["area_m2"].to_numpy(), offsets, baselines, pmap)
+        fits = fit_groups(groups, u, plain, offsets, baselines, pmap)
         return MonitorResult(points=res.points, selection=res.selection, fits=fits, windows=res.windows)
 
-    res, (groups, offsets), ratio = _monitor_points(lake, params, None, engine, with_ratio=True)
-    pmap = {v: _params_for(params, v) for v in res.windows["valve_id"].unique().to_list()}
+    ratio = pts.ratio
     if leakage_passes is None:
         leakage_passes = max((p.leakage_passes for p in pmap.values()), default=1)
-    u = res.points["u_m"].to_numpy()
-    plain = res.points["area_m2"].to_numpy()
     g_n = groups.height
     valve_ids = groups["valve_id"].to_list()
     edge_ids = groups["edge"].to_list()
@@ -337,20 +376,19 @@ def monitor(
     shift = np.zeros(g_n)
     area = np.empty_like(plain)
     _leak_correct(u, plain, ratio, offsets, scale, shift, packed.kstart, packed.kend, packed.kn, packed.kv, packed.ks, area)
-    fits = fit_groups(groups, u, area, offsets, baselines, pmap, sort=False)
-    for _ in range(int(leakage_passes)):
-        own_a, own_x = _edge_states(fits, u, area, offsets, baselines, valve_ids, edge_ids)
+    passes = int(leakage_passes)
+    x0 = None
+    for _ in range(passes):
+        # a first estimate of every edge's state in every window from every FIRST_FIT_STRIDE-th
+        # point (the leakage needs it to a few per cent; the final fit below uses all points)
+        status, alpha, xhat = _quick_fit(groups, u, area, offsets, baselines, pmap, valve_ids, edge_ids)
+        own_a, own_x = _edge_states(status, alpha, xhat, u, area, offsets, baselines, valve_ids, edge_ids)
         scale, shift = own_a[opposite], own_x[opposite]
         _leak_correct(u, plain, ratio, offsets, scale, shift, packed.kstart, packed.kend, packed.kn, packed.kv, packed.ks, area)
-        x0 = fits["x_hat_m"].to_numpy().copy()
-        fits = fit_groups(groups, u, area, offsets, baselines, pmap, x_start_m=x0, sort=False)
-    edge_rank = {e: i for i, e in enumerate(EDGES)}
-    fits = fits.sort(
-        pl.col("valve_id"), pl.col("window_start"), pl.col("window_id"),
-        pl.col("edge").replace_strict(edge_rank, return_dtype=pl.Int8), maintain_order=True,
-    ).select(FIT_COLUMNS)  # fmt: skip
-    points = res.points.with_columns(pl.Series("area_m2", area))
-    return MonitorResult(points=points, selection=res.selection, fits=fits, windows=res.windows)
+        x0 = xhat
+    fits = fit_groups(groups, u, area, offsets, baselines, pmap, x_start_m=x0)
+    out_points = res.points.with_columns(pl.Series("area_m2", area)) if points else res.points
+    return MonitorResult(points=out_points, selection=res.selection, fits=fits, windows=res.windows)
 
 
 # --------------------------------------------------------------------------------------------
@@ -429,12 +467,35 @@ def _leak_correct(u, plain, ratio, offsets, scale, shift, kstart, kend, kn, kv, 
             out[i] = plain[i] - a * (kv[j] + ks[j] * (t - kn[j])) * ratio[i]
 
 
-def _edge_states(fits, u, area, offsets, baselines, valve_ids, edge_ids):
+FIRST_FIT_STRIDE = 8
+"""The first estimate of each population (for the leakage and as the final fit's warm start)
+uses every 8th point: a population's points are serially correlated over the 21-sample
+Savitzky–Golay stencil, so 1/8 of them carry most of the information, at 1/8 of the cost."""
+
+
+def _quick_fit(groups, u, area, offsets, baselines, pmap, valve_ids, edge_ids):
+    """(status, α̂, x̂) per population from every :data:`FIRST_FIT_STRIDE`-th point, to 0.1 µm,
+    without the residual pass; the point thresholds scaled by the stride."""
+    k = FIRST_FIT_STRIDE
+    n = np.diff(offsets)
+    m = (n + k - 1) // k
+    sub_off = np.concatenate([[0], np.cumsum(m)]).astype(np.int64)
+    idx = np.repeat(offsets[:-1] - sub_off[:-1] * k, m) + k * np.arange(sub_off[-1])
+    res = fit_arrays(
+        u[idx], area[idx], sub_off, [baselines.get(v, {}).get(e) for v, e in zip(valve_ids, edge_ids, strict=True)],
+        x_bound_m=np.array([pmap[v].x_hat_bound_m for v in valve_ids]),
+        min_points=np.array([max(3, pmap[v].min_points // k) for v in valve_ids], dtype=np.int64),
+        min_coverage_m=np.array([pmap[v].min_coverage_m for v in valve_ids]),
+        xtol_m=1e-7, residuals=False,
+    )  # fmt: skip
+    return res["status"], res["alpha_hat"], res["x_hat_m"]
+
+
+def _edge_states(status, alpha, xhat, u, area, offsets, baselines, valve_ids, edge_ids):
     """Each population's own state relative to its baseline, (scale, shift): the fit where it is
     ``ok``, else a scale-only estimate (:data:`SCALE_ONLY_MIN_POINTS`), else (1, 0)."""
-    status = fits["status"].to_numpy()
-    a = fits["alpha_hat"].to_numpy().copy()
-    x = fits["x_hat_m"].to_numpy().copy()
+    a = np.array(alpha, dtype=np.float64)
+    x = np.array(xhat, dtype=np.float64)
     ok = (status == "ok") & np.isfinite(a) & np.isfinite(x)
     a[~ok] = 1.0
     x[~ok] = 0.0
