@@ -151,11 +151,13 @@ def _savgol_kernel(x, w0, w1, scale1, smooth, deriv, want_smooth):
     m = w1.shape[0]
     h = m // 2
     for i in range(min(h, n)):
-        smooth[i] = np.nan
         deriv[i] = np.nan
+        if want_smooth:
+            smooth[i] = np.nan
     for i in range(max(n - h, h), n):
-        smooth[i] = np.nan
         deriv[i] = np.nan
+        if want_smooth:
+            smooth[i] = np.nan
     block = 512
     acc0 = np.empty(block)
     acc1 = np.empty(block)
@@ -193,8 +195,5 @@ def savgol_arrays(x: np.ndarray, *, window: int, order: int, sample_period_s: fl
     w1 = np.array(_weights(window, order, 1))
     out0 = np.empty_like(x) if smooth else np.empty(0)
     out1 = np.empty_like(x)
-    if smooth:
-        _savgol_kernel(x, w0, w1, 1.0 / sample_period_s, out0, out1, True)
-    else:
-        _savgol_kernel(x, w0, w1, 1.0 / sample_period_s, np.empty_like(x), out1, False)
+    _savgol_kernel(x, w0, w1, 1.0 / sample_period_s, out0, out1, bool(smooth))
     return (out0 if smooth else None), out1

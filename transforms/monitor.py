@@ -35,7 +35,6 @@ from transforms.fit import fit_arrays, fit_groups
 from transforms.params import EDGES, MonitorParams
 from transforms.points import (
     DEFAULT_SIGNALS,
-    EDGE_SIGN,
     OPPOSITE_EDGE,
     POINT_COLUMNS,
     opening_area_points,
@@ -197,6 +196,13 @@ def _valve_polars(lake_v, valve_id, p, leakage, with_ratio, want_points):
 _SIGNALS_F64 = ("ps_pa", "pr_pa", "p1_pa", "p2_pa", "x_spool_m", "x_cyl_m")
 
 
+def _float64(col: pl.Series) -> np.ndarray:
+    """A signal as a float64 array (the lake may store float32), nulls as NaN, in one pass."""
+    if col.null_count():
+        col = col.cast(pl.Float64).fill_null(float("nan"))
+    return np.asarray(col.to_numpy(), dtype=np.float64)
+
+
 def _valve_numba(lake_v, valve_id, p, leakage, with_ratio, want_points):
     lake_v = _time_sorted(lake_v)
     dt = p.sample_period_s or infer_sample_period_s(lake_v)
@@ -206,7 +212,7 @@ def _valve_numba(lake_v, valve_id, p, leakage, with_ratio, want_points):
         ts, sample_period_s=dt, gap_limit_s=p.gap_limit_periods * dt, step_tolerance=p.step_tolerance,
         half_window=p.half_window,
     )
-    first = np.flatnonzero(np.diff(win, prepend=-1) != 0)
+    first = np.concatenate([[0], np.flatnonzero(win[1:] != win[:-1]) + 1]) if n else np.zeros(0, dtype=np.int64)
     last = np.append(first[1:] - 1, n - 1) if n else first
     windows = pl.DataFrame(
         {
@@ -220,7 +226,7 @@ def _valve_numba(lake_v, valve_id, p, leakage, with_ratio, want_points):
     # the signals once as float64 (the lake may store float32; nulls become NaN), then
     # Savitzky–Golay as plain weighted sums over the whole column in one compiled pass per
     # signal; the validity comes from window_arrays and is applied in the selection kernel
-    arrays = {c: lake_v[c].cast(pl.Float64).fill_null(float("nan")).to_numpy() for c in _SIGNALS_F64}
+    arrays = {c: _float64(lake_v[c]) for c in _SIGNALS_F64}
     for column, (smooth_name, deriv_name) in _SG_OUTPUTS.items():
         sm, de = savgol_arrays(arrays[column], window=p.savgol_window, order=p.savgol_order, sample_period_s=dt,
                                smooth=smooth_name is not None)  # fmt: skip
@@ -230,11 +236,9 @@ def _valve_numba(lake_v, valve_id, p, leakage, with_ratio, want_points):
     codes, flagged, removed, selected, _ = selection_codes(arrays, win, n_windows, p, valid=valid)
     stats = stats_frame(valve_id, windows, flagged, removed, selected)
 
-    idx, area, offs, ratio = points_arrays(
+    idx, area, offs, ratio, u = points_arrays(
         arrays, codes, SELECTED_CODE, p, leakage=None if leakage is None else leakage.get(valve_id), with_ratio=with_ratio
     )
-    x = arrays[DEFAULT_SIGNALS.x_spool][idx]
-    u = np.concatenate([x[offs[e] : offs[e + 1]] * float(EDGE_SIGN[edge]) for e, edge in enumerate(EDGES)])
     points = None
     if want_points:
         pw = win[idx]

@@ -229,13 +229,19 @@ def _pwl(kn, kv, k0, k1, t):
 
 
 @numba.njit(cache=True)
-def _points_kernel(codes, n_selected, selected_code, ps, pr, p1, p2, x, xc, dp1, dp2, v, c, lkn, lkv, loff, use_leak, want_ratio):
+def _points_kernel(codes, selected_code, ps, pr, p1, p2, x, xc, dp1, dp2, v, c, lkn, lkv, loff, use_leak, want_ratio):
     sq, beta, a1, a2, v01, v02 = c[0], c[1], c[2], c[3], c[4], c[5]
+    n_selected = np.zeros(4, dtype=np.int64)
+    for i in range(codes.shape[0]):
+        for e in range(4):
+            if codes[i, e] == selected_code:
+                n_selected[e] += 1
     offsets = np.zeros(5, dtype=np.int64)
     for e in range(4):
         offsets[e + 1] = offsets[e] + n_selected[e]
     idx = np.empty(offsets[4], dtype=np.int64)
     area = np.empty(offsets[4], dtype=np.float64)
+    u = np.empty(offsets[4], dtype=np.float64)
     ratio = np.empty(offsets[4] if want_ratio else 0, dtype=np.float64)
     cursor = offsets[:4].copy()
     for i in range(x.shape[0]):
@@ -264,8 +270,9 @@ def _points_kernel(codes, n_selected, selected_code, ps, pr, p1, p2, x, xc, dp1,
             else:
                 area[k] = (sq * num) / (beta * den)
             idx[k] = i
+            u[k] = sign_u * x[i]
             cursor[e] = k + 1
-    return idx, area, offsets, ratio
+    return idx, area, offsets, ratio, u
 
 
 def points_arrays(
@@ -280,14 +287,13 @@ def points_arrays(
     """Eq. 7 (and its siblings) for the rows whose ``codes[:, e]`` equal ``selected_code``
     (:func:`transforms.selection.selection_codes`), in one compiled pass per edge.
 
-    Returns ``(idx, area, offsets, ratio)``: row indices and α·A of edge e in
-    ``offsets[e]:offsets[e + 1]`` (edges in :data:`EDGES` order, rows in input order).
+    Returns ``(idx, area, offsets, ratio, u)``: row indices, α·A and the opening coordinate u of
+    edge e in ``offsets[e]:offsets[e + 1]`` (edges in :data:`EDGES` order, rows in input order).
     Same formulas as :func:`area_expr`, same optional closed-edge correction. ``ratio`` (empty
     unless ``with_ratio``): :func:`leak_ratio_expr` per point, so that any closed-edge
     characteristic L can be subtracted later as ``area − L(−u)·ratio``.
     """
     s = DEFAULT_SIGNALS
-    n_sel = (codes == selected_code).sum(axis=0).astype(np.int64)
     c = np.array(
         [sqrt(params.density_kg_m3 / 2.0), params.bulk_modulus_pa, params.piston_area_m2,
          params.annulus_area_m2, params.v01_m3, params.v02_m3],
@@ -302,7 +308,7 @@ def points_arrays(
         lkn = lkv = np.zeros(2)
         loff = np.zeros(5, dtype=np.int64)
     return _points_kernel(
-        codes, n_sel, int(selected_code),
+        codes, codes.dtype.type(selected_code),
         *(np.ascontiguousarray(arrays[k], dtype=np.float64) for k in (
             s.ps, s.pr, s.p1, s.p2, s.x_spool, s.x_cyl, s.dp1_dt, s.dp2_dt, s.v_cyl)),
         c, lkn, lkv, loff, leakage is not None, bool(with_ratio),

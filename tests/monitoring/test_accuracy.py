@@ -17,7 +17,6 @@ covering only u ≈ 1.04–1.37 mm; :func:`test_narrow_window_unbiased` holds th
 
 from __future__ import annotations
 
-import dataclasses
 from datetime import timedelta
 
 import numpy as np
