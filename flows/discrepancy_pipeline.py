@@ -56,6 +56,11 @@ class _Prepared:
     edges: np.ndarray
     base_load: LoadEstimate
     loads: dict = field(default_factory=dict)  # Effects -> LoadEstimate of that model
+    seg: LoadEstimate | None = None  # the load segments of the regression (default base_load)
+
+    @property
+    def segmentation(self) -> LoadEstimate:
+        return self.base_load if self.seg is None else self.seg
 
 
 def prepare_records(records: list[Record], plant: PlantParams, condition: ValveCondition, settings: DiscrepancySettings) -> list[_Prepared]:
@@ -238,23 +243,21 @@ def _rows(prepared: list[_Prepared], plant, condition, effects, settings) -> _Ro
         rec = p.rec
         ir = interval_residuals(_terms_raw(rec, plant, condition, effects), rec.raw["X"], c.A1, c.A2, rec.dt, p.edges, settings.interval_smoothing)
         e = p.edges
-        L = settings.interval_samples
         nb = 100000
         bc = (ir.t_cont // settings.block_s).astype(np.int64) + i * nb
         bm = (ir.t_motion // settings.block_s).astype(np.int64) + i * nb
         # motion rows: every sample of [e_{i-1}, e_{i+1}] usable and in one load segment
-        us = p.base_load.usable.astype(np.int64)
+        us = p.segmentation.usable.astype(np.int64)
         cus = np.r_[0, np.cumsum(us)]
         lo, hi = e[:-2], e[2:] + 1
         all_usable = (cus[hi] - cus[lo]) == (hi - lo)
-        seg = p.base_load.segment
+        seg = p.segmentation.segment
         same = seg[lo] == seg[np.minimum(hi - 1, rec.n - 1)]
         mrow = all_usable & same & np.isfinite(ir.rm)
         ys += [ir.r1, ir.r2, ir.rm[mrow]]
         eqs += [np.zeros(ir.r1.size, int), np.ones(ir.r2.size, int), np.full(int(mrow.sum()), 2)]
         blocks += [bc, bc, bm[mrow]]
         groups += [np.full(ir.r1.size, -1), np.full(ir.r2.size, -1), (i * nb + seg[e[1:-1]])[mrow]]
-        del L
     return _Rows(np.concatenate(ys), np.concatenate(eqs), np.concatenate(blocks), np.concatenate(groups))
 
 
@@ -487,6 +490,23 @@ def _refine(prepared, plant, condition, specs: list[EffectSpec], start: Effects,
     return fx, se, J
 
 
+def _select(prepared, plant, condition, specs, settings):
+    """Rows, weights and forward selection against the base model (module docstring)."""
+    base = Effects()
+    rows0 = _rows(prepared, plant, condition, base, settings)
+    r0 = _demean_motion(rows0.y, rows0)
+    sig = _equation_sigmas(r0, rows0)
+    w_rows = 1.0 / sig[rows0.eq]
+    J0 = _jacobian(prepared, plant, condition, base, specs, rows0, settings, rows0.y)
+    st = block_stats(-r0 * w_rows, J0 * w_rows[:, None], rows0.block)
+    sel: SelectionResult = forward_select(
+        st, list(range(len(specs))), max_effects=settings.max_effects, min_t_stat=settings.min_t_stat,
+        min_relative_gain=settings.min_relative_gain, min_z=settings.min_z,
+        positive=frozenset(j for j, spec in enumerate(specs) if spec.lower is not None),
+    )
+    return rows0, w_rows, sel, sig
+
+
 def diagnose(records: list[Record], plant: PlantParams, condition: ValveCondition | None = None, settings: DiscrepancySettings | None = None, *, library: tuple[EffectSpec, ...] = EFFECT_LIBRARY, trace_records: int = 1, monitoring: bool = True) -> Diagnosis:
     """Run steps 1–3 on ``records`` of one valve (module docstring).
 
@@ -515,19 +535,21 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
     if not prepared:
         raise ValueError("no record long enough to diagnose")
     base = Effects()
-    # step 2: the base model's residuals and the library's regressors
-    rows0 = _rows(prepared, plant, condition, base, settings)
-    r0 = _demean_motion(rows0.y, rows0)
-    sig = _equation_sigmas(r0, rows0)
-    w_rows = 1.0 / sig[rows0.eq]
     specs = list(library)
-    J0 = _jacobian(prepared, plant, condition, base, specs, rows0, settings, rows0.y)
-    st = block_stats(-r0 * w_rows, J0 * w_rows[:, None], rows0.block)
-    sel: SelectionResult = forward_select(
-        st, list(range(len(specs))), max_effects=settings.max_effects, min_t_stat=settings.min_t_stat,
-        min_relative_gain=settings.min_relative_gain, min_z=settings.min_z,
-        positive=frozenset(j for j, spec in enumerate(specs) if spec.lower is not None),
-    )
+    # step 2: the base model's residuals and the library's regressors; the load segments come
+    # from the base model's motion equation, which a friction or mass change disturbs (where the
+    # inertia mismatch changes fast it can pass for a load step and absorb part of the effect):
+    # once effects are named, the load is segmented again with the fitted model and the
+    # selection repeated (alternating between the nuisance load and the effects)
+    rows0, w_rows, sel, sig = _select(prepared, plant, condition, specs, settings)
+    if sel.named:
+        start = base
+        for cs in sel.named:
+            start = perturbed(start, specs[cs.column], cs.theta)
+        fitted, _, _ = _refine(prepared, plant, condition, [specs[cs.column] for cs in sel.named], start, rows0, w_rows, settings)
+        for p in prepared:
+            p.seg = _estimate_load(p.rec, plant, condition, fitted, settings)
+        rows0, w_rows, sel, sig = _select(prepared, plant, condition, specs, settings)
     B = sel.n_blocks
     q = float(_stats.t.ppf(0.5 + settings.ci_level / 2.0, max(B - 1, 1)))
     candidates = []
