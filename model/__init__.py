@@ -10,6 +10,7 @@ from .area import edge_area, opening_coordinate, valve_areas
 from .condition import (BROKEN_1R, HEALTHY, WEAR, Scenario, broken_edge, condition_arrays,
                         condition_at, healthy, manufactured, wear)
 from .controller import feedforward, feedforward_table, pi_step
+from .effects import EFFECT_LIBRARY, EFFECT_NAMES, EffectSpec, Effects
 from .cylinder import (chamber_volumes, cylinder_acceleration, friction_force,
                        pressure_derivatives, resultant_force)
 from .orifice import orifice_flow, port_flows, port_flows_from_areas
@@ -18,6 +19,7 @@ from .params import (EDGES, OPENING_SIGN, TABLE1, ControllerParams, CylinderPara
                      SpoolParams, SupplyParams, TrajectoryParams, ValveCondition, ValveGeometry,
                      edge_index)
 from .sensors import MeasuredSignals, measure
+from .replay import ReplayResult, replay
 from .simulate import (SimulationResult, rhs, simulate_inputs, simulate_windows, window_seed)
 from .spool import spool_acceleration
 from .standstill import RestState, eq9_residual, standstill, steady_state, steady_states
@@ -41,4 +43,5 @@ __all__ = [
     "condition_at", "healthy", "manufactured", "wear",
     "SimulationResult", "rhs", "simulate_inputs", "simulate_windows", "window_seed",
     "MeasuredSignals", "measure",
+    "EFFECT_LIBRARY", "EFFECT_NAMES", "EffectSpec", "Effects", "ReplayResult", "replay",
 ]
