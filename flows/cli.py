@@ -214,10 +214,10 @@ def backfill(
     with ExitStack() as stack:
         address = dask_address
         if address or dask_workers:
-            stack.enter_context(shared_api())
             if dask_workers:
                 address = stack.enter_context(local_cluster(dask_workers))
-            threads = cluster_threads(address)
+            threads = cluster_threads(address)  # reachable, and how big
+            stack.enter_context(shared_api())
             n = concurrency or 2 * threads
         else:
             n = concurrency or CONCURRENCY

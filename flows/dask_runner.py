@@ -33,7 +33,7 @@ def task_runner(concurrency: int, dask_address: str | None = None):
     return ThreadPoolTaskRunner(max_workers=max(1, concurrency))
 
 
-def cluster_threads(dask_address: str, timeout_s: float = 20.0) -> int:
+def cluster_threads(dask_address: str, timeout_s: float = 10.0) -> int:
     """Worker threads of the cluster at ``dask_address`` (and a clear error if it is unreachable)."""
     import distributed
 

@@ -1,0 +1,205 @@
+"""Benchmark of ``valvemon backfill``: a simulated archive → lake → fits, single process vs Dask.
+
+Runs the command itself (``valvemon backfill --config ARCHIVE/plant.toml --exports
+ARCHIVE/exports --from … --to … --quiet``) once per mode into a fresh warehouse under
+``--work``, and measures from outside:
+
+* wall time;
+* CPU seconds of the whole process tree, split into the flow process (the command: planning,
+  Prefect bookkeeping, every DuckDB write), the Dask workers and the Prefect API server — the
+  tree is sampled every ``--sample-s`` with psutil and each process's last CPU times are kept,
+  and the total is checked against ``getrusage(RUSAGE_CHILDREN)``;
+* peak memory: the largest resident set of one process (``ru_maxrss``) and the peak of the
+  tree's summed RSS (sampled);
+* the 1-minute load average before and after (the machine is shared);
+* rows: archive rows ingested (``ingest_manifest.rows_in``), lake rows monitored and windows
+  and fits written (``backfill_progress``), hence rows per second.
+
+Make the archive first (not in the repository), e.g. 2 valve-years of hourly 10 s windows:
+
+    valvemon simulate --out /tmp/vm_bench/archive2vy --n-valves 2 --from 2025-01-01 --days 365 \\
+        --format parquet --workers 1 --quiet
+    .venv/bin/python bench/backfill.py --archive /tmp/vm_bench/archive2vy --from 2025-01-01 --to 2026-01-01 \\
+        --work /tmp/vm_bench/work --modes single,dask2
+
+Modes: ``single`` (tasks on one thread of the command's process, ``--concurrency 1``),
+``threadsN`` (N threads), ``daskN`` (a temporary local Dask cluster of N one-thread worker
+processes, ``--dask-workers N``). Results are printed as a Markdown table and appended to
+``--json`` if given.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+import resource
+import shutil
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import duckdb
+import psutil
+
+ROOT = Path(__file__).resolve().parents[1]
+VALVEMON = str(Path(sys.executable).with_name("valvemon"))
+
+
+def mode_args(mode: str) -> list[str]:
+    if mode == "single":
+        return ["--concurrency", "1"]
+    if mode.startswith("threads"):
+        return ["--concurrency", mode.removeprefix("threads")]
+    if mode.startswith("dask"):
+        n = int(mode.removeprefix("dask"))
+        return ["--dask-workers", str(n), "--concurrency", str(2 * n)]
+    raise SystemExit(f"unknown mode {mode!r}")
+
+
+class TreeSampler(threading.Thread):
+    """Samples the CPU times and RSS of a process and its descendants."""
+
+    def __init__(self, pid: int, every_s: float):
+        super().__init__(daemon=True)
+        self.root = psutil.Process(pid)
+        self.every_s = every_s
+        self.cpu: dict[int, tuple[str, float]] = {}
+        self.peak_rss = 0
+        self.stop = threading.Event()
+
+    @staticmethod
+    def kind(p: psutil.Process, root_pid: int) -> str:
+        if p.pid == root_pid:
+            return "flow"
+        try:
+            cmd = " ".join(p.cmdline())
+        except psutil.Error:
+            return "other"
+        if "uvicorn" in cmd or "prefect.server" in cmd or "server start" in cmd:
+            return "api"
+        if "multiprocessing" in cmd or "distributed" in cmd or "dask" in cmd:
+            return "workers"
+        return "other"
+
+    def sample(self) -> None:
+        try:
+            procs = [self.root, *self.root.children(recursive=True)]
+        except psutil.Error:
+            return
+        rss = 0
+        for p in procs:
+            try:
+                with p.oneshot():
+                    t = p.cpu_times()
+                    rss += p.memory_info().rss
+                    kind = self.cpu.get(p.pid, (None, 0))[0] or self.kind(p, self.root.pid)
+                    self.cpu[p.pid] = (kind, t.user + t.system)
+            except psutil.Error:
+                continue
+        self.peak_rss = max(self.peak_rss, rss)
+
+    def run(self) -> None:
+        while not self.stop.is_set():
+            self.sample()
+            self.stop.wait(self.every_s)
+
+    def by_kind(self) -> dict[str, float]:
+        out: dict[str, float] = {}
+        for kind, cpu in self.cpu.values():
+            out[kind] = out.get(kind, 0.0) + cpu
+        return out
+
+
+def counts(warehouse: Path) -> dict:
+    con = duckdb.connect(str(warehouse / "valvemon.duckdb"), read_only=True)
+    try:
+        q = lambda sql: con.execute(sql).fetchone()  # noqa: E731
+        rows_in, files = q("SELECT coalesce(sum(rows_in), 0), count(*) FROM ingest_manifest")
+        lake_rows, windows, units = q("SELECT coalesce(sum(rows_read), 0), coalesce(sum(windows), 0), count(*) FROM backfill_progress WHERE unit_kind = 'monitor'")
+        fits, ok = q("SELECT count(*), count(*) FILTER (status = 'ok') FROM edge_fits")
+    finally:
+        con.close()
+    lake_bytes = sum(p.stat().st_size for p in (warehouse / "lake").rglob("*.parquet"))
+    return {"archive_rows": int(rows_in), "files": int(files), "lake_rows": int(lake_rows), "windows": int(windows),
+            "monitor_units": int(units), "fits": int(fits), "fits_ok": int(ok), "lake_mb": lake_bytes / 1e6}  # fmt: skip
+
+
+def run_mode(mode: str, args) -> dict:
+    warehouse = Path(args.work) / f"wh-{mode}"
+    if warehouse.exists():
+        shutil.rmtree(warehouse)
+    archive = Path(args.archive)
+    cmd = [
+        VALVEMON, "backfill", "--config", str(archive / "plant.toml"), "--exports", str(archive / "exports"),
+        "--from", args.start, "--to", args.end, "--warehouse", str(warehouse), "--unit-days", str(args.unit_days),
+        "--quiet", *mode_args(mode),
+    ]  # fmt: skip
+    env = dict(os.environ, PREFECT_HOME=str(Path(args.work) / f"prefect-{mode}"), PREFECT_SERVER_ANALYTICS_ENABLED="false")
+    env.pop("PREFECT_API_URL", None)
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    load0 = os.getloadavg()[0]
+    t0 = time.monotonic()
+    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    sampler = TreeSampler(proc.pid, args.sample_s)
+    sampler.start()
+    out, err = proc.communicate()
+    wall = time.monotonic() - t0
+    sampler.stop.set()
+    sampler.join()
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    load1 = os.getloadavg()[0]
+    if proc.returncode != 0:
+        raise SystemExit(f"{mode}: exit {proc.returncode}\n{err[-3000:]}")
+    cpu_rusage = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    c = counts(warehouse)
+    kinds = sampler.by_kind()
+    summary = out.strip().splitlines()[-1] if out.strip() else ""
+    m = re.search(r" in ([\d,.]+) s$", summary)
+    return {
+        "mode": mode, "command": " ".join(cmd[1:]), "wall_s": wall, "cpu_s": cpu_rusage, "cpu_sampled": kinds,
+        "max_rss_mb": after.ru_maxrss / 1024, "peak_tree_rss_mb": sampler.peak_rss / 1e6, "load_before": load0,
+        "load_after": load1, "summary": summary, "flow_s": float(m.group(1).replace(",", "")) if m else None, **c,
+    }  # fmt: skip
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--archive", required=True, help="A `valvemon simulate` archive (plant.toml, exports/).")
+    ap.add_argument("--from", dest="start", required=True)
+    ap.add_argument("--to", dest="end", required=True)
+    ap.add_argument("--work", default="/tmp/vm_bench/work", help="Warehouses are made here (one per mode).")
+    ap.add_argument("--modes", default="single,dask2")
+    ap.add_argument("--unit-days", type=float, default=7.0)
+    ap.add_argument("--sample-s", type=float, default=1.0)
+    ap.add_argument("--json", help="Append the results (one JSON object per line) to this file.")
+    ap.add_argument("--keep", action="store_true", help="Keep the warehouses.")
+    args = ap.parse_args()
+    Path(args.work).mkdir(parents=True, exist_ok=True)
+    results = []
+    for mode in args.modes.split(","):
+        r = run_mode(mode, args)
+        results.append(r)
+        print(json.dumps(r), flush=True)
+        if args.json:
+            with open(args.json, "a") as fh:
+                fh.write(json.dumps(r) + "\n")
+        if not args.keep:
+            shutil.rmtree(Path(args.work) / f"wh-{mode}", ignore_errors=True)
+    print()
+    print("| mode | wall s | of which in the flow s | CPU s (tree) | flow / workers / API CPU s | archive rows / wall s | lake rows / wall s | lake rows / CPU s | windows | fits | peak RSS one process MB | peak tree RSS MB | load 1-min before → after |")
+    print("|---|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---|")
+    for r in results:
+        k = r["cpu_sampled"]
+        print(
+            f"| {r['mode']} | {r['wall_s']:,.0f} | {r['flow_s'] or 0:,.0f} | {r['cpu_s']:,.0f} | {k.get('flow', 0):,.0f} / {k.get('workers', 0):,.0f} / {k.get('api', 0):,.0f} "
+            f"| {r['archive_rows'] / r['wall_s'] / 1e6:,.2f} M | {r['lake_rows'] / r['wall_s'] / 1e6:,.2f} M | {r['lake_rows'] / r['cpu_s'] / 1e6:,.2f} M "
+            f"| {r['windows']:,} | {r['fits']:,} | {r['max_rss_mb']:,.0f} | {r['peak_tree_rss_mb']:,.0f} | {r['load_before']:.1f} → {r['load_after']:.1f} |"
+        )
+
+
+if __name__ == "__main__":
+    main()
