@@ -130,11 +130,17 @@ def counts(warehouse: Path) -> dict:
 
 def run_mode(mode: str, args) -> dict:
     warehouse = Path(args.work) / f"wh-{mode}"
-    if warehouse.exists():
-        shutil.rmtree(warehouse)
     archive = Path(args.archive)
+    if args.phase == "monitor":  # redo the monitoring of a kept warehouse (--force, no exports)
+        if not warehouse.exists():
+            raise SystemExit(f"{warehouse}: no warehouse of an earlier --keep run")
+        inputs = ["--force"]
+    else:
+        if warehouse.exists():
+            shutil.rmtree(warehouse)
+        inputs = ["--exports", str(archive / "exports")]
     cmd = [
-        VALVEMON, "backfill", "--config", str(archive / "plant.toml"), "--exports", str(archive / "exports"),
+        VALVEMON, "backfill", "--config", str(archive / "plant.toml"), *inputs,
         "--from", args.start, "--to", args.end, "--warehouse", str(warehouse), "--unit-days", str(args.unit_days),
         "--quiet", *mode_args(mode),
     ]  # fmt: skip
@@ -160,7 +166,7 @@ def run_mode(mode: str, args) -> dict:
     summary = out.strip().splitlines()[-1] if out.strip() else ""
     m = re.search(r" in ([\d,.]+) s$", summary)
     return {
-        "mode": mode, "command": " ".join(cmd[1:]), "wall_s": wall, "cpu_s": cpu_rusage, "cpu_sampled": kinds,
+        "mode": mode, "phase": args.phase, "command": " ".join(cmd[1:]), "wall_s": wall, "cpu_s": cpu_rusage, "cpu_sampled": kinds,
         "max_rss_mb": after.ru_maxrss / 1024, "peak_tree_rss_mb": sampler.peak_rss / 1e6, "load_before": load0,
         "load_after": load1, "summary": summary, "flow_s": float(m.group(1).replace(",", "")) if m else None, **c,
     }  # fmt: skip
@@ -177,6 +183,8 @@ def main() -> None:
     ap.add_argument("--sample-s", type=float, default=1.0)
     ap.add_argument("--json", help="Append the results (one JSON object per line) to this file.")
     ap.add_argument("--keep", action="store_true", help="Keep the warehouses.")
+    ap.add_argument("--phase", choices=("all", "monitor"), default="all",
+                    help="all: archive → lake → fits into a fresh warehouse; monitor: redo the fits of a kept warehouse (--force).")
     args = ap.parse_args()
     Path(args.work).mkdir(parents=True, exist_ok=True)
     results = []
@@ -187,16 +195,17 @@ def main() -> None:
         if args.json:
             with open(args.json, "a") as fh:
                 fh.write(json.dumps(r) + "\n")
-        if not args.keep:
+        if not args.keep and args.phase == "all":
             shutil.rmtree(Path(args.work) / f"wh-{mode}", ignore_errors=True)
     print()
+    print(f"phase: {args.phase}")
     print("| mode | wall s | of which in the flow s | CPU s (tree) | flow / workers / API CPU s | archive rows / wall s | lake rows / wall s | lake rows / CPU s | windows | fits | peak RSS one process MB | peak tree RSS MB | load 1-min before → after |")
     print("|---|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---|")
     for r in results:
         k = r["cpu_sampled"]
         print(
             f"| {r['mode']} | {r['wall_s']:,.0f} | {r['flow_s'] or 0:,.0f} | {r['cpu_s']:,.0f} | {k.get('flow', 0):,.0f} / {k.get('workers', 0):,.0f} / {k.get('api', 0):,.0f} "
-            f"| {r['archive_rows'] / r['wall_s'] / 1e6:,.2f} M | {r['lake_rows'] / r['wall_s'] / 1e6:,.2f} M | {r['lake_rows'] / r['cpu_s'] / 1e6:,.2f} M "
+            f"| {(str(round(r['archive_rows'] / r['wall_s'] / 1e6, 2)) + ' M') if r['phase'] == 'all' else '—'} | {r['lake_rows'] / r['wall_s'] / 1e6:,.2f} M | {r['lake_rows'] / r['cpu_s'] / 1e6:,.2f} M "
             f"| {r['windows']:,} | {r['fits']:,} | {r['max_rss_mb']:,.0f} | {r['peak_tree_rss_mb']:,.0f} | {r['load_before']:.1f} → {r['load_after']:.1f} |"
         )
 

@@ -777,7 +777,9 @@ def _monitor_phase(config, warehouse, valves, summary, concurrency, opts, unit_d
     if monitor_new_data:
         spans = [s for s in summary.new_spans if s[0] in set(valves)]
         units = extra_units(summary.span_start, unit_days, spans) + units
-    units = [u for u in units if any(d in stats.get(u.valve_id, {}) for d in u.days())]
+    # time-major: a stopped backfill has finished the earliest days of every valve, and the
+    # rows arrive in time order (DuckDB's zone maps on window_start then prune the deletes)
+    units = sorted((u for u in units if any(d in stats.get(u.valve_id, {}) for d in u.days())), key=lambda u: (u.start, u.valve_id))
     if not units:
         return
     summary.units_planned = len(units)
