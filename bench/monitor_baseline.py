@@ -96,15 +96,19 @@ def window_points(w: pd.DataFrame, p, dt: float) -> dict[str, tuple[np.ndarray, 
 
 
 def fit_eq8(u, a, knots, values, x0=(1.0, 0.0), x_bound_m=1.5e-3):
-    """Eq. 8 by scipy.optimize.least_squares (x in mm inside, for a sensible step), no Jacobian."""
+    """Eq. 8 by scipy.optimize.least_squares, no Jacobian (2-point differences). Inside, x is in
+    mm and the residuals in mm²: in SI (1e-5 m², 1e-4 m) the default tolerances stop at the
+    start point."""
+    a_mm2 = a * 1e6
+    v_mm2 = values * 1e6
 
     def resid(theta):
-        return a - theta[0] * _interp(knots, values, u + theta[1] * 1e-3)
+        return a_mm2 - theta[0] * _interp(knots, v_mm2, u + theta[1] * 1e-3)
 
     b = x_bound_m * 1e3
     start = (x0[0], float(np.clip(x0[1] * 1e3, -b + 1e-9, b - 1e-9)))
     r = least_squares(resid, start, bounds=([0.0, -b], [np.inf, b]))
-    return float(r.x[0]), float(r.x[1] * 1e-3), float(np.sqrt(np.mean(r.fun**2)))
+    return float(r.x[0]), float(r.x[1] * 1e-3), float(np.sqrt(np.mean(r.fun**2))) * 1e-6
 
 
 def monitor_pandas(lake: pd.DataFrame, p, baseline: dict, leakage: dict, passes: int = 1) -> pd.DataFrame:

@@ -43,7 +43,7 @@ from model.area import edge_area
 from schemas.fields import BASELINE_FIELDS, EDGE_FIT_FIELDS, EDGES, SELECTION_FIELDS, polars_schema
 from schemas.plant_config import PlantConfig, ValveSpec
 from transforms.characteristic import Characteristic, scaled_shifted
-from transforms.monitor import MonitorResult, commissioning_baseline, monitor
+from transforms.monitor import LAKE_COLUMNS, MonitorResult, commissioning_baseline, monitor
 from transforms.params import MonitorParams
 
 MONITOR_TABLES = {
@@ -247,20 +247,26 @@ def _utc(value: str | date | datetime | None) -> datetime | None:
     return value.replace(tzinfo=timezone.utc) if value.tzinfo is None else value.astimezone(timezone.utc)
 
 
-def lake_chunks(warehouse: Path, valve_id: str, gap_s: float, start: datetime | None, end: datetime | None, days: int | None = None) -> Iterator[pl.DataFrame]:
+def lake_chunks(
+    warehouse: Path, valve_id: str, gap_s: float, start: datetime | None, end: datetime | None, days: int | None = None,
+    columns: tuple[str, ...] | None = None,
+) -> Iterator[pl.DataFrame]:
     """The valve's lake rows, ``days`` partitions at a time (default :data:`CHUNK_DAYS`), each
     chunk ending at a gap: a contiguous run of samples (a window) that reaches the end of a chunk
     is carried into the next, so no window is ever split.
 
     With ``start``/``end`` the chunks hold the windows that *start* in [start, end), whole: a
     window that began before ``start`` is left out (it belongs to an earlier span), one that
-    starts before ``end`` is read to its end (the lake is read a day beyond both bounds)."""
+    starts before ``end`` is read to its end (the lake is read a day beyond both bounds).
+
+    ``columns``: read only these (``timestamp_utc`` always; ``valve_id`` is then filled in
+    rather than decoded from the files)."""
     if start is None and end is None:
-        yield from _gap_chunks(warehouse, valve_id, gap_s, None, None, days)
+        yield from _gap_chunks(warehouse, valve_id, gap_s, None, None, days, columns)
         return
     read_lo = start - timedelta(days=1) if start is not None else None
     read_hi = end + timedelta(days=1) if end is not None else None
-    for rows in _gap_chunks(warehouse, valve_id, gap_s, read_lo, read_hi, days):
+    for rows in _gap_chunks(warehouse, valve_id, gap_s, read_lo, read_hi, days, columns):
         new_run = pl.col("timestamp_utc").diff().dt.total_microseconds().fill_null(0) > gap_s * 1e6
         run_start = pl.col("timestamp_utc").first().over(new_run.cum_sum())
         keep = pl.lit(True)
@@ -273,8 +279,15 @@ def lake_chunks(warehouse: Path, valve_id: str, gap_s: float, start: datetime | 
             yield rows
 
 
-def _gap_chunks(warehouse: Path, valve_id: str, gap_s: float, start: datetime | None, end: datetime | None, days: int | None) -> Iterator[pl.DataFrame]:
+def _gap_chunks(
+    warehouse: Path, valve_id: str, gap_s: float, start: datetime | None, end: datetime | None, days: int | None,
+    columns: tuple[str, ...] | None,
+) -> Iterator[pl.DataFrame]:
     """:func:`lake_chunks` for rows in [start, end) (runs cut at the bounds)."""
+    select = None
+    if columns is not None:
+        names = list(dict.fromkeys(["timestamp_utc", *columns]))
+        select = [pl.lit(valve_id, dtype=pl.Utf8).alias("valve_id") if c == "valve_id" else pl.col(c) for c in names]
     days = CHUNK_DAYS if days is None else int(days)
     if days < 1:
         raise ValueError(f"chunk days must be >= 1, got {days}")
@@ -283,7 +296,8 @@ def _gap_chunks(warehouse: Path, valve_id: str, gap_s: float, start: datetime | 
     for i in range(0, len(dates), days):
         lo = datetime.combine(dates[i], datetime.min.time(), timezone.utc)
         hi = datetime.combine(dates[min(i + days, len(dates)) - 1] + timedelta(days=1), datetime.min.time(), timezone.utc)
-        rows = read_lake(warehouse, [valve_id], max(lo, start) if start else lo, min(hi, end) if end else hi).collect()
+        lf = read_lake(warehouse, [valve_id], max(lo, start) if start else lo, min(hi, end) if end else hi)
+        rows = (lf if select is None else lf.select(select)).collect()
         if carry is not None:
             rows = pl.concat([carry, rows])
         last = i + days >= len(dates)
@@ -371,7 +385,7 @@ def monitor_valve(
     baselines = ensure_baselines(valve, params, warehouse)
     report = ValveReport(valve_id, baseline_source=baselines["s1"].source, baseline_plausible=all(b.plausible for b in baselines.values()))
     gap_s = params.gap_limit_periods * params.sample_period_s
-    for rows in lake_chunks(warehouse, valve.id, gap_s, start, end, chunk_days):
+    for rows in lake_chunks(warehouse, valve.id, gap_s, start, end, chunk_days, LAKE_COLUMNS):
         res = monitor_rows(valve, params, baselines, rows)
         now = datetime.now(timezone.utc)
         fits = _fits_table(res.fits, valve, baselines, now)

@@ -376,20 +376,25 @@ def monitor(
     chars = [leakage.get(v, {}).get(OPPOSITE_EDGE[e]) for v, e in zip(valve_ids, edge_ids, strict=True)]
     opposite = _opposite_groups(groups)
     packed = _LeakPacked(chars)
+    lk = (packed.kstart, packed.kend, packed.kn, packed.kv, packed.ks)
     scale = np.ones(g_n)
     shift = np.zeros(g_n)
-    area = np.empty_like(plain)
-    _leak_correct(u, plain, ratio, offsets, scale, shift, packed.kstart, packed.kend, packed.kn, packed.kv, packed.ks, area)
-    passes = int(leakage_passes)
     x0 = None
-    for _ in range(passes):
-        # a first estimate of every edge's state in every window from every FIRST_FIT_STRIDE-th
-        # point (the leakage needs it to a few per cent; the final fit below uses all points)
-        status, alpha, xhat = _quick_fit(groups, u, area, offsets, baselines, pmap, valve_ids, edge_ids)
-        own_a, own_x = _edge_states(status, alpha, xhat, u, area, offsets, baselines, valve_ids, edge_ids)
-        scale, shift = own_a[opposite], own_x[opposite]
-        _leak_correct(u, plain, ratio, offsets, scale, shift, packed.kstart, packed.kend, packed.kn, packed.kv, packed.ks, area)
-        x0 = xhat
+    passes = int(leakage_passes)
+    if passes:
+        # first estimates of every edge's state in every window from every FIRST_FIT_STRIDE-th
+        # point (the leakage needs them to a few per cent; the final fit uses all points)
+        idx, sub_off = _strided(offsets, FIRST_FIT_STRIDE)
+        su, splain, sratio = u[idx], plain[idx], ratio[idx]
+        sarea = np.empty_like(splain)
+        for _ in range(passes):
+            _leak_correct(su, splain, sratio, sub_off, scale, shift, *lk, sarea)
+            status, alpha, xhat = _quick_fit(su, sarea, sub_off, baselines, pmap, valve_ids, edge_ids)
+            own_a, own_x = _edge_states(status, alpha, xhat, su, sarea, sub_off, baselines, valve_ids, edge_ids)
+            scale, shift = own_a[opposite], own_x[opposite]
+            x0 = xhat
+    area = np.empty_like(plain)
+    _leak_correct(u, plain, ratio, offsets, scale, shift, *lk, area)
     fits = fit_groups(groups, u, area, offsets, baselines, pmap, x_start_m=x0)
     out_points = res.points.with_columns(pl.Series("area_m2", area)) if points else res.points
     return MonitorResult(points=out_points, selection=res.selection, fits=fits, windows=res.windows)
@@ -400,7 +405,8 @@ def monitor(
 # --------------------------------------------------------------------------------------------
 
 SCALE_ONLY_MIN_POINTS = 50
-"""A population whose fit is not ``ok`` but has at least this many points still gives its edge's
+"""A population whose fit is not ``ok`` but has at least this many points (in the strided
+subsample: this over :data:`FIRST_FIT_STRIDE`) still gives its edge's
 leakage a scale-only estimate (Σ A Â / Σ Â² at x̂ = 0). Near the closed branch this is nearly
 as good as the full estimate: a narrow population confounds α̂ and x̂ along α̂·(u + x̂ + const)
 ≈ const, and the leakage ∝ α/(|u| − x) is nearly invariant along that line."""
@@ -477,16 +483,21 @@ uses every 8th point: a population's points are serially correlated over the 21-
 Savitzky–Golay stencil, so 1/8 of them carry most of the information, at 1/8 of the cost."""
 
 
-def _quick_fit(groups, u, area, offsets, baselines, pmap, valve_ids, edge_ids):
-    """(status, α̂, x̂) per population from every :data:`FIRST_FIT_STRIDE`-th point, to 0.1 µm,
-    without the residual pass; the point thresholds scaled by the stride."""
-    k = FIRST_FIT_STRIDE
+def _strided(offsets: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """Every k-th point of each population: (indices, offsets of the subsample)."""
     n = np.diff(offsets)
     m = (n + k - 1) // k
     sub_off = np.concatenate([[0], np.cumsum(m)]).astype(np.int64)
     idx = np.repeat(offsets[:-1] - sub_off[:-1] * k, m) + k * np.arange(sub_off[-1])
+    return idx, sub_off
+
+
+def _quick_fit(u, area, offsets, baselines, pmap, valve_ids, edge_ids):
+    """(status, α̂, x̂) per population of a :func:`_strided` subsample, to 0.1 µm, without the
+    residual pass; the point thresholds scaled by the stride."""
+    k = FIRST_FIT_STRIDE
     res = fit_arrays(
-        u[idx], area[idx], sub_off, [baselines.get(v, {}).get(e) for v, e in zip(valve_ids, edge_ids, strict=True)],
+        u, area, offsets, [baselines.get(v, {}).get(e) for v, e in zip(valve_ids, edge_ids, strict=True)],
         x_bound_m=np.array([pmap[v].x_hat_bound_m for v in valve_ids]),
         min_points=np.array([max(3, pmap[v].min_points // k) for v in valve_ids], dtype=np.int64),
         min_coverage_m=np.array([pmap[v].min_coverage_m for v in valve_ids]),
@@ -504,7 +515,7 @@ def _edge_states(status, alpha, xhat, u, area, offsets, baselines, valve_ids, ed
     a[~ok] = 1.0
     x[~ok] = 0.0
     n = np.diff(offsets)
-    for g in np.flatnonzero(~ok & (n >= SCALE_ONLY_MIN_POINTS)):
+    for g in np.flatnonzero(~ok & (n >= -(-SCALE_ONLY_MIN_POINTS // FIRST_FIT_STRIDE))):
         base = baselines.get(valve_ids[g], {}).get(edge_ids[g])
         if base is None:
             continue
