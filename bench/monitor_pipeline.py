@@ -37,6 +37,7 @@ import json  # noqa: E402
 import resource  # noqa: E402
 import subprocess  # noqa: E402
 import sys  # noqa: E402
+import tempfile  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
@@ -206,7 +207,7 @@ def step_baseline(config_path: Path, warehouse: Path, valve_ids) -> dict:
     import pandas as pd
 
     allf = pd.concat(fits)
-    out = ROOT / ".bench_baseline_fits.parquet"
+    out = Path(tempfile.gettempdir()) / f"valvemon_bench_baseline_fits_{os.getpid()}.parquet"
     allf.to_parquet(out)
     return {"step": "baseline", "pinned": pinned, "rows": n, "cpu_s": cpu, "wall_s": wall, "peak_mb": _peak_mb(),
             "fits_ok": int((allf["status"] == "ok").sum()), "fits_path": str(out)}  # fmt: skip

@@ -7,7 +7,9 @@ fit of step 4b shifts it and may evaluate a little outside the commissioning ran
 basis. Knots follow the distribution of the points (paper: "the location of nodes is adaptively
 chosen depending on the distribution of the measurement points"): quantiles of u, one interval per
 ``points_per_interval`` points, at most ``max_knots`` knots, never closer than
-``min_spacing_m`` (0.1 mm: several times the spool sensor noise, about 3 % of x_max).
+``min_spacing_m`` (0.1 mm: several times the spool sensor noise, about 3 % of x_max). With a
+``carrier`` (what the monitor uses: the nominal characteristic) the piecewise-linear fit is a
+correction factor on the carrier's shape, sampled finely (see :func:`fit_characteristic`).
 
 The nominal characteristic α_nominal·A(u) is computed by the flows layer from the model and
 handed in as arrays (:meth:`Characteristic.from_arrays`).

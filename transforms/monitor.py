@@ -10,7 +10,10 @@ Pure: frames and parameters in, frames out. Per valve (a Python loop over valves
    intermediate boolean columns per row; the tests hold both engines to the same points and
    counts).
 
-Then the points of all valves are fitted in one compiled batch (:func:`transforms.fit.fit_windows`).
+Then the points of all valves are fitted in one compiled batch (:func:`transforms.fit.fit_groups`),
+optionally with the closed-edge leakage correction that follows each window's own estimates
+(:func:`monitor`'s ``leakage``). :func:`commissioning_baseline` is steps 2–4a and 5a on a
+commissioning window. docs/monitoring.md describes the whole.
 """
 
 from __future__ import annotations
