@@ -137,6 +137,15 @@ def add_savgol(
     return framed.with_columns(savgol_valid(window).alias("_sg_valid")).with_columns(exprs).drop("_sg_valid")
 
 
+def _float_array(a) -> np.ndarray:
+    """A contiguous float32 or float64 array as it is (the kernels compute in float64 either
+    way, and a float32 lake column needs no conversion pass), anything else as float64."""
+    a = np.asarray(a)
+    if a.dtype in (np.float32, np.float64):
+        return np.ascontiguousarray(a)
+    return np.ascontiguousarray(a, dtype=np.float64)
+
+
 # --------------------------------------------------------------------------------------------
 # compiled path (used by transforms.monitor for throughput)
 # --------------------------------------------------------------------------------------------
@@ -190,10 +199,10 @@ def savgol_arrays(x: np.ndarray, *, window: int, order: int, sample_period_s: fl
     entries and wherever the stencil touches a NaN (the validity is the caller's, as there)."""
     if sample_period_s <= 0:
         raise ValueError("sample_period_s must be > 0")
-    x = np.ascontiguousarray(x, dtype=np.float64)
+    x = _float_array(x)
     w0 = np.array(_weights(window, order, 0))
     w1 = np.array(_weights(window, order, 1))
-    out0 = np.empty_like(x) if smooth else np.empty(0)
-    out1 = np.empty_like(x)
+    out0 = np.empty(x.shape[0]) if smooth else np.empty(0)
+    out1 = np.empty(x.shape[0])
     _savgol_kernel(x, w0, w1, 1.0 / sample_period_s, out0, out1, bool(smooth))
     return (out0 if smooth else None), out1

@@ -200,10 +200,13 @@ _SIGNALS_F64 = ("ps_pa", "pr_pa", "p1_pa", "p2_pa", "x_spool_m", "x_cyl_m")
 
 
 def _float64(col: pl.Series) -> np.ndarray:
-    """A signal as a float64 array (the lake may store float32), nulls as NaN, in one pass."""
+    """A signal as a float array, nulls as NaN: a float32 lake column stays float32 (no copy;
+    the kernels compute in float64), anything else becomes float64."""
     if col.null_count():
         col = col.cast(pl.Float64).fill_null(float("nan"))
-    return np.asarray(col.to_numpy(), dtype=np.float64)
+    if col.dtype not in (pl.Float32, pl.Float64):
+        col = col.cast(pl.Float64)
+    return col.to_numpy()
 
 
 def _valve_numba(lake_v, valve_id, p, leakage, with_ratio, want_points):
@@ -226,7 +229,7 @@ def _valve_numba(lake_v, valve_id, p, leakage, with_ratio, want_points):
             "n_samples": pl.Series(last - first + 1, dtype=pl.Int64),
         }
     )
-    # the signals once as float64 (the lake may store float32; nulls become NaN), then
+    # the signals as float arrays (float32 from the lake as it is; nulls become NaN), then
     # Savitzky–Golay as plain weighted sums over the whole column in one compiled pass per
     # signal; the validity comes from window_arrays and is applied in the selection kernel
     arrays = {c: _float64(lake_v[c]) for c in _SIGNALS_F64}
