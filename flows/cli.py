@@ -54,12 +54,12 @@ def demo(warehouse: Warehouse = None) -> None:
     report = result["report"]
     ranking = report.ranking if report.ranking is not None else None
     table = Table(title=f"Fleet condition, most urgent first ({result['config']})")
-    columns = [c for c in ("urgency_rank", "valve_id", "state", "worst_edge", "reason", "remaining_hours") if ranking is not None and c in ranking.columns]
+    columns = [c for c in ("urgency_rank", "valve_id", "state", "worst_edge", "remaining_hours", "reason") if ranking is not None and c in ranking.columns]
     for c in columns:
-        table.add_column(c)
+        table.add_column(c, overflow="fold")
     for row in ranking.select(columns).iter_rows() if ranking is not None else []:
         table.add_row(*("" if v is None else (f"{v:,.0f}" if isinstance(v, float) else str(v)) for v in row))
-    Console().print(table)
+    Console(width=max(Console().width, 160)).print(table)
     typer.echo(f"report: {report.html.resolve()}")
 
 

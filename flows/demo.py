@@ -1,7 +1,8 @@
 """``valvemon demo``: a small synthetic plant through the whole pipeline.
 
 The demo plant (``DEMO``, Table 1 valves) has twelve valves of different ages: new healthy ones,
-worn ones commissioned up to two years earlier (the paper's wear scenario), and one whose edge
+worn ones commissioned up to three years earlier (the paper's wear scenario; one past its wear
+bound), and one whose edge
 1r breaks during the demo span (Table 2's fault). Every valve's commissioning day is simulated
 too and named as its ``baseline_window``, so each edge's baseline is the step-4a fit of its own
 commissioning data (checked against the nominal characteristic, step 5a), as at a real plant.
@@ -51,7 +52,7 @@ DEMO_FLEET: dict[str, tuple[float, str]] = {
     "V007": (450, "wear"),
     "V008": (500, "healthy"),
     "V009": (550, "wear"),
-    "V010": (600, "wear"),
+    "V010": (1150, "wear"),  # past the x̂ wear bound (6 % of x_max): state worn
     "V011": (650, "healthy"),
     "V012": (100, "broken_edge:1r@{h}"),
 }
