@@ -22,6 +22,11 @@ Make the archive first (not in the repository), e.g. 2 valve-years of hourly 10 
     .venv/bin/python bench/backfill.py --archive /tmp/vm_bench/archive2vy --from 2025-01-01 --to 2026-01-01 \\
         --work /tmp/vm_bench/work --modes single,dask2
 
+``--db-scaling WAREHOUSE`` instead times the flow's database write of one weekly monitor unit
+against ``edge_fits`` tables of growing size (the serial part of a large backfill):
+
+    .venv/bin/python bench/backfill.py --db-scaling /tmp/vm_bench/work/wh-single --db-sizes 0,1000000,10000000
+
 Modes: ``single`` (tasks on one thread of the command's process, ``--concurrency 1``),
 ``threadsN`` (N threads), ``daskN`` (a temporary local Dask cluster of N one-thread worker
 processes, ``--dask-workers N``). Results are printed as a Markdown table and appended to
@@ -172,11 +177,88 @@ def run_mode(mode: str, args) -> dict:
     }  # fmt: skip
 
 
+def db_scaling(src: Path, work: Path, sizes: list[int], valves: int = 500, repeats: int = 20) -> list[dict]:
+    """Cost of the flow's write of monitor units (``flows.backfill.store_units``: delete each
+    unit's span, insert its fits and selection rows and its progress row, a fresh connection and
+    one transaction for 1 or 32 units) against ``edge_fits`` already holding N rows (time-major, ``valves`` valves, one
+    week of hourly windows per valve and unit, copied from a real unit of ``src``)."""
+    from datetime import timedelta
+
+    import polars as pl
+
+    from flows.backfill import MonitorUnit, _progress_frame, ensure_backfill_tables, store_units
+    from flows.monitor import ensure_monitor_tables
+    from flows.warehouse_db import connect, insert_frame, query_frame
+
+    with connect(src, read_only=True) as con:
+        t0 = query_frame(con, "SELECT min(window_start) AS t FROM edge_fits")["t"][0]
+        fits = query_frame(con, "SELECT * FROM edge_fits WHERE valve_id = 'V001' AND window_start < ? ORDER BY ALL", [t0 + timedelta(days=7)])
+        sel = query_frame(con, "SELECT * FROM selection_stats WHERE valve_id = 'V001' AND window_start < ? ORDER BY ALL", [t0 + timedelta(days=7)])
+    week = timedelta(days=7)
+
+    def unit_rows(v: int, w: int) -> tuple[pl.DataFrame, pl.DataFrame]:
+        shift = [pl.col("window_start") + w * week, pl.lit(f"V{v:04d}").alias("valve_id")]
+        f = fits.with_columns(*shift, pl.col("window_end") + w * week)
+        return f, sel.with_columns(*shift)
+
+    out = []
+    for size in sizes:
+        wh = work / f"dbscale-{size}"
+        shutil.rmtree(wh, ignore_errors=True)
+        with connect(wh) as con:
+            ensure_monitor_tables(con)
+            ensure_backfill_tables(con)
+        n_units = size // fits.height
+        batch_f, batch_s, done = [], [], 0
+        for k in range(n_units):
+            f, s_ = unit_rows(k % valves, k // valves)
+            batch_f.append(f)
+            batch_s.append(s_)
+            if len(batch_f) * fits.height >= 500_000 or k == n_units - 1:
+                with connect(wh) as con:
+                    insert_frame(con, "edge_fits", pl.concat(batch_f))
+                    insert_frame(con, "selection_stats", pl.concat(batch_s))
+                done += len(batch_f)
+                batch_f, batch_s = [], []
+        w_next = n_units // valves + 1
+        row = {}
+        for batch in (1, 32):
+            times = []
+            for r in range(repeats):
+                items, prog = [], []
+                for b in range(batch):
+                    f, s_ = unit_rows((r * batch + b) % valves, w_next + (r * batch + b) // valves)
+                    unit = MonitorUnit(f["valve_id"][0], f["window_start"].min(), f["window_start"].min() + week)
+                    items.append((unit, f, s_))
+                    prog.append({"unit_kind": "monitor", "unit_key": unit.key, "valve_id": unit.valve_id, "run_id": "bench", "finished_at": unit.start})
+                t = time.perf_counter()
+                store_units(wh, items, _progress_frame(prog))
+                times.append((time.perf_counter() - t) / batch)
+            w_next += repeats * batch // valves + 1
+            times.sort()
+            row[f"batch{batch}_median_ms"], row[f"batch{batch}_best_ms"] = 1e3 * times[len(times) // 2], 1e3 * times[0]
+        with connect(wh, read_only=True) as con:
+            n = query_frame(con, "SELECT count(*) AS n FROM edge_fits")["n"][0]
+            m = query_frame(con, "SELECT count(*) AS n FROM selection_stats")["n"][0]
+        row |= {"edge_fits_rows": n, "selection_rows": m, "unit_fits": fits.height, "unit_selection": sel.height,
+                "db_mb": (wh / "valvemon.duckdb").stat().st_size / 1e6}  # fmt: skip
+        print(json.dumps(row), flush=True)
+        out.append(row)
+        shutil.rmtree(wh, ignore_errors=True)
+    print()
+    print("| edge_fits rows | selection_stats rows | DB MB | per unit, one unit per transaction (median / best) | per unit, 32 units per transaction (median / best) |")
+    print("|---:|---:|---:|---|---|")
+    for r in out:
+        print(f"| {r['edge_fits_rows']:,} | {r['selection_rows']:,} | {r['db_mb']:,.0f} | {r['batch1_median_ms']:.0f} / {r['batch1_best_ms']:.0f} ms "
+              f"| {r['batch32_median_ms']:.1f} / {r['batch32_best_ms']:.1f} ms |")
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--archive", required=True, help="A `valvemon simulate` archive (plant.toml, exports/).")
-    ap.add_argument("--from", dest="start", required=True)
-    ap.add_argument("--to", dest="end", required=True)
+    ap.add_argument("--archive", help="A `valvemon simulate` archive (plant.toml, exports/).")
+    ap.add_argument("--from", dest="start")
+    ap.add_argument("--to", dest="end")
     ap.add_argument("--work", default="/tmp/vm_bench/work", help="Warehouses are made here (one per mode).")
     ap.add_argument("--modes", default="single,dask2")
     ap.add_argument("--unit-days", type=float, default=7.0)
@@ -185,8 +267,15 @@ def main() -> None:
     ap.add_argument("--keep", action="store_true", help="Keep the warehouses.")
     ap.add_argument("--phase", choices=("all", "monitor"), default="all",
                     help="all: archive → lake → fits into a fresh warehouse; monitor: redo the fits of a kept warehouse (--force).")
+    ap.add_argument("--db-scaling", metavar="WAREHOUSE", help="Instead: time the flow's write of one monitor unit against growing tables (rows copied from this warehouse's fits).")
+    ap.add_argument("--db-sizes", default="0,1000000,10000000", help="edge_fits rows already there, for --db-scaling.")
     args = ap.parse_args()
     Path(args.work).mkdir(parents=True, exist_ok=True)
+    if args.db_scaling:
+        db_scaling(Path(args.db_scaling), Path(args.work), [int(x) for x in args.db_sizes.split(",")])
+        return
+    if not (args.archive and args.start and args.end):
+        ap.error("--archive, --from and --to are required (or --db-scaling)")
     results = []
     for mode in args.modes.split(","):
         r = run_mode(mode, args)

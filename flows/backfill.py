@@ -16,7 +16,8 @@ A backfill is cut into **units** that Prefect runs as tasks, at most ``concurren
    began before ``start`` and reads past ``end`` until the window that is open there ends, so
    every window is fitted whole, exactly once, whatever the cut. The task returns the unit's
    ``edge_fits`` and ``selection_stats`` rows; this process replaces the valve's rows with
-   ``window_start`` in ``[start, end)`` by them in one transaction.
+   ``window_start`` in ``[start, end)`` by them, up to :data:`WRITE_BATCH_UNITS` units in one
+   transaction.
 
 Workers therefore compute and write only lake partitions (atomic renames, locked); every
 DuckDB write happens here, in short transactions, so the warehouse database never sees two
@@ -837,19 +838,24 @@ def _monitor_phase(config, warehouse, valves, summary, concurrency, opts, unit_d
     advance = bar("monitor units", len(todo))
     fingerprints = dict((u.key, fp) for u, fp in todo)
 
+    def written(batch: list[tuple[MonitorUnit, pl.DataFrame, pl.DataFrame, dict]]) -> None:
+        for _, fits, _, row in batch:
+            summary.units_done += 1
+            summary.windows += row["windows"]
+            summary.fits += fits.height
+            summary.fits_ok += row["fits_ok"]
+            summary.rows_read += row["rows_read"]
+
+    writer = UnitWriter(warehouse, on_written=written)
+
     def done(u: MonitorUnit, out: MonitorOutcome) -> None:
-        fits_ok = int((out.fits["status"] == "ok").sum())
         row = {
             "unit_kind": "monitor", "unit_key": u.key, "valve_id": u.valve_id, "span_start": u.start, "span_end": u.end,
-            "fingerprint": fingerprints[u.key], "windows": out.windows, "fits": out.fits.height, "fits_ok": fits_ok,
-            "rows_read": out.rows_read, "run_id": summary.run_id, "finished_at": _now(),
+            "fingerprint": fingerprints[u.key], "windows": out.windows, "fits": out.fits.height,
+            "fits_ok": int((out.fits["status"] == "ok").sum()), "rows_read": out.rows_read, "run_id": summary.run_id,
+            "finished_at": _now(),
         }  # fmt: skip
-        store_unit(warehouse, u, out.fits, out.selection, _progress_frame([row]))
-        summary.units_done += 1
-        summary.windows += out.windows
-        summary.fits += out.fits.height
-        summary.fits_ok += fits_ok
-        summary.rows_read += out.rows_read
+        writer.add(u, out.fits, out.selection, row)
         advance()
 
     def failed(u: MonitorUnit, exc: BaseException) -> None:
@@ -859,29 +865,72 @@ def _monitor_phase(config, warehouse, valves, summary, concurrency, opts, unit_d
 
     window = Window(concurrency, done, failed)
     task_ = monitor_unit_task.with_options(**opts)
-    for u, _ in todo:
-        window.submit(u, task_, config, u, baselines[u.valve_id], str(warehouse))
-    window.drain()
+    try:
+        for u, _ in todo:
+            window.submit(u, task_, config, u, baselines[u.valve_id], str(warehouse))
+        window.drain()
+    finally:
+        writer.flush()  # what finished is kept, also when the run is interrupted
     summary.max_in_flight = max(summary.max_in_flight, window.max_in_flight)
 
 
-def store_unit(warehouse: Path, unit: MonitorUnit, fits: pl.DataFrame, selection: pl.DataFrame, progress: pl.DataFrame) -> None:
-    """Replace the valve's rows with ``window_start`` in ``[start, end)`` and record the unit, in one transaction."""
+WRITE_BATCH_UNITS = 32
+"""Finished monitor units written in one transaction at most…"""
+WRITE_BATCH_S = 5.0
+"""…or once the oldest of them has waited this long (a transaction costs ~0.1 s whatever its
+size, BENCHMARKS.md "Backfill": per unit it would be the serial bottleneck of a large backfill)."""
+
+
+class UnitWriter:
+    """Collects finished monitor units in the flow process and writes them in batches
+    (:func:`store_units`); ``on_written(batch)`` after each write."""
+
+    def __init__(self, warehouse: Path, *, max_units: int = WRITE_BATCH_UNITS, max_wait_s: float = WRITE_BATCH_S,
+                 on_written: Callable[[list], None] | None = None):  # fmt: skip
+        self.warehouse, self.max_units, self.max_wait_s = Path(warehouse), max_units, max_wait_s
+        self.on_written = on_written or (lambda batch: None)
+        self.pending: list[tuple[MonitorUnit, pl.DataFrame, pl.DataFrame, dict]] = []
+        self.oldest = 0.0
+
+    def add(self, unit: MonitorUnit, fits: pl.DataFrame, selection: pl.DataFrame, progress_row: dict) -> None:
+        if not self.pending:
+            self.oldest = time.monotonic()
+        self.pending.append((unit, fits, selection, progress_row))
+        if len(self.pending) >= self.max_units or time.monotonic() - self.oldest >= self.max_wait_s:
+            self.flush()
+
+    def flush(self) -> None:
+        if not self.pending:
+            return
+        batch, self.pending = self.pending, []
+        store_units(self.warehouse, [(u, f, s) for u, f, s, _ in batch], _progress_frame([r for *_, r in batch]))
+        self.on_written(batch)
+
+
+def store_units(warehouse: Path, units: list[tuple[MonitorUnit, pl.DataFrame, pl.DataFrame]], progress: pl.DataFrame) -> None:
+    """For each unit replace the valve's rows with ``window_start`` in ``[start, end)`` by its rows;
+    record the units' progress rows; all in one transaction."""
     with connect(warehouse) as con:
         con.execute("BEGIN TRANSACTION")
         try:
-            for table in ("edge_fits", "selection_stats"):
-                con.execute(
-                    f"DELETE FROM {table} WHERE valve_id = ? AND window_start >= ? AND window_start < ?",
-                    [unit.valve_id, unit.start, unit.end],
-                )
-            insert_frame(con, "edge_fits", fits)
-            insert_frame(con, "selection_stats", selection)
+            for unit, _, _ in units:
+                for table in ("edge_fits", "selection_stats"):
+                    con.execute(
+                        f"DELETE FROM {table} WHERE valve_id = ? AND window_start >= ? AND window_start < ?",
+                        [unit.valve_id, unit.start, unit.end],
+                    )
+            insert_frame(con, "edge_fits", pl.concat([f for _, f, _ in units], how="vertical_relaxed"))
+            insert_frame(con, "selection_stats", pl.concat([s for _, _, s in units], how="vertical_relaxed"))
             insert_frame(con, PROGRESS_TABLE, progress, replace=True)
             con.execute("COMMIT")
         except BaseException:
             con.execute("ROLLBACK")
             raise
+
+
+def store_unit(warehouse: Path, unit: MonitorUnit, fits: pl.DataFrame, selection: pl.DataFrame, progress: pl.DataFrame) -> None:
+    """One unit's :func:`store_units`."""
+    store_units(warehouse, [(unit, fits, selection)], progress)
 
 
 @flow(name="valvemon-backfill", persist_result=False, validate_parameters=False)
