@@ -151,7 +151,7 @@ def test_commissioning_condition_is_fitted_and_later_effects_found():
     assert d.named[0].value == pytest.approx(5e-13, rel=0.05)
 
 
-# docs/discrepancy.md, "Detection limits" (bench/discrepancy_limits.py --seeds 5 --windows 4)
+# docs/discrepancy.md, "Detection limits" (bench/discrepancy_limits.py --seeds 10 --windows 4)
 LIMITS = {
     "internal_leakage": 2e-14,
     "external_leakage": 6e-15,
@@ -160,9 +160,9 @@ LIMITS = {
     "pressure_sensor_offset[p1]": 2e3,
     "pressure_sensor_offset[p2]": 6e3,
     "pressure_sensor_gain[p1]": 9e-4,
-    "pressure_sensor_gain[p2]": 9e-5,
+    "pressure_sensor_gain[p2]": 3e-4,
     "supply_line_resistance": 3e9,
-    "friction_change": 60.0,
+    "friction_change": 200.0,
     "load_mass_change": 180.0,
 }
 
@@ -179,12 +179,14 @@ def test_limits_table_matches_the_docs():
 @pytest.mark.slow
 @pytest.mark.parametrize("key", list(LIMITS))
 def test_documented_detection_limit(key):
-    """Other seeds than the sweep's: at twice the documented limit the effect is named first
-    (parameter within 20 %); at a tenth of it nothing wrong is named."""
+    """Other seeds than the sweep's: one grid step (3.3x) above the documented limit the effect
+    is named first (parameter within 20 %); at a tenth of it nothing wrong is named (nothing, or
+    the effect itself)."""
     spec = library_entry(key)
     for seed in (70, 71):
-        d = _diagnose(spec.effects(spec.neutral + 2 * LIMITS[key]), seed=seed)
-        assert d.named and d.named[0].spec.key == key
-        assert abs(d.named[0].value - spec.neutral - 2 * LIMITS[key]) <= 0.2 * 2 * LIMITS[key]
+        mag = 10.0 / 3.0 * LIMITS[key]
+        d = _diagnose(spec.effects(spec.neutral + mag), seed=seed)
+        assert d.named and d.named[0].spec.key == key, [(n.spec.key, n.value) for n in d.named]
+        assert abs(d.named[0].value - spec.neutral - mag) <= 0.2 * mag
         d = _diagnose(spec.effects(spec.neutral + 0.1 * LIMITS[key]), seed=seed)
-        assert all(n.spec.key == key for n in d.named)
+        assert all(n.spec.key == key for n in d.named), [(n.spec.key, n.value) for n in d.named]

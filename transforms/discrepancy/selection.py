@@ -22,7 +22,11 @@ Forward selection (a greedy sparse regression, one candidate = one coefficient):
        the absolute ones are heavy-tailed: a supply-line effect lives where the flow is large),
    (c) its coefficient is ≥ ``min_z`` jackknife standard errors (over blocks) from 0, and
    (d) it has the physical sign where the parameter has one (leakage, air, line resistance ≥ 0).
-3. The significant candidate with the largest Σ d_b joins S (its rank is the step number); stop
+3. The significant candidate with the largest mean relative gain over blocks, mean_b d_b /
+   loss_b(S), joins S (its rank is the step number; the mean of relative gains weighs every
+   block alike, as the t statistic of (b) does, where Σ d_b would let a few blocks with large
+   residuals decide -- between a small transmitter gain and the same transmitter's offset they
+   chose the offset in seeds where the blocks favoured the gain); stop
    when none is significant or ``max_effects`` are named. No candidate at step 1 means ``none``.
    The runner-up of each step is kept with the t statistic of the winner's blockwise advantage
    over it: a small t means the two are hard to tell apart on these data (e.g. a small
@@ -150,6 +154,9 @@ class CandidateScore:
     z : float
         |theta| / se.
     significant : bool
+    block_gain : float
+        Mean over blocks of the relative gains d_b / loss_b(base): what the choice among the
+        significant candidates maximises.
     """
 
     column: int
@@ -160,6 +167,7 @@ class CandidateScore:
     t_stat: float
     z: float
     significant: bool
+    block_gain: float = 0.0
 
     def interval(self, n_blocks: int, level: float) -> tuple[float, float]:
         """θ ± t_{B−1} SE at ``level``."""
@@ -197,7 +205,7 @@ def score_candidates(st: BlockStats, base: list[int], candidates: list[int], *, 
         z = abs(th) / se if se > 0 else np.inf
         rel = gain / total if total > 0 else 0.0
         sig = bool(rel >= min_relative_gain and t >= min_t_stat and z >= min_z and (j not in positive or th > 0))
-        out.append(CandidateScore(j, th, float(se), gain, rel, t, float(z), sig))
+        out.append(CandidateScore(j, th, float(se), gain, rel, t, float(z), sig, float(rd.mean())))
     return out
 
 
@@ -243,10 +251,10 @@ def forward_select(st: BlockStats, candidates: list[int], *, max_effects: int, m
         sig = [s for s in scores if s.significant]
         if not sig:
             break
-        best = max(sig, key=lambda s: s.gain)
+        best = max(sig, key=lambda s: s.block_gain)
         others = [s for s in scores if s.column != best.column]
         if others:
-            rival = max(others, key=lambda s: s.gain)
+            rival = max(others, key=lambda s: s.block_gain)
             base_loss, _, _ = cv_losses(st, base)
             lb, _, _ = cv_losses(st, base + [best.column])
             lr, _, _ = cv_losses(st, base + [rival.column])
