@@ -48,7 +48,6 @@ import fcntl
 import hashlib
 import json
 import math
-import os
 import queue
 import re
 import time
