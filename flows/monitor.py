@@ -140,11 +140,13 @@ class Baseline:
     @classmethod
     def from_row(cls, valve: ValveSpec, params: MonitorParams, row: dict) -> Baseline:
         """From a row of table ``baselines`` (as a dict)."""
+        a, x_mm = row.get("alpha_vs_nominal"), row.get("x_vs_nominal_mm")
+        if a is None or x_mm is None or not (np.isfinite(a) and np.isfinite(x_mm) and a > 0):
+            a, x_mm = 1.0, 0.0  # no state against the nominal: leak as designed
         return cls(
             Characteristic.from_arrays(np.array(row["knots_u_mm"]) * 1e-3, np.array(row["values_mm2"]) * 1e-6),
             row["version"], row["source"], row["plausible"], row["plausibility_reasons"],
-            scaled_shifted(nominal_characteristic(valve, row["edge"], params.x_hat_bound_m),
-                           row["alpha_vs_nominal"], row["x_vs_nominal_mm"] * 1e-3),
+            scaled_shifted(nominal_characteristic(valve, row["edge"], params.x_hat_bound_m), a, x_mm * 1e-3),
         )  # fmt: skip
 
 
