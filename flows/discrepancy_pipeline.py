@@ -11,9 +11,11 @@ Steps (``docs/discrepancy.md``):
    motion equation of the base model, and their derivatives with respect to each library
    candidate's parameter, go into the blocked-cross-validation forward selection of
    :mod:`transforms.discrepancy.selection`; the named parameters are refined by Gauss–Newton on
-   the exact (not linearised) residuals, with jackknife intervals.
+   the exact (not linearised) residuals, with jackknife intervals. Once something is named, the
+   load is segmented again with the fitted model and the selection repeated.
 3. **add it** -- the named effects are switched on one after the other, each record replayed
-   again; gap before/after per effect.
+   again; gap before/after per effect. An effect that does not shrink the gap is not confirmed
+   (dropped with the ones after it).
 4. **what it did to monitoring** -- the monitoring (steps 2–4b) is run on the records as
    recorded and with the effect accounted for (:func:`monitoring_bias`).
 
@@ -37,7 +39,17 @@ from transforms.discrepancy.residuals import demean_by_group, interval_edges, in
 from transforms.discrepancy.selection import SelectionResult, block_stats, cv_losses, forward_select
 from transforms.discrepancy.settings import DiscrepancySettings
 
-__all__ = ["Diagnosis", "NamedEffect", "diagnose", "perturbed", "prepare_records"]
+__all__ = [
+    "ConditionFit",
+    "Diagnosis",
+    "NamedEffect",
+    "ReplayTrace",
+    "diagnose",
+    "fit_condition",
+    "monitoring_bias",
+    "perturbed",
+    "prepare_records",
+]
 
 EQUATIONS = ("chamber1", "chamber2", "motion")
 FD_FRACTION = 0.01
