@@ -27,6 +27,11 @@ against ``edge_fits`` tables of growing size (the serial part of a large backfil
 
     .venv/bin/python bench/backfill.py --db-scaling /tmp/vm_bench/work/wh-single --db-sizes 0,1000000,10000000
 
+``--task-overhead N`` times N no-op tasks through the same bounded window instead (the fixed
+price of a unit in the flow process and in the workers):
+
+    .venv/bin/python bench/backfill.py --task-overhead 300 --modes threads2,dask2
+
 Modes: ``single`` (tasks on one thread of the command's process, ``--concurrency 1``),
 ``threadsN`` (N threads), ``daskN`` (a temporary local Dask cluster of N one-thread worker
 processes, ``--dask-workers N``). Results are printed as a Markdown table and appended to
@@ -254,6 +259,63 @@ def db_scaling(src: Path, work: Path, sizes: list[int], valves: int = 500, repea
     return out
 
 
+def task_overhead(n: int, modes: list[str]) -> list[dict]:
+    """CPU cost of one Prefect task (a no-op, submitted through the backfill's bounded window)
+    in the flow process and in the Dask workers: the fixed price of a unit."""
+    from prefect import flow, task
+
+    from flows.backfill import Window
+    from flows.dask_runner import cluster_threads, local_cluster, shared_api, task_runner
+
+    @task(name="noop", persist_result=False)
+    def noop(i: int) -> int:
+        return i
+
+    @flow(name="bench-task-overhead", persist_result=False)
+    def run(n: int, limit: int) -> None:
+        w = Window(limit, lambda tag, r: None, lambda tag, exc: None)
+        for i in range(n):
+            w.submit(i, noop, i)
+        w.drain()
+
+    def worker_cpu(address) -> float:
+        import distributed
+
+        with distributed.Client(address, set_as_default=False) as c:
+            usage = c.run(lambda: (lambda r: r.ru_utime + r.ru_stime)(resource.getrusage(resource.RUSAGE_SELF)))
+        return sum(usage.values())
+
+    out = []
+    for mode in modes:
+        with shared_api():
+            if mode.startswith("dask"):
+                with local_cluster(int(mode.removeprefix("dask"))) as address:
+                    limit = 2 * cluster_threads(address)
+                    f = run.with_options(task_runner=task_runner(limit, address))
+                    f(n=20, limit=limit)  # warm up: imports in the workers
+                    w0, p0, t0 = worker_cpu(address), time.process_time(), time.monotonic()
+                    f(n=n, limit=limit)
+                    w1, p1, t1 = worker_cpu(address), time.process_time(), time.monotonic()
+            else:
+                limit = int(mode.removeprefix("threads") or 2)
+                f = run.with_options(task_runner=task_runner(limit))
+                f(n=20, limit=limit)
+                w0 = w1 = 0.0
+                p0, t0 = time.process_time(), time.monotonic()
+                f(n=n, limit=limit)
+                p1, t1 = time.process_time(), time.monotonic()
+        row = {"mode": mode, "tasks": n, "wall_ms_per_task": 1e3 * (t1 - t0) / n, "flow_cpu_ms_per_task": 1e3 * (p1 - p0) / n,
+               "worker_cpu_ms_per_task": 1e3 * (w1 - w0) / n, "load": os.getloadavg()[0]}  # fmt: skip
+        print(json.dumps(row), flush=True)
+        out.append(row)
+    print()
+    print("| runner | tasks | wall per task | flow-process CPU per task | worker CPU per task | 1-min load |")
+    print("|---|---:|---:|---:|---:|---:|")
+    for r in out:
+        print(f"| {r['mode']} | {r['tasks']} | {r['wall_ms_per_task']:.0f} ms | {r['flow_cpu_ms_per_task']:.0f} ms | {r['worker_cpu_ms_per_task']:.0f} ms | {r['load']:.1f} |")
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--archive", help="A `valvemon simulate` archive (plant.toml, exports/).")
@@ -269,8 +331,12 @@ def main() -> None:
                     help="all: archive → lake → fits into a fresh warehouse; monitor: redo the fits of a kept warehouse (--force).")
     ap.add_argument("--db-scaling", metavar="WAREHOUSE", help="Instead: time the flow's write of one monitor unit against growing tables (rows copied from this warehouse's fits).")
     ap.add_argument("--db-sizes", default="0,1000000,10000000", help="edge_fits rows already there, for --db-scaling.")
+    ap.add_argument("--task-overhead", type=int, metavar="N", help="Instead: the CPU price of N no-op Prefect tasks per --modes (threadsN, daskN).")
     args = ap.parse_args()
     Path(args.work).mkdir(parents=True, exist_ok=True)
+    if args.task_overhead:
+        task_overhead(args.task_overhead, args.modes.split(","))
+        return
     if args.db_scaling:
         db_scaling(Path(args.db_scaling), Path(args.work), [int(x) for x in args.db_sizes.split(",")])
         return

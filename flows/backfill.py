@@ -24,7 +24,7 @@ DuckDB write happens here, in short transactions, so the warehouse database neve
 writers from one backfill, on one machine or a cluster.
 
 **Resumable and idempotent.** Each finished unit is recorded in table ``backfill_progress``
-in the same transaction as its results (ingest units right after their manifest row):
+(a monitor unit in the same transaction as its rows, an ingest unit after its manifest row):
 
 * an ingest unit by the file's path, size and mtime and its content hash — a rerun skips the
   file without reading it (if the manifest still holds that hash);
@@ -736,14 +736,26 @@ def _ingest_phase(config, warehouse, files, summary, concurrency, opts, force, f
                     summary.new_spans.append((v, manifest["time_start"], manifest["time_end"]))
         else:
             summary.files_skipped += 1
-        row = {
+        pending.append({
             "unit_kind": "ingest", "unit_key": str(Path(out.path).resolve()), "source_file": out.path,
             "size_bytes": out.size_bytes, "mtime_ns": out.mtime_ns, "file_sha256": out.report.sha256,
             "run_id": summary.run_id, "finished_at": _now(),
-        }  # fmt: skip
-        with connect(warehouse) as con:
-            insert_frame(con, PROGRESS_TABLE, _progress_frame([row]), replace=True)
+        })  # fmt: skip
+        if len(pending) >= WRITE_BATCH_UNITS or time.monotonic() - pending_since[0] >= WRITE_BATCH_S:
+            flush()
         advance()
+
+    # the progress rows of ingested files are written in batches: one lost in a crash only
+    # costs the rerun a read of the file (its content is then found in the manifest)
+    pending: list[dict] = []
+    pending_since = [time.monotonic()]
+
+    def flush() -> None:
+        if pending:
+            with connect(warehouse) as con:
+                insert_frame(con, PROGRESS_TABLE, _progress_frame(pending), replace=True)
+            pending.clear()
+        pending_since[0] = time.monotonic()
 
     def failed(path: Path, exc: BaseException) -> None:
         summary.files_failed += 1
@@ -753,9 +765,12 @@ def _ingest_phase(config, warehouse, files, summary, concurrency, opts, force, f
     window = Window(concurrency, done, failed)
     task_ = ingest_export_task.with_options(**opts)
     with ingest_lock(warehouse):
-        for f in todo:
-            window.submit(f, task_, str(f), config, str(warehouse), known, summary.run_id)
-        window.drain()
+        try:
+            for f in todo:
+                window.submit(f, task_, str(f), config, str(warehouse), known, summary.run_id)
+            window.drain()
+        finally:
+            flush()
     summary.max_in_flight = max(summary.max_in_flight, window.max_in_flight)
 
 
