@@ -136,7 +136,7 @@ def step_full(config_path: Path, warehouse: Path, valve_ids) -> dict:
     fm.ensure_baselines = clock.wrap("baselines (from DuckDB)", fm.ensure_baselines)
     fm.monitor_rows = clock.wrap("steps 2–4b (transforms.monitor)", fm.monitor_rows)
     fm._fits_table = clock.wrap("fits → table rows", fm._fits_table)
-    fm.store_chunk = clock.wrap("store (DuckDB delete + insert)", fm.store_chunk)
+    fm.store_spans = clock.wrap("store (DuckDB delete + insert)", fm.store_spans)
     c, w = time.process_time(), time.perf_counter()
     reports = fm.run_monitor(config_path, warehouse, valve_ids)
     cpu, wall = time.process_time() - c, time.perf_counter() - w

@@ -73,9 +73,11 @@ from flows.monitor import (
     _fits_table,
     _latest_baselines,
     baseline_definition,
+    WRITE_BATCH_S,
     ensure_monitor_tables,
     monitor_params,
     monitor_rows,
+    store_spans,
 )
 from flows.warehouse_db import connect, ensure_ingest_tables, insert_frame, query_frame
 from schemas.fields import EDGE_FIT_FIELDS, EDGES, SELECTION_FIELDS, polars_schema
@@ -889,10 +891,9 @@ def _monitor_phase(config, warehouse, valves, summary, concurrency, opts, unit_d
 
 
 WRITE_BATCH_UNITS = 32
-"""Finished monitor units written in one transaction at most…"""
-WRITE_BATCH_S = 5.0
-"""…or once the oldest of them has waited this long (a transaction costs ~0.1 s whatever its
-size, BENCHMARKS.md "Backfill": per unit it would be the serial bottleneck of a large backfill)."""
+"""Finished monitor units written in one transaction at most, or once the oldest of them has
+waited :data:`flows.monitor.WRITE_BATCH_S` (per unit, the transaction would be the serial part of
+a large backfill)."""
 
 
 class UnitWriter:
@@ -922,29 +923,12 @@ class UnitWriter:
 
 
 def store_units(warehouse: Path, units: list[tuple[MonitorUnit, pl.DataFrame, pl.DataFrame]], progress: pl.DataFrame) -> None:
-    """For each unit replace the valve's rows with ``window_start`` in ``[start, end)`` by its rows;
-    record the units' progress rows; all in one transaction."""
-    with connect(warehouse) as con:
-        con.execute("BEGIN TRANSACTION")
-        try:
-            for unit, _, _ in units:
-                for table in ("edge_fits", "selection_stats"):
-                    con.execute(
-                        f"DELETE FROM {table} WHERE valve_id = ? AND window_start >= ? AND window_start < ?",
-                        [unit.valve_id, unit.start, unit.end],
-                    )
-            insert_frame(con, "edge_fits", pl.concat([f for _, f, _ in units], how="vertical_relaxed"))
-            insert_frame(con, "selection_stats", pl.concat([s for _, _, s in units], how="vertical_relaxed"))
-            insert_frame(con, PROGRESS_TABLE, progress, replace=True)
-            con.execute("COMMIT")
-        except BaseException:
-            con.execute("ROLLBACK")
-            raise
-
-
-def store_unit(warehouse: Path, unit: MonitorUnit, fits: pl.DataFrame, selection: pl.DataFrame, progress: pl.DataFrame) -> None:
-    """One unit's :func:`store_units`."""
-    store_units(warehouse, [(unit, fits, selection)], progress)
+    """For each unit replace the valve's rows with ``window_start`` in ``[start, end)`` by its rows
+    and record the units' progress rows, all in one transaction (:func:`flows.monitor.store_spans`)."""
+    store_spans(
+        warehouse, [(u.valve_id, u.start, u.end, f, s) for u, f, s in units],
+        also=lambda con: insert_frame(con, PROGRESS_TABLE, progress, replace=True),
+    )  # fmt: skip
 
 
 @flow(name="valvemon-backfill", persist_result=False, validate_parameters=False)

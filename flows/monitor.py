@@ -25,11 +25,13 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import time
 from dataclasses import dataclass, field
 from datetime import date, datetime, timedelta, timezone
 from pathlib import Path
 from typing import Callable, Iterator
 
+import duckdb
 import numpy as np
 import polars as pl
 from prefect import flow, task
@@ -53,6 +55,16 @@ MONITOR_TABLES = {
 }
 """Table → (fields, unique key)."""
 
+INDEXED_TABLES = frozenset({"baselines"})
+"""Tables whose key DuckDB enforces with a unique index. ``edge_fits`` and ``selection_stats``
+keep theirs by construction instead: every write deletes the spans it replaces and inserts their
+rows in one transaction (:func:`store_spans`). A unique (ART) index on them made each such write
+about 4× as expensive (~45 against ~12 ms CPU for a valve-week), BENCHMARKS.md "Monitoring"."""
+
+WRITE_BATCH_S = 5.0
+"""Finished chunks wait in memory at most this long before they are written together (one
+transaction costs ~20–40 ms whatever its size: per chunk it weighs on short runs)."""
+
 CHUNK_DAYS = 7
 """Days of lake read at once per valve: a week of hourly 10 s windows at 1 kHz is 1.7 M rows."""
 
@@ -65,7 +77,11 @@ def ensure_monitor_tables(con) -> None:
     """Create ``baselines``, ``edge_fits`` and ``selection_stats`` (with unique keys) if missing."""
     for name, (fields, key) in MONITOR_TABLES.items():
         con.execute(create_table_sql(name, fields))
-        con.execute(f"CREATE UNIQUE INDEX IF NOT EXISTS {name}_key ON {name} ({', '.join(key)})")
+        if name in INDEXED_TABLES:
+            con.execute(f"CREATE UNIQUE INDEX IF NOT EXISTS {name}_key ON {name} ({', '.join(key)})")
+    indexed = con.sql("SELECT index_name FROM duckdb_indexes() WHERE index_name IN ('edge_fits_key', 'selection_stats_key')").fetchall()
+    for (name,) in indexed:  # made by versions before INDEXED_TABLES
+        con.execute(f"DROP INDEX {name}")
 
 
 def monitor_params(valve: ValveSpec, sample_rate_hz: float) -> MonitorParams:
@@ -348,16 +364,28 @@ def _fits_table(fits: pl.DataFrame, valve: ValveSpec, baselines: dict[str, Basel
     ).cast(dict(polars_schema(EDGE_FIT_FIELDS))).with_columns(pl.col(pl.Float64).fill_nan(None))  # no estimate: NULL
 
 
-def store_chunk(warehouse: Path, valve_id: str, lo: datetime, hi: datetime, fits: pl.DataFrame, selection: pl.DataFrame) -> None:
-    """Replace the valve's rows with window_start in [lo, hi] by these, in one transaction."""
+Span = tuple[str, datetime, datetime, pl.DataFrame, pl.DataFrame]
+"""(valve_id, start, end, fits, selection): the rows of one valve's windows starting in [start, end)."""
+
+
+def store_spans(warehouse: Path, spans: list[Span], also: Callable[[duckdb.DuckDBPyConnection], None] | None = None) -> None:
+    """For each span replace the valve's ``edge_fits`` and ``selection_stats`` rows whose
+    ``window_start`` lies in ``[start, end)`` by the span's rows, then run ``also(con)`` (e.g. a
+    progress record), all in one transaction: a rerun replaces, never duplicates, and a crash
+    leaves every span as before or complete."""
+    if not spans:
+        return
     with connect(warehouse) as con:
         ensure_monitor_tables(con)
         con.execute("BEGIN TRANSACTION")
         try:
-            for table in ("edge_fits", "selection_stats"):
-                con.execute(f"DELETE FROM {table} WHERE valve_id = ? AND window_start BETWEEN ? AND ?", [valve_id, lo, hi])
-            insert_frame(con, "edge_fits", fits)
-            insert_frame(con, "selection_stats", selection)
+            for valve_id, start, end, _, _ in spans:
+                for table in ("edge_fits", "selection_stats"):
+                    con.execute(f"DELETE FROM {table} WHERE valve_id = ? AND window_start >= ? AND window_start < ?", [valve_id, start, end])
+            insert_frame(con, "edge_fits", pl.concat([s[3] for s in spans], how="vertical_relaxed"))
+            insert_frame(con, "selection_stats", pl.concat([s[4] for s in spans], how="vertical_relaxed"))
+            if also is not None:
+                also(con)
             con.execute("COMMIT")
         except BaseException:
             con.execute("ROLLBACK")
@@ -387,17 +415,26 @@ def monitor_valve(
     baselines = ensure_baselines(valve, params, warehouse)
     report = ValveReport(valve_id, baseline_source=baselines["s1"].source, baseline_plausible=all(b.plausible for b in baselines.values()))
     gap_s = params.gap_limit_periods * params.sample_period_s
+    pending: list[Span] = []
+    oldest = 0.0
     for rows in lake_chunks(warehouse, valve.id, gap_s, start, end, chunk_days, LAKE_COLUMNS):
         res = monitor_rows(valve, params, baselines, rows)
         now = datetime.now(timezone.utc)
         fits = _fits_table(res.fits, valve, baselines, now)
         selection = res.selection.select([f.name for f in SELECTION_FIELDS]).cast(dict(polars_schema(SELECTION_FIELDS)))
-        store_chunk(warehouse, valve.id, rows["timestamp_utc"][0], rows["timestamp_utc"][-1], fits, selection)
+        t = rows["timestamp_utc"]
+        if not pending:
+            oldest = time.monotonic()
+        pending.append((valve.id, t[0], t[-1] + timedelta(microseconds=1), fits, selection))
+        if time.monotonic() - oldest >= WRITE_BATCH_S:
+            store_spans(warehouse, pending)
+            pending = []
         report.rows_read += rows.height
         report.windows += res.windows.height
         report.fits_ok += int((fits["status"] == "ok").sum())
         for s, n in fits["status"].value_counts().iter_rows():
             report.status_counts[s] = report.status_counts.get(s, 0) + n
+    store_spans(warehouse, pending)
     return report
 
 

@@ -187,3 +187,15 @@ def test_chunking_never_splits_a_window(archive, tmp_path):
     ref = _table(ref_wh, FITS)
     assert ref.select("valve_id", "edge", "status", "n_points").equals(one.select("valve_id", "edge", "status", "n_points"))
     assert (ref["alpha_hat"] - one["alpha_hat"]).abs().max() < 1e-9
+
+
+def test_fit_tables_drop_the_unique_indexes_of_earlier_versions(tmp_path):
+    """edge_fits and selection_stats keep their keys by replace-in-one-transaction (the rerun tests
+    above); an index an earlier version made is dropped, the baselines' stays."""
+    with connect(tmp_path) as con:
+        fm.ensure_monitor_tables(con)
+        for name, (_, key) in fm.MONITOR_TABLES.items():
+            con.execute(f"CREATE UNIQUE INDEX IF NOT EXISTS {name}_key ON {name} ({', '.join(key)})")
+        fm.ensure_monitor_tables(con)
+        names = sorted(r[0] for r in con.sql("SELECT index_name FROM duckdb_indexes()").fetchall())
+    assert names == ["baselines_key"]
