@@ -65,8 +65,8 @@ from prefect.cache_policies import NO_CACHE
 
 from flows.config import load_plant_config
 from flows.errors import ValvemonError
-from flows.ingest import FileReport, discover_files, file_records, ingest_lock, read_export, record_file
-from flows.lake import list_partitions, partition_path, read_lake, read_partition, write_partition
+from flows.ingest import FileReport, discover_files, ingest_lock, merge_export, read_export, record_file
+from flows.lake import list_partitions, read_lake
 from flows.monitor import (
     Baseline,
     _baseline_rows,
@@ -82,7 +82,7 @@ from flows.monitor import (
 from flows.warehouse_db import connect, ensure_ingest_tables, insert_frame, query_frame
 from schemas.fields import EDGE_FIT_FIELDS, EDGES, SELECTION_FIELDS, polars_schema
 from schemas.plant_config import ConfigError, PlantConfig
-from transforms.ingest import Grid, IngestError, TagTable, merge_partition, process_export, tags_by_column
+from transforms.ingest import Grid, IngestError, TagTable
 
 UNIT_DAYS = 7
 """Days of one valve per monitor unit: a week of hourly 10 s windows at 1 kHz is 1.7 M lake rows."""
@@ -278,38 +278,12 @@ def ingest_export(path: str | Path, config: PlantConfig, warehouse: str | Path, 
     """
     path, warehouse = Path(path), Path(warehouse)
     st = path.stat()
-    export = config.export
     tags = TagTable.from_config(config)
-    ef = read_export(path, export, tags)
-    report = FileReport(str(path), ef.sha256)
-    out = IngestOutcome(str(path), st.st_size, st.st_mtime_ns, report)
+    ef = read_export(path, config.export, tags)
     if ef.sha256 in known:
-        report.skipped = True
-        return out
-    try:
-        result = process_export(ef.frame, config, first_line=ef.first_line, tags=tags)
-    except IngestError as exc:
-        raise ValvemonError(f"{path}: {exc}") from None
-    c = result.counts
-    report.rows_in, report.samples_in, report.quarantined = c.rows_in, c.samples_in, c.quarantined
-    report.duplicates, report.conflicts, report.gaps, report.rows_out = c.duplicates, c.conflicts, c.gaps, c.rows_out
-    report.valves = c.valves
-    report.partitions = len(result.partitions)
-    gap_us = max(int(round(export.max_gap_s * 1e6)), 1)
-    for part in result.partitions:
-        target = partition_path(warehouse, part.valve_id, part.date)
-        with partition_lock(warehouse, target):
-            try:
-                merged = merge_partition(read_partition(target), part.frame, export.duplicate_rule, tags_by_column(config, part.valve_id))
-            except IngestError as exc:
-                raise ValvemonError(f"{path}: {exc}") from None
-            report.rows_added += merged.rows_added
-            report.lake_conflicts += merged.lake_conflicts
-            if merged.changed:
-                write_partition(target, merged.frame, gap_us=gap_us)
-                report.partitions_written += 1
-    out.records = file_records(path, ef, result, report, run_id, export.layout)
-    return out
+        return IngestOutcome(str(path), st.st_size, st.st_mtime_ns, FileReport(str(path), ef.sha256, skipped=True))
+    report, records = merge_export(path, ef, config, warehouse, run_id, tags, lock=lambda target: partition_lock(warehouse, target))
+    return IngestOutcome(str(path), st.st_size, st.st_mtime_ns, report, records)
 
 
 # --- monitor unit (runs on a worker) ----------------------------------------------------------

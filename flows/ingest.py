@@ -22,7 +22,7 @@ import io
 import os
 import uuid
 import zlib
-from contextlib import contextmanager
+from contextlib import AbstractContextManager, contextmanager, nullcontext
 from dataclasses import asdict, dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
@@ -243,13 +243,40 @@ def ingest_file(path: str | Path, config: PlantConfig, warehouse: str | Path, ru
         Naming the file and, where it applies, the line, tag, time and what was expected.
     """
     path, warehouse = Path(path), Path(warehouse)
-    export = config.export
     tags = tags or TagTable.from_config(config)
-    ef = read_export(path, export, tags)
-    report = FileReport(str(path), ef.sha256)
+    ef = read_export(path, config.export, tags)
     if not force and in_manifest(warehouse, ef.sha256):
-        report.skipped = True
-        return report
+        return FileReport(str(path), ef.sha256, skipped=True)
+    report, records = merge_export(path, ef, config, warehouse, run_id, tags)
+    record_file(warehouse, *records)
+    return report
+
+
+def _unlocked(target: Path) -> AbstractContextManager:
+    return nullcontext()
+
+
+def merge_export(
+    path: Path,
+    ef: ExportFile,
+    config: PlantConfig,
+    warehouse: Path,
+    run_id: str,
+    tags: TagTable,
+    lock: Callable[[Path], AbstractContextManager] = _unlocked,
+) -> tuple[FileReport, tuple[dict, pl.DataFrame, pl.DataFrame]]:
+    """Turn a read export into lake partitions and merge each into the lake.
+
+    ``lock(target)`` is held around each partition's read-merge-write. Returns the file's
+    report and its database rows (:func:`file_records`), which the caller writes.
+
+    Raises
+    ------
+    ValvemonError
+        Naming the file and what is wrong with its content.
+    """
+    export = config.export
+    report = FileReport(str(path), ef.sha256)
     try:
         result = process_export(ef.frame, config, first_line=ef.first_line, tags=tags)
     except IngestError as exc:
@@ -262,17 +289,17 @@ def ingest_file(path: str | Path, config: PlantConfig, warehouse: str | Path, ru
     gap_us = max(int(round(export.max_gap_s * 1e6)), 1)
     for part in result.partitions:
         target = partition_path(warehouse, part.valve_id, part.date)
-        try:
-            merged = merge_partition(read_partition(target), part.frame, export.duplicate_rule, tags_by_column(config, part.valve_id))
-        except IngestError as exc:
-            raise ValvemonError(f"{path}: {exc}") from None
-        report.rows_added += merged.rows_added
-        report.lake_conflicts += merged.lake_conflicts
-        if merged.changed:
-            write_partition(target, merged.frame, gap_us=gap_us)
-            report.partitions_written += 1
-    record_file(warehouse, *file_records(path, ef, result, report, run_id, export.layout))
-    return report
+        with lock(target):
+            try:
+                merged = merge_partition(read_partition(target), part.frame, export.duplicate_rule, tags_by_column(config, part.valve_id))
+            except IngestError as exc:
+                raise ValvemonError(f"{path}: {exc}") from None
+            report.rows_added += merged.rows_added
+            report.lake_conflicts += merged.lake_conflicts
+            if merged.changed:
+                write_partition(target, merged.frame, gap_us=gap_us)
+                report.partitions_written += 1
+    return report, file_records(path, ef, result, report, run_id, export.layout)
 
 
 def file_records(path: Path, ef: ExportFile, result, report: FileReport, run_id: str, layout: str) -> tuple[dict, pl.DataFrame, pl.DataFrame]:
