@@ -7,7 +7,7 @@ Layout::
     export/fleet_ranking.parquet                    view fleet_ranking
 
 Each file's schema is built from the field registry (:func:`bi_schema`) (``schemas.fields.EDGE_FIT_FIELDS``,
-``schemas.report_fields.VALVE_CONDITION_FIELDS`` / ``FLEET_RANKING_FIELDS``): the same column
+``VALVE_CONDITION_FIELDS`` / ``FLEET_RANKING_FIELDS``): the same column
 names, order and types on every export, timestamps ``timestamp[us, tz=UTC]``, each field's unit
 and description in the Parquet field metadata. The partition key ``valve_id`` is also inside
 the files, so a tool that ignores hive partitioning still sees it. Every file is written to a
@@ -26,8 +26,7 @@ import polars as pl
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from schemas.fields import EDGE_FIT_FIELDS, Field, arrow_schema, polars_schema
-from schemas.report_fields import FLEET_RANKING_FIELDS, VALVE_CONDITION_FIELDS
+from schemas.fields import EDGE_FIT_FIELDS, FLEET_RANKING_FIELDS, VALVE_CONDITION_FIELDS, Field, arrow_schema, polars_schema
 
 EXPORT_DIR = "export"
 PART_NAME = "part-0.parquet"

@@ -40,9 +40,8 @@ from flows.standstill import expected_residual, standstill_rows
 from flows.views import connect_snapshot, create_views, ensure_report_tables, publish_snapshot
 from flows.warehouse_db import connect, insert_frame, query_frame
 from model.area import edge_area
-from schemas.fields import EDGES, polars_schema
+from schemas.fields import CONDITION_BOUNDS_FIELDS, EDGES, polars_schema
 from schemas.plant_config import BOUND_KEYS, PlantConfig
-from schemas.report_fields import CONDITION_BOUNDS_FIELDS
 
 REPORTS_DIR = "reports"
 REPORT_NAME = "report.html"

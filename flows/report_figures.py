@@ -24,8 +24,7 @@ import polars as pl  # noqa: E402
 from matplotlib.colors import ListedColormap  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 
-from schemas.fields import EDGES  # noqa: E402
-from schemas.report_fields import STATES  # noqa: E402
+from schemas.fields import EDGES, STATES  # noqa: E402
 
 STATE_COLOURS = {"healthy": "#4caf50", "worn": "#ff9800", "faulty": "#d32f2f", "unknown": "#9e9e9e"}
 PARAM_LABELS = {"alpha_hat": "α̂ (relative)", "x_hat_pct": "x̂ (% of x_max)", "e_mm2": "e (mm²)"}

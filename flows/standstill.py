@@ -28,8 +28,7 @@ from datetime import datetime
 import numpy as np
 import polars as pl
 
-from schemas.report_fields import STANDSTILL_FIELDS
-from schemas.fields import polars_schema
+from schemas.fields import STANDSTILL_FIELDS, polars_schema
 
 STANDSTILL_VELOCITY_M_S = 1e-3
 """|dX/dt| below this is standstill (the monitor's step-3 rule uses 5 mm/s to drop data; Eq. 9
@@ -52,7 +51,7 @@ def _run_age(mask: np.ndarray) -> np.ndarray:
 
 
 def standstill_rows(frame: pl.DataFrame, *, max_gap_s: float, commissioned: datetime, computed_at: datetime) -> pl.DataFrame:
-    """Eq. 9 rows (:data:`schemas.report_fields.STANDSTILL_FIELDS`) of one valve's lake rows.
+    """Eq. 9 rows (:data:`schemas.fields.STANDSTILL_FIELDS`) of one valve's lake rows.
 
     ``frame`` is the canonical sensor frame of one valve, sorted by time; windows are the runs
     without a gap longer than ``max_gap_s``.

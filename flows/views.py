@@ -36,7 +36,7 @@ import duckdb
 
 from flows.errors import ValvemonError
 from flows.warehouse_db import DB_NAME, create_table_sql, db_path
-from schemas.report_fields import CONDITION_BOUNDS_FIELDS, STANDSTILL_FIELDS
+from schemas.fields import CONDITION_BOUNDS_FIELDS, STANDSTILL_FIELDS
 
 SQL_DIR = Path(__file__).resolve().parents[1] / "sql"
 """The repository's ``sql/`` folder."""

@@ -50,6 +50,13 @@ class Field:
 
 UTC_US = pl.Datetime("us", "UTC")
 
+# Columns several tables share, to the letter.
+_VALVE_ID = Field("valve_id", pl.Utf8, "", "Valve identifier.")
+_EDGE = Field("edge", pl.Utf8, "", "Control edge.", isin=EDGES)
+_WINDOW_START = Field("window_start", UTC_US, "", "First sample of the monitoring window (UTC).")
+_WINDOW_END = Field("window_end", UTC_US, "", "Last sample of the monitoring window (UTC).")
+_OPERATING_HOURS = Field("operating_hours", pl.Float64, "h", "Calendar hours since commissioning at window_start.")
+
 SIGNAL_COLUMN: dict[str, str] = {
     "ps": "ps_pa",
     "pr": "pr_pa",
@@ -137,8 +144,12 @@ SENSOR_SCHEMA = pandera_schema(SENSOR_FIELDS, "sensor_frame")
 UTC_NS = pl.Datetime("ns", "UTC")
 """Export timestamps before they are put on the lake's grid (PI writes 100 ns)."""
 
+_FILE_SHA256 = Field("file_sha256", pl.Utf8, "", "Content hash of the source file.")
+_SOURCE_FILE = Field("source_file", pl.Utf8, "", "Path of the source file as given to the ingest.")
+_LINE = Field("line", pl.Int64, "", "Line of the source file (CSV, header = line 1) or row (Parquet, first row = 1).", ge=1)
+
 RAW_ROW_FIELDS: tuple[Field, ...] = (
-    Field("line", pl.Int64, "", "Line of the source file (CSV, header = line 1) or row (Parquet, first row = 1).", ge=1),
+    _LINE,
     Field("tag", pl.Categorical, "", "Historian tag name as exported (during ingest an Enum of the plant's tags, which also checks them)."),
     Field("timestamp_utc", UTC_NS, "", "Sample time at the export's full resolution, UTC."),
     Field("value_si", pl.Float64, "", "Sample value converted to the SI unit of the tag's signal (Pa or m).", ge=-1e12, le=1e12),
@@ -146,9 +157,9 @@ RAW_ROW_FIELDS: tuple[Field, ...] = (
 """One accepted sample of one tag, as the ingest reads it from an export (long form)."""
 
 QUARANTINE_FIELDS: tuple[Field, ...] = (
-    Field("file_sha256", pl.Utf8, "", "Content hash of the source file."),
-    Field("source_file", pl.Utf8, "", "Path of the source file as given to the ingest."),
-    Field("line", pl.Int64, "", "Line of the source file (CSV, header = line 1) or row (Parquet, first row = 1).", ge=1),
+    _FILE_SHA256,
+    _SOURCE_FILE,
+    _LINE,
     Field("tag", pl.Utf8, "", "Historian tag name.", nullable=True),
     Field("timestamp_raw", pl.Utf8, "", "Timestamp as written in the export.", nullable=True),
     Field("value_raw", pl.Utf8, "", "Value as written in the export (e.g. a PI digital state).", nullable=True),
@@ -160,9 +171,9 @@ QUARANTINE_FIELDS: tuple[Field, ...] = (
 """Samples of an export set aside by the ingest (table ``quarantine``)."""
 
 GAP_FIELDS: tuple[Field, ...] = (
-    Field("file_sha256", pl.Utf8, "", "Content hash of the source file."),
-    Field("source_file", pl.Utf8, "", "Path of the source file as given to the ingest."),
-    Field("valve_id", pl.Utf8, "", "Valve identifier."),
+    _FILE_SHA256,
+    _SOURCE_FILE,
+    _VALVE_ID,
     Field("signal", pl.Utf8, "", "Signal of the plant configuration's [valves.tags].", isin=SIGNALS),
     Field("tag", pl.Utf8, "", "Historian tag name."),
     Field("gap_start", UTC_US, "", "Last sample before the gap (UTC, truncated to µs)."),
@@ -225,11 +236,11 @@ GAP_SCHEMA = pandera_schema(GAP_FIELDS, "ingest_gaps")
 # --- monitoring (steps 2–6) ----------------------------------------------------------------
 
 EDGE_FIT_FIELDS: tuple[Field, ...] = (
-    Field("valve_id", pl.Utf8, "", "Valve identifier."),
-    Field("edge", pl.Utf8, "", "Control edge.", isin=EDGES),
-    Field("window_start", UTC_US, "", "First sample of the monitoring window (UTC)."),
-    Field("window_end", UTC_US, "", "Last sample of the monitoring window (UTC)."),
-    Field("operating_hours", pl.Float64, "h", "Calendar hours since commissioning at window_start."),
+    _VALVE_ID,
+    _EDGE,
+    _WINDOW_START,
+    _WINDOW_END,
+    _OPERATING_HOURS,
     Field("n_points", pl.Int32, "", "Opening-area points used by the fit.", ge=0),
     Field("alpha_hat", pl.Float64, "", "Relative change of α against the baseline (1 = unchanged).", nullable=True),
     Field("x_hat_mm", pl.Float64, "mm", "Change of underlap in the edge's opening coordinate; > 0 = more open.", nullable=True),
@@ -248,8 +259,8 @@ EDGE_FIT_FIELDS: tuple[Field, ...] = (
 """One row per valve, edge and monitoring window (table ``edge_fits``, interfaces.md)."""
 
 BASELINE_FIELDS: tuple[Field, ...] = (
-    Field("valve_id", pl.Utf8, "", "Valve identifier."),
-    Field("edge", pl.Utf8, "", "Control edge.", isin=EDGES),
+    _VALVE_ID,
+    _EDGE,
     Field("version", pl.Int32, "", "Version per valve and edge, 1, 2, … (a new definition adds one).", ge=1),
     Field("source", pl.Utf8, "", "nominal (α_nominal·A(u), Eq. 3) or commissioning (step 4a fit).", isin=("nominal", "commissioning")),
     Field("definition", pl.Utf8, "", "What the baseline was built from (design data, window); a change makes a new version."),
@@ -265,8 +276,8 @@ BASELINE_FIELDS: tuple[Field, ...] = (
 """Versioned baseline characteristics per valve and edge (table ``baselines``)."""
 
 SELECTION_FIELDS: tuple[Field, ...] = (
-    Field("valve_id", pl.Utf8, "", "Valve identifier."),
-    Field("edge", pl.Utf8, "", "Control edge.", isin=EDGES),
+    _VALVE_ID,
+    _EDGE,
     Field("window_start", UTC_US, "", "First sample of the window (UTC)."),
     Field("window_end", UTC_US, "", "Last sample of the window (UTC)."),
     Field("rule", pl.Utf8, "", "Step-3 rule: no_derivative, standstill, pressure_peak, spool_range, small_dp."),
@@ -276,6 +287,109 @@ SELECTION_FIELDS: tuple[Field, ...] = (
     Field("n_selected", pl.Int64, "", "Samples left for the edge after all rules.", ge=0),
 )
 """What each step-3 rule removed, per window and edge (table ``selection_stats``)."""
+
+# --- report (condition, fleet ranking, BI hand-off) ---------------------------------------
+
+# ``condition_bounds`` and ``standstill_checks`` are tables ``valvemon report`` writes;
+# ``valve_condition`` and ``fleet_ranking`` are views (``sql/report``) whose columns are fixed
+# here, so the exported Parquet files keep a stable, documented schema.
+
+STATES: tuple[str, ...] = ("healthy", "worn", "faulty", "unknown")
+"""The states of ``valve_condition`` (interfaces.md)."""
+
+CONDITION_BOUNDS_FIELDS: tuple[Field, ...] = (
+    _VALVE_ID,
+    Field("valve_type", pl.Utf8, "", "Valve type of the plant configuration."),
+    Field("x_max_mm", pl.Float64, "mm", "Spool stroke x_max (x_hat_pct is in % of it).", ge=0.0),
+    Field("alpha_fault_low", pl.Float64, "", "alpha_hat below this in one window: faulty."),
+    Field("alpha_fault_high", pl.Float64, "", "alpha_hat above this in one window: faulty."),
+    Field("alpha_wear_low", pl.Float64, "", "Long-term level of alpha_hat below this: worn."),
+    Field("alpha_wear_high", pl.Float64, "", "Long-term level of alpha_hat above this: worn."),
+    Field("x_hat_pct_fault_low", pl.Float64, "%", "x_hat_pct below this in one window: faulty."),
+    Field("x_hat_pct_fault_high", pl.Float64, "%", "x_hat_pct above this in one window: faulty."),
+    Field("x_hat_pct_wear_low", pl.Float64, "%", "Long-term level of x_hat_pct below this: worn."),
+    Field("x_hat_pct_wear_high", pl.Float64, "%", "Long-term level of x_hat_pct above this: worn."),
+    Field("e_mm2_fault_high", pl.Float64, "mm²", "e_mm2 above this in one window: faulty."),
+    Field("e_mm2_wear_high", pl.Float64, "mm²", "Long-term level of e_mm2 above this: worn."),
+    Field("change_z", pl.Float64, "", "Robust z-score beyond which a window departs significantly from its recent trend."),
+    Field("change_history_windows", pl.Int32, "", "Previous ok windows the rolling median and MAD are taken over; also the windows of the long-term level."),
+    Field("change_min_history", pl.Int32, "", "Fewest previous ok windows for a z-score."),
+    Field("alpha_sigma_floor", pl.Float64, "", "Smallest scale of the alpha_hat z-score."),
+    Field("x_hat_pct_sigma_floor", pl.Float64, "%", "Smallest scale of the x_hat_pct z-score."),
+    Field("e_mm2_sigma_floor", pl.Float64, "mm²", "Smallest scale of the e_mm2 z-score."),
+    Field("fault_hold_hours", pl.Float64, "h", "An alarm keeps the edge faulty this long after its window."),
+    Field("trend_min_fits", pl.Int32, "", "Fewest ok, alarm-free windows for a trend (else unknown)."),
+    Field("trend_min_span_hours", pl.Float64, "h", "Shortest span of operating hours for a remaining-life forecast."),
+    Field("trend_span_hours", pl.Float64, "h", "Trailing span of operating hours the trend is fitted on."),
+    Field("eq9_expected", pl.Float64, "", "Eq. 9 residual the valve's design gives at rest."),
+    Field("eq9_tolerance", pl.Float64, "", "Largest |residual - expected| of a sound valve."),
+    Field("updated_at", UTC_US, "", "When the row was written from the plant configuration."),
+)
+"""Each configured valve's bounds (table ``condition_bounds``, replaced by every report)."""
+
+STANDSTILL_FIELDS: tuple[Field, ...] = (
+    _VALVE_ID,
+    _WINDOW_START,
+    _WINDOW_END,
+    _OPERATING_HOURS,
+    Field("n_samples", pl.Int64, "", "Standstill samples of the window used (cylinder at rest, |x| small, settled).", ge=0),
+    Field("ps_bar", pl.Float64, "bar", "Median supply pressure over those samples."),
+    Field("pr_bar", pl.Float64, "bar", "Median return pressure."),
+    Field("p1_bar", pl.Float64, "bar", "Median head-side pressure."),
+    Field("p2_bar", pl.Float64, "bar", "Median rod-side pressure."),
+    Field("x_spool_mm", pl.Float64, "mm", "Median spool position."),
+    Field("eq9_residual", pl.Float64, "", "Median of (p1-pr)/(ps-p1) - (ps-p2)/(p2-pr) (Eq. 9; 0 for the idealised valve)."),
+    Field("computed_at", UTC_US, "", "When this row was computed."),
+)
+"""Eq. 9 at standstill per window (table ``standstill_checks``, filled incrementally from the lake)."""
+
+VALVE_CONDITION_FIELDS: tuple[Field, ...] = (
+    _VALVE_ID,
+    _EDGE,
+    Field("state", pl.Utf8, "", "healthy, worn, faulty or unknown.", isin=STATES),
+    Field("reason", pl.Utf8, "", "Why, in words, with the numbers."),
+    Field("remaining_hours", pl.Float64, "h", "Operating hours until a parameter's trend reaches its wear bound (0 when worn).", nullable=True),
+    Field("remaining_hours_low", pl.Float64, "h", "Lower end of its 95 % interval.", nullable=True),
+    Field("remaining_hours_high", pl.Float64, "h", "Upper end of its 95 % interval.", nullable=True),
+    Field("limiting_parameter", pl.Utf8, "", "The parameter whose trend reaches its bound first.", nullable=True),
+    Field("end_of_life_hours", pl.Float64, "h", "Operating hours at which that happens.", nullable=True),
+    Field("operating_hours", pl.Float64, "h", "Operating hours of the latest ok window.", nullable=True),
+    Field("last_window_start", UTC_US, "", "Latest monitoring window of the edge (any status).", nullable=True),
+    Field("last_ok_window_start", UTC_US, "", "Latest window with an estimate.", nullable=True),
+    Field("alpha_hat", pl.Float64, "", "alpha_hat of the latest ok window.", nullable=True),
+    Field("x_hat_pct", pl.Float64, "%", "x_hat_pct of the latest ok window.", nullable=True),
+    Field("e_mm2", pl.Float64, "mm²", "e_mm2 of the latest ok window.", nullable=True),
+    Field("alpha_level", pl.Float64, "", "Long-term level (median of the latest alarm-free windows) of alpha_hat.", nullable=True),
+    Field("x_hat_pct_level", pl.Float64, "%", "Long-term level of x_hat_pct.", nullable=True),
+    Field("e_mm2_level", pl.Float64, "mm²", "Long-term level of e_mm2.", nullable=True),
+    Field("n_windows", pl.Int64, "", "Windows of the edge against its current baseline.", ge=0),
+    Field("n_ok_windows", pl.Int64, "", "Of which gave an estimate.", ge=0),
+    Field("n_recent_alarms", pl.Int64, "", "Alarm windows within fault_hold_hours of the latest ok window.", ge=0),
+    Field("eq9_ok", pl.Boolean, "", "Latest Eq. 9 standstill check of the valve passed (null: no standstill data).", nullable=True),
+    Field("edge_order", pl.Int32, "", "1..4 for s1, 1r, s2, 2r (for sorting)."),
+)
+"""View ``valve_condition`` (interfaces.md), as exported to ``export/valve_condition.parquet``."""
+
+FLEET_RANKING_FIELDS: tuple[Field, ...] = (
+    Field("urgency_rank", pl.Int64, "", "1 = look at this valve first.", ge=1),
+    _VALVE_ID,
+    Field("state", pl.Utf8, "", "Worst state of its edges (unknown only if all four are).", isin=STATES),
+    Field("urgency_tier", pl.Int32, "", "1 faulty, 2 worn, 3 Eq. 9 fails, 4 healthy with forecast, 5 unknown, 6 healthy."),
+    Field("edges_faulty", pl.Int64, "", "Faulty edges.", ge=0),
+    Field("edges_worn", pl.Int64, "", "Worn edges.", ge=0),
+    Field("edges_unknown", pl.Int64, "", "Edges without enough data.", ge=0),
+    Field("worst_edge", pl.Utf8, "", "The edge that decides the state.", isin=EDGES),
+    Field("reason", pl.Utf8, "", "Its reason."),
+    Field("remaining_hours", pl.Float64, "h", "Soonest remaining life over the edges.", nullable=True),
+    Field("remaining_hours_low", pl.Float64, "h", "Lower end of its 95 % interval.", nullable=True),
+    Field("remaining_hours_high", pl.Float64, "h", "Upper end of its 95 % interval.", nullable=True),
+    Field("limiting_edge", pl.Utf8, "", "The edge with the soonest remaining life.", nullable=True),
+    Field("eq9_ok", pl.Boolean, "", "Latest Eq. 9 standstill check passed.", nullable=True),
+    Field("eq9_residual", pl.Float64, "", "Its residual.", nullable=True),
+    Field("operating_hours", pl.Float64, "h", "Operating hours of the latest ok window.", nullable=True),
+    Field("last_window_start", UTC_US, "", "Latest monitoring window.", nullable=True),
+)
+"""View ``fleet_ranking``, as exported to ``export/fleet_ranking.parquet``."""
 
 # --- model discrepancy (issue 7) -----------------------------------------------------------
 
@@ -293,15 +407,18 @@ DISCREPANCY_EFFECTS: tuple[str, ...] = (
 """The library's effect names (interfaces.md; ``model.effects.EFFECT_NAMES``)."""
 
 DISCREPANCY_STAGES = "0 = the base model; k = the base model with the effects named 1 … k (fitted parameters)."
+_STAGE = Field("stage", pl.Int32, "", DISCREPANCY_STAGES, ge=0)
+_REGION = Field("region", pl.Utf8, "", "Operating region.", isin=("all", "extending", "retracting", "standstill", "pressure_low", "pressure_mid", "pressure_high"))
+_REGION_SAMPLES = Field("n_samples", pl.Int64, "", "Samples of the region.", ge=0)
 
 _RUN_FIELDS: tuple[Field, ...] = (
     Field("run_id", pl.Utf8, "", "Identifier of the discrepancy run."),
-    Field("valve_id", pl.Utf8, "", "Valve identifier."),
+    _VALVE_ID,
     Field("run_at", UTC_US, "", "When the run started (UTC)."),
 )
 
 DISCREPANCY_FINDING_FIELDS: tuple[Field, ...] = (
-    Field("valve_id", pl.Utf8, "", "Valve identifier."),
+    _VALVE_ID,
     Field("run_at", UTC_US, "", "When the run started (UTC)."),
     Field("effect", pl.Utf8, "", "The named effect, or none.", isin=DISCREPANCY_EFFECTS + ("none",)),
     Field("parameter_name", pl.Utf8, "", "The effect's parameter (K_i, K_e, air_fraction, delta_x, delta_p1, delta_p2, gain_p1, gain_p2, R_s, delta_d_v, delta_m); null for none.", nullable=True),
@@ -353,28 +470,28 @@ DISCREPANCY_CANDIDATE_FIELDS: tuple[Field, ...] = _RUN_FIELDS + (
 """Every library candidate scored against the base model, per run (table ``discrepancy_candidates``)."""
 
 DISCREPANCY_GAP_FIELDS: tuple[Field, ...] = _RUN_FIELDS + (
-    Field("stage", pl.Int32, "", DISCREPANCY_STAGES, ge=0),
+    _STAGE,
     Field("signal", pl.Utf8, "", "Replayed signal.", isin=("p1", "p2", "X")),
-    Field("region", pl.Utf8, "", "Operating region.", isin=("all", "extending", "retracting", "standstill", "pressure_low", "pressure_mid", "pressure_high")),
+    _REGION,
     Field("rms", pl.Float64, "", "RMS of replayed reading minus recorded signal, in unit.", nullable=True),
     Field("unit", pl.Utf8, "", "Pa or m."),
-    Field("n_samples", pl.Int64, "", "Samples of the region.", ge=0),
+    _REGION_SAMPLES,
 )
 """Replay gap per stage, signal and operating region (table ``discrepancy_gaps``)."""
 
 DISCREPANCY_RESIDUAL_FIELDS: tuple[Field, ...] = _RUN_FIELDS + (
-    Field("stage", pl.Int32, "", DISCREPANCY_STAGES, ge=0),
+    _STAGE,
     Field("equation", pl.Utf8, "", "Chamber 1 or 2 continuity (Eq. 6) or the motion equation (Eq. 5).", isin=("chamber1", "chamber2", "motion")),
-    Field("region", pl.Utf8, "", "Operating region.", isin=("all", "extending", "retracting", "standstill", "pressure_low", "pressure_mid", "pressure_high")),
+    _REGION,
     Field("rms", pl.Float64, "", "RMS of the pointwise residual (Savitzky–Golay derivatives), in unit.", nullable=True),
     Field("mean", pl.Float64, "", "Mean of the pointwise residual, in unit.", nullable=True),
     Field("unit", pl.Utf8, "", "m3/s (chambers) or N (motion)."),
-    Field("n_samples", pl.Int64, "", "Samples of the region.", ge=0),
+    _REGION_SAMPLES,
 )
 """Equation residuals per stage and operating region (table ``discrepancy_residuals``)."""
 
 DISCREPANCY_MONITORING_FIELDS: tuple[Field, ...] = _RUN_FIELDS + (
-    Field("edge", pl.Utf8, "", "Control edge.", isin=EDGES),
+    _EDGE,
     Field("effects", pl.Utf8, "", "The effects accounted for (name=value, '; '-separated), empty if none was named."),
     Field("n_windows", pl.Int32, "", "Windows with an ok fit both ways.", ge=0),
     Field("alpha_hat_recorded", pl.Float64, "", "Median α̂ of the monitoring on the signals as recorded (nominal baseline).", nullable=True),
@@ -387,7 +504,7 @@ DISCREPANCY_MONITORING_FIELDS: tuple[Field, ...] = _RUN_FIELDS + (
 """What the named effects did to α̂, x̂ and e (table ``discrepancy_monitoring``)."""
 
 DISCREPANCY_CONDITION_FIELDS: tuple[Field, ...] = _RUN_FIELDS + (
-    Field("edge", pl.Utf8, "", "Control edge.", isin=EDGES),
+    _EDGE,
     Field("source", pl.Utf8, "", "design or commissioning (fitted on the baseline_window).", isin=("design", "commissioning")),
     Field("alpha", pl.Float64, "", "Contraction coefficient α of the edge in the model.", ge=0.0),
     Field("alpha_se", pl.Float64, "", "Its jackknife standard error (commissioning fit).", nullable=True),

@@ -13,9 +13,8 @@ import pytest
 
 from flows.views import REPORT_TABLES, create_views
 from flows.warehouse_db import create_table_sql, insert_frame, query_frame
-from schemas.fields import EDGE_FIT_FIELDS, EDGES, polars_schema
+from schemas.fields import CONDITION_BOUNDS_FIELDS, EDGE_FIT_FIELDS, EDGES, STANDSTILL_FIELDS, polars_schema
 from schemas.plant_config import ConditionBounds
-from schemas.report_fields import CONDITION_BOUNDS_FIELDS, STANDSTILL_FIELDS
 
 COMMISSIONED = datetime(2025, 1, 1, tzinfo=timezone.utc)
 

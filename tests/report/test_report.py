@@ -27,8 +27,7 @@ from flows.monitor import ensure_baselines, ensure_monitor_tables, monitor_param
 from flows.report import run_report
 from flows.views import connect_snapshot, publish_snapshot, snapshot_path
 from flows.warehouse_db import connect, insert_frame
-from schemas.fields import EDGE_FIT_FIELDS, EDGES, polars_schema
-from schemas.report_fields import FLEET_RANKING_FIELDS, VALVE_CONDITION_FIELDS
+from schemas.fields import EDGE_FIT_FIELDS, EDGES, FLEET_RANKING_FIELDS, VALVE_CONDITION_FIELDS, polars_schema
 
 from .conftest import COMMISSIONED, Warehouse
 
