@@ -39,7 +39,7 @@ fails after its retries is reported and left unrecorded; the others go on, and t
 with an error naming the first failure (run it again to retry them).
 
 Runs are logged in ``backfill_runs``. :func:`backfill_flow` is the Prefect flow behind the
-command; :func:`run_backfill` is its body (it must run inside a flow: it submits tasks).
+command.
 """
 
 from __future__ import annotations
@@ -589,7 +589,8 @@ def _backfill_lock(warehouse: Path) -> Iterator[None]:
         fh.close()
 
 
-def run_backfill(
+@flow(name="valvemon-backfill", persist_result=False, validate_parameters=False)
+def backfill_flow(
     config_path: str | Path,
     warehouse: str | Path,
     start: str | date | datetime,
@@ -605,9 +606,10 @@ def run_backfill(
     filter_exports_by_name: bool = True,
     monitor_new_data: bool = False,
     kind: str = "backfill",
-    task_runner_name: str = "",
+    task_runner_name: str = "threads",
 ) -> BackfillSummary:
-    """Ingest ``exports`` and monitor ``[start, end)`` unit by unit (module doc); must run in a flow.
+    """The Prefect flow behind ``valvemon backfill``: ingest ``exports`` and monitor ``[start, end)``
+    unit by unit (module doc).
 
     Parameters
     ----------
@@ -902,31 +904,4 @@ def store_units(warehouse: Path, units: list[tuple[MonitorUnit, pl.DataFrame, pl
     store_spans(
         warehouse, [(u.valve_id, u.start, u.end, f, s) for u, f, s in units],
         also=lambda con: insert_frame(con, PROGRESS_TABLE, progress, replace=True),
-    )  # fmt: skip
-
-
-@flow(name="valvemon-backfill", persist_result=False, validate_parameters=False)
-def backfill_flow(
-    config_path: str,
-    warehouse: str,
-    start: str,
-    end: str,
-    valve_ids: list[str] | None = None,
-    exports: str | None = None,
-    concurrency: int = CONCURRENCY,
-    unit_days: float = UNIT_DAYS,
-    retries: int = RETRIES,
-    force: bool = False,
-    show_progress: bool = False,
-    filter_exports_by_name: bool = True,
-    monitor_new_data: bool = False,
-    kind: str = "backfill",
-    task_runner_name: str = "threads",
-) -> BackfillSummary:
-    """The Prefect flow behind ``valvemon backfill`` (:func:`run_backfill`)."""
-    return run_backfill(
-        config_path, warehouse, start, end, valve_ids=valve_ids, exports=exports, concurrency=concurrency,
-        unit_days=unit_days, retries=retries, force=force, show_progress=show_progress,
-        filter_exports_by_name=filter_exports_by_name, monitor_new_data=monitor_new_data, kind=kind,
-        task_runner_name=task_runner_name,
     )  # fmt: skip
