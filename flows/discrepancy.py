@@ -35,6 +35,7 @@ from prefect.cache_policies import NO_CACHE
 from flows.config import load_plant_config
 from flows.discrepancy_pipeline import ConditionFit, Diagnosis, diagnose, fit_condition
 from flows.errors import ValvemonError
+from flows.instants import utc_instant
 from flows.lake import read_lake
 from flows.warehouse_db import connect, create_table_sql, insert_frame
 from model.params import PlantParams, ValveCondition
@@ -74,18 +75,6 @@ def plant_params_for(valve: ValveSpec, export) -> PlantParams:
     from flows.archive import plant_params_for_valve
 
     return plant_params_for_valve(valve, export)
-
-
-def _utc(value: str | datetime | None) -> datetime | None:
-    """An ISO-8601 date or date-time (naive = UTC) as an aware UTC datetime."""
-    if value is None:
-        return None
-    if isinstance(value, str):
-        try:
-            value = datetime.fromisoformat(value.replace("Z", "+00:00"))
-        except ValueError:
-            raise ValvemonError(f"{value!r} is not an ISO-8601 date or date-time") from None
-    return value.replace(tzinfo=timezone.utc) if value.tzinfo is None else value.astimezone(timezone.utc)
 
 
 def ensure_discrepancy_tables(con) -> None:
@@ -296,7 +285,7 @@ def check_arguments(config_path: str | Path, valve_id: str, start=None, end=None
     known = [v.id for v in config.valves]
     if valve_id not in known:
         raise ValvemonError(f"{config_path}: no valve {valve_id!r} in plant {config.name!r} (valves: {', '.join(known)})")
-    t0, t1 = _utc(start), _utc(end)
+    t0, t1 = utc_instant(start), utc_instant(end)
     if t0 and t1 and t1 <= t0:
         raise ValvemonError("--to must be later than --from")
     if condition_mode not in CONDITION_MODES:

@@ -39,6 +39,7 @@ from prefect.cache_policies import NO_CACHE
 
 from flows.config import load_plant_config
 from flows.errors import ValvemonError
+from flows.instants import utc_instant
 from flows.lake import list_partitions, read_lake
 from flows.warehouse_db import connect, create_table_sql, insert_frame, query_frame
 from model.area import edge_area
@@ -252,19 +253,6 @@ def monitor_rows(valve: ValveSpec, params: MonitorParams, baselines: dict[str, B
     return monitor(rows, params, chars, leakage={valve.id: leaks}, points=False)
 
 
-def _utc(value: str | date | datetime | None) -> datetime | None:
-    if value is None:
-        return None
-    if isinstance(value, str):
-        try:
-            value = datetime.fromisoformat(value.replace("Z", "+00:00"))
-        except ValueError:
-            raise ValvemonError(f"{value!r} is not an ISO-8601 date or date-time") from None
-    if not isinstance(value, datetime):
-        value = datetime(value.year, value.month, value.day)
-    return value.replace(tzinfo=timezone.utc) if value.tzinfo is None else value.astimezone(timezone.utc)
-
-
 def lake_chunks(
     warehouse: Path, valve_id: str, gap_s: float, start: datetime | None, end: datetime | None, days: int | None = None,
     columns: tuple[str, ...] | None = None,
@@ -457,7 +445,7 @@ def run_monitor(
     unknown = sorted(set(valve_ids or []) - set(known))
     if unknown:
         raise ValvemonError(f"{config_path}: no valve {unknown[0]!r} in plant {config.name!r} (valves: {', '.join(known)})")
-    t0, t1 = _utc(start), _utc(end)
+    t0, t1 = utc_instant(start), utc_instant(end)
     if t0 and t1 and t1 <= t0:
         raise ValvemonError("--to must be later than --from")
     if chunk_days is None:
