@@ -160,16 +160,15 @@ def process_export(df: pl.DataFrame, config: PlantConfig, *, first_line: int = 2
                 )
             )
 
-    partitions: list[Partition] = []
+    frames = []
     for valve_id in valves:
         signals = gridded.get(valve_id, {})
         if not all(s in signals for s in REQUIRED_SIGNALS):
             continue  # every sample of a required signal was quarantined: no lake rows
-        frame = assemble_valve(valve_id, signals)
-        counts.rows_out += frame.height
-        names = tags_by_column(config, valve_id)
-        for day, part in split_days(frame):
-            validate_sensor_frame(part, names)
-            partitions.append(Partition(valve_id, day, part))
+        frames.append(assemble_valve(valve_id, signals))
+        counts.rows_out += frames[-1].height
+    if frames:  # every partition, in one pass (one pandera call per partition costs ~5× more)
+        validate_sensor_frame(pl.concat(frames), {v: tags_by_column(config, v) for v in valves})
+    partitions = [Partition(f["valve_id"][0], day, part) for f in frames for day, part in split_days(f)]
     gaps = pl.concat(gap_frames) if gap_frames else pl.DataFrame(schema=GAP_COLUMNS)
     return ExportResult(partitions, samples.quarantine, gaps, counts)

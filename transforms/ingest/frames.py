@@ -98,32 +98,36 @@ def _first_failure(err: pandera.errors.SchemaErrors) -> tuple[str | None, int | 
     return row.get("column"), None if index is None else int(index), check, row.get("failure_case")
 
 
-def validate_sensor_frame(frame: pl.DataFrame, tags_by_column: dict[str, str]) -> pl.DataFrame:
-    """Validate one partition with the sensor-frame pandera schema (names, dtypes, physical ranges).
+def validate_sensor_frame(frame: pl.DataFrame, tags_by_column: dict[str, dict[str, str]]) -> pl.DataFrame:
+    """Validate sensor rows (one or more partitions, of one or more valves) with the sensor-frame
+    pandera schema (names, dtypes, physical ranges).
 
     Parameters
     ----------
     frame : DataFrame
-        A collected sensor frame.
+        Collected sensor rows.
     tags_by_column : dict
-        Lake column → historian tag, for the message.
+        Valve → lake column → historian tag, for the message.
 
     Raises
     ------
     IngestError
-        Naming the tag, the time and the failed check.
+        Naming the valve, the tag, the time and the failed check.
     """
     try:
         return SENSOR_SCHEMA.validate(frame, lazy=True)
     except pandera.errors.SchemaErrors as err:
         column, index, check, value = _first_failure(err)
-        when = ""
+        when, valve = "", "?"
         if index is not None and index < frame.height:
             when = f" at {frame['timestamp_utc'][index].isoformat().replace('+00:00', 'Z')}"
+            valve = frame["valve_id"][index]
             if column in frame.columns:
                 value = frame[column][index]
-        tag = tags_by_column.get(column or "")
-        where = f"valve {frame['valve_id'][0] if frame.height else '?'}, column {column}{when}"
+        elif frame.height and frame["valve_id"].n_unique() == 1:
+            valve = frame["valve_id"][0]
+        tag = tags_by_column.get(valve, {}).get(column or "")
+        where = f"valve {valve}, column {column}{when}"
         raise IngestError(f"{where}: value {value!r} fails check {check!r}", tag=tag) from None
 
 
