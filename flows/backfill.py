@@ -44,7 +44,6 @@ command.
 
 from __future__ import annotations
 
-import fcntl
 import hashlib
 import json
 import math
@@ -52,7 +51,7 @@ import queue
 import re
 import time
 import uuid
-from contextlib import contextmanager
+from contextlib import AbstractContextManager, contextmanager
 from dataclasses import dataclass, field
 from datetime import date, datetime, timedelta, timezone
 from pathlib import Path
@@ -67,6 +66,7 @@ from flows.config import load_plant_config
 from flows.errors import ValvemonError
 from flows.ingest import FileReport, discover_files, ingest_lock, merge_export, read_export, record_file
 from flows.lake import list_partitions, read_lake
+from flows.locks import file_lock
 from flows.monitor import (
     Baseline,
     _baseline_rows,
@@ -246,17 +246,9 @@ def _lock_path(warehouse: Path, target: Path) -> Path:
     return Path(warehouse) / ".locks" / rel.parent / f"{rel.name}.lock"
 
 
-@contextmanager
-def partition_lock(warehouse: Path, target: Path) -> Iterator[None]:
+def partition_lock(warehouse: Path, target: Path) -> AbstractContextManager:
     """Exclusive lock on one lake partition for a read-merge-write (``WAREHOUSE/.locks/...``)."""
-    lock = _lock_path(warehouse, target)
-    lock.parent.mkdir(parents=True, exist_ok=True)
-    fh = open(lock, "a+")
-    try:
-        fcntl.flock(fh, fcntl.LOCK_EX)
-        yield
-    finally:
-        fh.close()
+    return file_lock(_lock_path(warehouse, target))
 
 
 @dataclass
@@ -575,18 +567,8 @@ def _progress_bars(show: bool) -> Iterator[Callable[..., Any]]:
         yield bar
 
 
-@contextmanager
-def _backfill_lock(warehouse: Path) -> Iterator[None]:
-    warehouse.mkdir(parents=True, exist_ok=True)
-    fh = open(warehouse / ".backfill.lock", "a+")
-    try:
-        try:
-            fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            raise ValvemonError(f"{warehouse}: another backfill or nightly run is working on this warehouse") from None
-        yield
-    finally:
-        fh.close()
+def _backfill_lock(warehouse: Path) -> AbstractContextManager:
+    return file_lock(warehouse / ".backfill.lock", f"{warehouse}: another backfill or nightly run is working on this warehouse")
 
 
 @flow(name="valvemon-backfill", persist_result=False, validate_parameters=False)

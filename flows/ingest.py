@@ -15,7 +15,6 @@ Method, rules and counts: ``docs/ingest.md``.
 
 from __future__ import annotations
 
-import fcntl
 import gzip
 import hashlib
 import io
@@ -35,6 +34,7 @@ from prefect.cache_policies import NO_CACHE
 from flows.config import load_plant_config
 from flows.errors import ValvemonError
 from flows.lake import partition_path, read_partition, write_partition
+from flows.locks import file_lock
 from flows.warehouse_db import connect, ensure_ingest_tables, insert_frame, query_frame
 from schemas.fields import GAP_FIELDS, GAP_SCHEMA, INGEST_RUN_FIELDS, MANIFEST_FIELDS, QUARANTINE_FIELDS, QUARANTINE_SCHEMA, polars_schema
 from schemas.plant_config import ConfigError, ExportSpec, PlantConfig
@@ -420,19 +420,9 @@ def summary_line(c: dict) -> str:
     )
 
 
-@contextmanager
-def ingest_lock(warehouse: Path) -> Iterator[None]:
+def ingest_lock(warehouse: Path) -> AbstractContextManager:
     """One ingest at a time per warehouse (an advisory lock on ``WAREHOUSE/.ingest.lock``)."""
-    warehouse.mkdir(parents=True, exist_ok=True)
-    fh = open(warehouse / ".ingest.lock", "a+")
-    try:
-        try:
-            fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            raise ValvemonError(f"{warehouse}: another ingest is running on this warehouse") from None
-        yield
-    finally:
-        fh.close()
+    return file_lock(warehouse / ".ingest.lock", f"{warehouse}: another ingest is running on this warehouse")
 
 
 def _run_row(summary: RunSummary, started: datetime, config_file: str, status: str, message: str | None) -> pl.DataFrame:

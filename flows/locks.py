@@ -1,0 +1,32 @@
+"""Advisory file locks (``fcntl.flock``) that keep the writers of one warehouse apart."""
+
+from __future__ import annotations
+
+import fcntl
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Iterator
+
+from flows.errors import ValvemonError
+
+
+@contextmanager
+def file_lock(path: Path, busy: str | None = None) -> Iterator[None]:
+    """An exclusive lock on ``path`` (created, with its folder) for the ``with`` block.
+
+    Without ``busy`` it waits for the lock; with it, a lock someone else holds raises
+    :class:`ValvemonError` with ``busy`` as the message.
+    """
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fh = open(path, "a+")
+    try:
+        if busy is None:
+            fcntl.flock(fh, fcntl.LOCK_EX)
+        else:
+            try:
+                fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                raise ValvemonError(busy) from None
+        yield
+    finally:
+        fh.close()
