@@ -238,23 +238,24 @@ def storage(seconds: int, repeat: int) -> None:
     print("duckdb SELECT sum() of the six channels (1 thread); window = polars scan with a time filter for one 10 s window")
     print(f"{'variant':<36}{'B/row':>7}{'write s':>9}{'6ch M/s':>9}{'all M/s':>9}{'duckdb M/s':>12}{'window ms':>11}")
     variants = [
-        ("float64 zstd-1", pl.Float64, "zstd", 1, False, "window"),
-        ("float64 zstd-3", pl.Float64, "zstd", 3, False, "window"),
-        ("float64 zstd-1 byte_stream_split", pl.Float64, "zstd", 1, True, "window"),
-        ("float64 lz4", pl.Float64, "lz4", None, False, "window"),
-        ("float64 snappy", pl.Float64, "snappy", None, False, "window"),
-        ("float64 uncompressed", pl.Float64, "none", None, False, "window"),
-        ("float32 zstd-1", pl.Float32, "zstd", 1, False, "window"),
-        ("float32 zstd-1 byte_stream_split", pl.Float32, "zstd", 1, True, "window"),
-        ("float32 lz4", pl.Float32, "lz4", None, False, "window"),
-        ("float32 uncompressed", pl.Float32, "none", None, False, "window"),
-        ("float64 zstd-1, 1 row group", pl.Float64, "zstd", 1, False, "one"),
-        ("float64 zstd-1, 1 window/row group", pl.Float64, "zstd", 1, False, "each"),
+        ("float64 zstd-1", pl.Float64, "zstd", 1, False, "window", False),
+        ("float64 zstd-3", pl.Float64, "zstd", 3, False, "window", False),
+        ("float64 zstd-1 byte_stream_split", pl.Float64, "zstd", 1, True, "window", False),
+        ("float64 lz4", pl.Float64, "lz4", None, False, "window", False),
+        ("float64 snappy", pl.Float64, "snappy", None, False, "window", False),
+        ("float64 uncompressed", pl.Float64, "none", None, False, "window", False),
+        ("float32 zstd-1", pl.Float32, "zstd", 1, False, "window", False),
+        ("float32 zstd-1 byte_stream_split", pl.Float32, "zstd", 1, True, "window", False),
+        ("float32 zstd-1, delta time (lake)", pl.Float32, "zstd", 1, False, "window", True),
+        ("float32 lz4", pl.Float32, "lz4", None, False, "window", False),
+        ("float32 uncompressed", pl.Float32, "none", None, False, "window", False),
+        ("float64 zstd-1, 1 row group", pl.Float64, "zstd", 1, False, "one", False),
+        ("float64 zstd-1, 1 window/row group", pl.Float64, "zstd", 1, False, "each", False),
     ]
     w0 = frame["timestamp_utc"][n // 2 - (n // 2) % 10_000]
     w1 = frame["timestamp_utc"][n // 2 - (n // 2) % 10_000 + 9_999]
     with tempfile.TemporaryDirectory(prefix="valvemon-bench-") as tmp:
-        for name, dtype, codec, level, bss, groups in variants:
+        for name, dtype, codec, level, bss, groups, delta in variants:
             f = frame.with_columns(pl.col(value_cols).cast(dtype))
             table = f.to_arrow()
             path = Path(tmp) / f"{name.replace(' ', '_').replace('/', '_')}.parquet"
@@ -269,6 +270,7 @@ def storage(seconds: int, repeat: int) -> None:
                 with pq.ParquetWriter(
                     path, table.schema, compression=codec, compression_level=level, use_dictionary=["valve_id", "date"],
                     write_statistics=["timestamp_utc", "valve_id", "date"], use_byte_stream_split=value_cols if bss else False,
+                    column_encoding={"timestamp_utc": "DELTA_BINARY_PACKED"} if delta else None,
                 ) as w:
                     for a, b in bounds:
                         w.write_table(table.slice(a, b - a), row_group_size=b - a)

@@ -26,6 +26,7 @@ import polars as pl
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from flows.instants import utc_instant
 from schemas.fields import SENSOR_FIELDS, arrow_schema, polars_schema
 
 LAKE_DIR = Path("lake") / "sensors"
@@ -35,6 +36,9 @@ COMPRESSION = "zstd"
 """Parquet codec of the lake (``docs/ingest.md``, "Storage")."""
 COMPRESSION_LEVEL = 1
 """zstd level: 1 compresses as well as 3 on sensor data and writes faster."""
+COLUMN_ENCODING = {"timestamp_utc": "DELTA_BINARY_PACKED"}
+"""Timestamps on a uniform grid delta-encode to almost nothing: the lake is ~10 % smaller, written
+~1.4× and the time column decoded ~3× faster than PLAIN + zstd (``docs/ingest.md``, "Storage")."""
 ROW_GROUP_MIN_ROWS = 8_192
 """A row group closes at the first window start (a gap) after this many rows…"""
 ROW_GROUP_MAX_ROWS = 1_048_576
@@ -112,6 +116,7 @@ def _write_temp(tmp: Path, frame: pl.DataFrame, gap_us: int) -> None:
             compression=COMPRESSION,
             compression_level=COMPRESSION_LEVEL,
             use_dictionary=["valve_id", "date"],
+            column_encoding=COLUMN_ENCODING,
             write_statistics=True,
             sorting_columns=[pq.SortingColumn(SENSOR_ARROW_SCHEMA.get_field_index("timestamp_utc"))],
         ) as writer:
@@ -160,18 +165,6 @@ def read_partition(path: Path) -> pl.DataFrame | None:
     return pl.read_parquet(path, hive_partitioning=False).cast(dict(SENSOR_POLARS_SCHEMA))
 
 
-def _as_utc(value: str | date | datetime | None) -> datetime | None:
-    if value is None:
-        return None
-    if isinstance(value, str):
-        value = datetime.fromisoformat(value.replace("Z", "+00:00"))
-    if not isinstance(value, datetime):
-        value = datetime(value.year, value.month, value.day)
-    if value.tzinfo is None:
-        value = value.replace(tzinfo=timezone.utc)
-    return value.astimezone(timezone.utc)
-
-
 def list_partitions(warehouse: str | Path, valve_ids: list[str] | None = None, start: str | date | datetime | None = None, end: str | date | datetime | None = None) -> list[tuple[str, date, Path]]:
     """Partitions ``(valve_id, date, path)`` of the lake, optionally only some valves and dates.
 
@@ -180,7 +173,7 @@ def list_partitions(warehouse: str | Path, valve_ids: list[str] | None = None, s
     root = lake_root(warehouse)
     if not root.exists():
         return []
-    t0, t1 = _as_utc(start), _as_utc(end)
+    t0, t1 = utc_instant(start), utc_instant(end)
     wanted = set(valve_ids) if valve_ids is not None else None
     out = []
     for vdir in sorted(root.glob("valve_id=*")):
@@ -221,7 +214,7 @@ def read_lake(
     if not parts:
         return pl.LazyFrame(schema=SENSOR_POLARS_SCHEMA)
     lf = pl.scan_parquet([str(p) for _, _, p in parts], hive_partitioning=False, schema=SENSOR_POLARS_SCHEMA)
-    t0, t1 = _as_utc(start), _as_utc(end)
+    t0, t1 = utc_instant(start), utc_instant(end)
     if t0 is not None:
         lf = lf.filter(pl.col("timestamp_utc") >= t0)
     if t1 is not None:
