@@ -64,7 +64,6 @@ CONDITION_MODES = ("auto", "design", "commissioning")
 NOISE_GAP = 0.2
 """A normalised gap above this is more than recorded noise and the load estimate leave (exact
 model on Table 1's sensors: 0.04–0.2, docs/discrepancy.md)."""
-REPORT_DIR = Path("reports") / "discrepancy"
 
 
 def plant_params_for(valve: ValveSpec, export) -> PlantParams:
@@ -220,8 +219,9 @@ def _tables(valve_id: str, run_id: str, run_at: datetime, d: Diagnosis, plots: l
 
 def _plots(valve_id: str, run_id: str, d: Diagnosis, warehouse: Path) -> list[Path | None]:
     from flows.discrepancy_plots import overlay_figure
+    from flows.report import DISCREPANCY_DIR
 
-    folder = warehouse / REPORT_DIR
+    folder = warehouse / DISCREPANCY_DIR
     if not d.traces:
         return [None] * max(1, len(d.named))
     trace = d.traces[0]

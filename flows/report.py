@@ -10,7 +10,8 @@
    snapshot ``WAREHOUSE/snapshot/valvemon.duckdb`` that readers query;
 4. reads the views from the snapshot and writes the BI hand-off (:mod:`flows.export`), the PNG
    pictures (:mod:`flows.report_figures`) and ``WAREHOUSE/reports/report.html``
-   (:mod:`flows.report_html`).
+   (:mod:`flows.report_html`), which also shows the latest ``valvemon discrepancy`` run of every
+   valve analysed (:func:`discrepancy_results`; its overlay pictures are the workflow's own).
 
 Every write to ``valvemon.duckdb`` happens in a short-lived connection; the pictures and the
 export are made from the snapshot, without holding the live database.
@@ -45,6 +46,8 @@ from schemas.plant_config import BOUND_KEYS, PlantConfig
 
 REPORTS_DIR = "reports"
 REPORT_NAME = "report.html"
+DISCREPANCY_DIR = Path(REPORTS_DIR) / "discrepancy"
+"""Where ``valvemon discrepancy`` writes its overlay pictures, inside the warehouse."""
 DETAIL_VALVES = 20
 """Valves shown with pictures in the HTML report by default: the most urgent ones."""
 U_GRID_POINTS = 281
@@ -157,6 +160,25 @@ def _edge_curves(config: PlantConfig, valve_id: str, baselines: pl.DataFrame, la
     return out
 
 
+def discrepancy_results(con, warehouse: Path) -> dict[str, list[dict]]:
+    """The findings of the latest ``valvemon discrepancy`` run of every valve analysed (none if
+    the workflow never ran): valve id → its ``discrepancy_findings`` rows in rank order, each
+    with ``png``, its overlay picture under ``WAREHOUSE/reports/discrepancy/`` (looked up by file
+    name, so a moved warehouse still finds it; None if there is none)."""
+    if not con.execute("SELECT count(*) FROM duckdb_tables() WHERE table_name = 'discrepancy_findings'").fetchall()[0][0]:
+        return {}
+    rows = query_frame(
+        con,
+        "SELECT * FROM discrepancy_findings QUALIFY run_id = arg_max(run_id, run_at) OVER (PARTITION BY valve_id) "
+        "ORDER BY valve_id, rank",
+    )
+    out: dict[str, list[dict]] = {}
+    for r in rows.iter_rows(named=True):
+        png = warehouse / DISCREPANCY_DIR / Path(r["plot_path"]).name if r["plot_path"] else None
+        out.setdefault(r["valve_id"], []).append(r | {"png": png if png and png.is_file() else None})
+    return out
+
+
 def _write_html(path: Path, text: str) -> None:
     tmp = path.parent / f".{path.name}.{uuid.uuid4().hex}.tmp"
     tmp.write_text(text, encoding="utf-8")
@@ -200,12 +222,13 @@ def run_report(config_path: str | Path, warehouse: str | Path, *, detail: int = 
             pngs += [ch, tr]
             valve_pngs[vid] = [("Opening-area characteristics (nominal, baseline, current)", ch),
                                ("α̂, x̂ and e over operating hours with bounds and end of life", tr)]  # fmt: skip
+        discrepancy = discrepancy_results(con, warehouse)
     finally:
         con.close()
     html_path = out_dir / REPORT_NAME
     _write_html(html_path, render_report(
         plant=config.name, generated_at=now, ranking=ranking, conditions=conditions,
-        fleet_png=pngs[0], valve_pngs=valve_pngs, snapshot=snapshot,
+        fleet_png=pngs[0], valve_pngs=valve_pngs, discrepancy=discrepancy, snapshot=snapshot,
     ))  # fmt: skip
     return ReportResult(html_path, snapshot, pngs, exports, views, n_standstill, ranking)
 

@@ -58,6 +58,43 @@ def _eq9(ok) -> str:
     return "—" if ok is None else ("ok" if ok else '<b style="color:#d32f2f">fails</b>')
 
 
+def _effect(r: dict) -> str:
+    return r["effect"] + (f"[{r['variant']}]" if r.get("variant") else "")
+
+
+def _discrepancy_section(discrepancy: dict[str, list[dict]]) -> list[str]:
+    parts = [
+        "<h2 id='discrepancy'>Model discrepancy</h2>",
+        '<p class="note">The latest <code>valvemon discrepancy</code> run of each valve analysed: the simulator '
+        "replayed on the valve's measured windows, the physical effect it misses named from the library (or "
+        "<b>none</b>), and the normalised gap between replay and measurement (RMS of p1, p2 in bar and X in mm) "
+        "before and after the effect is added; an exact model on recorded noise gives 0.04–0.2. Pictures: the "
+        "record with the largest gap, measured against replayed before and after. Details: tables "
+        "<code>discrepancy_*</code>.</p>",
+    ]
+    for vid, rows in discrepancy.items():
+        first = rows[0]
+        parts.append(f"<h3 id='discrepancy-{html.escape(vid)}'>Valve {html.escape(vid)}: "
+                     f"{html.escape(', '.join(_effect(r) for r in rows))}</h3>")  # fmt: skip
+        parts.append(
+            f'<div class="meta">run {first["run_at"]:%Y-%m-%d %H:%M} UTC on {first["n_records"]} records, '
+            f'{first["window_start"]:%Y-%m-%d %H:%M} – {first["window_end"]:%Y-%m-%d %H:%M} UTC; '
+            f"valve condition: {html.escape(first['condition_source'] or '—')}</div>"
+        )
+        parts.append("<table><tr><th>rank</th><th>effect</th><th>parameter</th><th>gap before</th><th>gap after</th></tr>")
+        for r in rows:
+            parameter = "—" if r["parameter_name"] is None else html.escape(
+                f"{r['parameter_name']} = {r['parameter_value']:.4g} {r['parameter_unit']}"
+            )
+            parts.append(
+                f"<tr><td class='num'>{r['rank']}</td><td>{html.escape(_effect(r))}</td><td>{parameter}</td>"
+                f"<td class='num'>{_num(r['gap_before'], '{:.3g}')}</td><td class='num'>{_num(r['gap_after'], '{:.3g}')}</td></tr>"
+            )
+        parts.append("</table>")
+        parts += [_img(r["png"], f"{vid}: {_effect(r)} overlay") for r in rows if r["png"] is not None]
+    return parts
+
+
 def render_report(
     *,
     plant: str,
@@ -66,6 +103,7 @@ def render_report(
     conditions: pl.DataFrame,
     fleet_png: Path,
     valve_pngs: dict[str, list[tuple[str, Path]]],
+    discrepancy: dict[str, list[dict]],
     snapshot: Path,
 ) -> str:
     """The report's HTML text.
@@ -78,6 +116,9 @@ def render_report(
         The fleet overview picture.
     valve_pngs : dict
         valve id → [(caption, PNG path)], for the valves shown in detail, in ranking order.
+    discrepancy : dict
+        valve id → its latest ``discrepancy_findings`` rows, each with ``png`` (the overlay
+        picture or None); a section "Model discrepancy" when not empty.
     snapshot : Path
         The database snapshot the report was made from (named for the reader's queries).
     """
@@ -132,5 +173,7 @@ def render_report(
         for caption, png in pngs:
             parts.append(f"<h3>{html.escape(caption)}</h3>")
             parts.append(_img(png, f"{vid}: {caption}"))
+    if discrepancy:
+        parts += _discrepancy_section(discrepancy)
     parts.append("</body></html>")
     return "\n".join(parts)

@@ -1,5 +1,6 @@
-"""``run_report`` on a hand-built warehouse: pictures, HTML (rendered in headless Chromium),
-the BI hand-off read by four readers, and the snapshot that keeps readers and writer apart."""
+"""``run_report`` on a hand-built warehouse: pictures, HTML (rendered in headless Chromium), the
+discrepancy workflow's findings in it, the BI hand-off read by four readers, and the snapshot that
+keeps readers and writer apart."""
 
 from __future__ import annotations
 
@@ -27,7 +28,7 @@ from flows.monitor import ensure_baselines, ensure_monitor_tables, monitor_param
 from flows.report import run_report
 from flows.views import connect_snapshot, publish_snapshot, snapshot_path
 from flows.warehouse_db import connect, insert_frame
-from schemas.fields import EDGE_FIT_FIELDS, EDGES, FLEET_RANKING_FIELDS, VALVE_CONDITION_FIELDS, polars_schema
+from schemas.fields import DISCREPANCY_FINDING_FIELDS, EDGE_FIT_FIELDS, EDGES, FLEET_RANKING_FIELDS, VALVE_CONDITION_FIELDS, polars_schema
 
 from .conftest import COMMISSIONED, Warehouse
 
@@ -114,6 +115,42 @@ def test_report_contains_the_expected_figures(built):
     for vid in VALVES:
         assert f"id='valve-{vid}'" in text
     assert "faulty" in text and "alpha_hat 2.53" in text
+
+
+def _finding(valve_id: str, run_id: str, hour: int, effect: str, gap_before: float, gap_after: float, png: Path) -> dict:
+    row = {f.name: None for f in DISCREPANCY_FINDING_FIELDS}
+    at = COMMISSIONED + timedelta(hours=hour)
+    return row | {
+        "run_id": run_id, "valve_id": valve_id, "run_at": at, "effect": effect, "variant": "", "rank": 1,
+        "gap_before": gap_before, "gap_after": gap_after, "window_start": at, "window_end": at, "n_records": 3,
+        "condition_source": "design", "plot_path": str(png), "ci_level": 0.95,
+        **{f"gap_{s}_{w}_{u}": 0.1 for s, u in (("p1", "bar"), ("p2", "bar"), ("x", "mm")) for w in ("before", "after")},
+    }  # fmt: skip
+
+
+def test_report_shows_the_latest_discrepancy_run_of_each_analysed_valve(built, tmp_path):
+    from flows.discrepancy import store_run
+
+    config_path, built_warehouse, built_result, _ = built
+    assert "Model discrepancy" not in built_result.html.read_text()  # the workflow never ran there
+    warehouse = tmp_path / "wh"
+    shutil.copytree(built_warehouse, warehouse)
+    folder = warehouse / "reports" / "discrepancy"
+    folder.mkdir()
+    png = shutil.copy(built_warehouse / "reports" / "fleet_overview.png", folder / "VB_0000_1_external_leakage.png")
+    elsewhere = Path("/moved/warehouse/reports/discrepancy") / png.name  # found by name in this warehouse
+    older = _finding("VB", "r1", 1, "none", 0.15, 0.15, folder / "VB_r1_none.png")
+    newer = _finding("VB", "r2", 2, "external_leakage", 0.9, 0.1, elsewhere)
+    newer |= {"parameter_name": "K_e", "parameter_value": 1e-12, "parameter_unit": "m3/(s*Pa)"}
+    findings = pl.DataFrame([older, newer], schema=polars_schema(DISCREPANCY_FINDING_FIELDS))
+    store_run(warehouse, {"discrepancy_findings": findings})
+    text = run_report(config_path, warehouse, valve_ids=["VA"]).html.read_text()
+    section = text[text.index("<h2 id='discrepancy'>Model discrepancy</h2>"):]
+    assert "<h3 id='discrepancy-VB'>Valve VB: external_leakage</h3>" in section  # the newer run only
+    assert section.count("<h3") == 1 and section.count("<tr><td class='num'>") == 1
+    assert "K_e = 1e-12 m3/(s*Pa)" in section and "<td class='num'>0.9</td><td class='num'>0.1</td>" in section
+    images = re.findall(r'<img alt="VB: external_leakage overlay" src="data:image/png;base64,([A-Za-z0-9+/=]+)"', section)
+    assert len(images) == 1 and base64.b64decode(images[0]) == png.read_bytes()
 
 
 @pytest.mark.skipif(not CHROMIUM.exists() and not os.environ.get("CI"), reason="chromium not installed (make test installs it)")
