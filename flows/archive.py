@@ -44,6 +44,7 @@ from flows.archive_sim import default_workers, run_ordered, simulate_measured, v
 from flows.archive_writers import ExportColumns, decimals_for_step, export_suffix, open_day_writer
 from flows.config import load_plant_config
 from flows.errors import ValvemonError
+from flows.instants import utc_instant
 from model import condition as mcond
 from model.params import (
     EDGES,
@@ -351,17 +352,6 @@ def _us(t: datetime) -> int:
 
 def _iso(t: datetime) -> str:
     return t.astimezone(timezone.utc).isoformat().replace("+00:00", "Z")
-
-
-def parse_instant(text: str, option: str) -> datetime:
-    """An ISO-8601 date or date-time; UTC unless it carries an offset."""
-    try:
-        t = datetime.fromisoformat(text.strip().replace("Z", "+00:00"))
-    except ValueError:
-        raise ValvemonError(f"{option}: {text!r} is not an ISO-8601 date or date-time") from None
-    if t.tzinfo is None:
-        t = t.replace(tzinfo=timezone.utc)
-    return t.astimezone(timezone.utc)
 
 
 def parse_hours(text: str) -> tuple[float, float]:
@@ -805,7 +795,7 @@ def plan_request(req: SimulateRequest) -> tuple[PlantConfig, ArchivePlan, dict[s
         name = req.plant if req.plant is not None else "SIM1"
         if not re.match(r"^[A-Za-z0-9_-]+$", name):
             raise ValvemonError(f"--plant: {name!r} may hold only letters, digits, '-' and '_' (it names files and tags)")
-        commissioned = parse_instant(req.commissioned, "--commissioned") if req.commissioned else DEFAULT_COMMISSIONED
+        commissioned = utc_instant(req.commissioned, "--commissioned") if req.commissioned else DEFAULT_COMMISSIONED
         config = generate_plant_config(name, req.n_valves if req.n_valves is not None else 3, layout, commissioned)
     scenarios = resolve_scenarios(config, default, per_valve)
 
@@ -817,12 +807,12 @@ def plan_request(req: SimulateRequest) -> tuple[PlantConfig, ArchivePlan, dict[s
         h0, h1 = parse_hours(req.hours)
         start, end = reference + timedelta(hours=h0), reference + timedelta(hours=h1)
     else:
-        start = parse_instant(req.start, "--from") if req.start is not None else reference
+        start = utc_instant(req.start, "--from") if req.start is not None else reference
         if req.end is not None and req.days is not None:
             raise ValvemonError("--to: give either --to or --days, not both")
         if req.days is not None and not (math.isfinite(req.days) and req.days > 0):
             raise ValvemonError(f"--days: {req.days:g} must be > 0")
-        end = parse_instant(req.end, "--to") if req.end is not None else start + timedelta(days=req.days if req.days is not None else 1.0)
+        end = utc_instant(req.end, "--to") if req.end is not None else start + timedelta(days=req.days if req.days is not None else 1.0)
     plan = ArchivePlan(start, end, req.windows_per_day, req.window_s, config.export.sample_rate_hz)
     return config, plan, scenarios, "parquet" if fmt == "parquet" else "csv"
 

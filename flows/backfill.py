@@ -64,6 +64,7 @@ from prefect.cache_policies import NO_CACHE
 
 from flows.config import load_plant_config
 from flows.errors import ValvemonError
+from flows.instants import utc_instant
 from flows.ingest import FileReport, discover_files, ingest_lock, merge_export, read_export, record_file
 from flows.lake import list_partitions, read_lake
 from flows.locks import file_lock
@@ -162,19 +163,6 @@ def ensure_backfill_tables(con) -> None:
 
 def _now() -> datetime:
     return datetime.now(timezone.utc)
-
-
-def parse_instant(text: str | date | datetime, option: str) -> datetime:
-    """An ISO-8601 date or date-time as an aware UTC datetime (naive values are UTC)."""
-    value = text
-    if isinstance(value, str):
-        try:
-            value = datetime.fromisoformat(value.strip().replace("Z", "+00:00"))
-        except ValueError:
-            raise ValvemonError(f"{option}: {text!r} is not an ISO-8601 date or date-time") from None
-    if not isinstance(value, datetime):
-        value = datetime(value.year, value.month, value.day)
-    return value.replace(tzinfo=timezone.utc) if value.tzinfo is None else value.astimezone(timezone.utc)
 
 
 # --- units -----------------------------------------------------------------------------------
@@ -624,7 +612,7 @@ def backfill_flow(
         Grid.from_export(config.export.sample_rate_hz, config.export.max_gap_s)
     except IngestError as exc:
         raise ConfigError(f"{config_path}: {exc}") from None
-    t0, t1 = parse_instant(start, "--from"), parse_instant(end, "--to")
+    t0, t1 = utc_instant(start, "--from"), utc_instant(end, "--to")
     if t1 <= t0:
         raise ValvemonError("--to must be later than --from")
     if unit_days <= 0:

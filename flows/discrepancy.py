@@ -285,7 +285,7 @@ def check_arguments(config_path: str | Path, valve_id: str, start=None, end=None
     known = [v.id for v in config.valves]
     if valve_id not in known:
         raise ValvemonError(f"{config_path}: no valve {valve_id!r} in plant {config.name!r} (valves: {', '.join(known)})")
-    t0, t1 = utc_instant(start), utc_instant(end)
+    t0, t1 = utc_instant(start, "--from"), utc_instant(end, "--to")
     if t0 and t1 and t1 <= t0:
         raise ValvemonError("--to must be later than --from")
     if condition_mode not in CONDITION_MODES:

@@ -445,7 +445,7 @@ def run_monitor(
     unknown = sorted(set(valve_ids or []) - set(known))
     if unknown:
         raise ValvemonError(f"{config_path}: no valve {unknown[0]!r} in plant {config.name!r} (valves: {', '.join(known)})")
-    t0, t1 = utc_instant(start), utc_instant(end)
+    t0, t1 = utc_instant(start, "--from"), utc_instant(end, "--to")
     if t0 and t1 and t1 <= t0:
         raise ValvemonError("--to must be later than --from")
     if chunk_days is None:

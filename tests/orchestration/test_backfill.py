@@ -18,7 +18,9 @@ import pytest
 import flows.backfill as bf
 from flows.backfill import BackfillFailed, MonitorUnit, backfill_flow, export_in_span, extra_units, unit_grid
 from flows.dask_runner import task_runner
+from flows.errors import ValvemonError
 from flows.ingest import run_ingest
+from flows.instants import utc_instant
 from flows.monitor import run_monitor
 from tests.orchestration.conftest import END, START, assert_same, copy_warehouse, lake_files, snapshot, table
 
@@ -54,6 +56,14 @@ def test_exports_outside_the_span_are_left_out_by_name():
     assert not export_in_span(Path("P_2025-02-27.csv"), t0, t1)
     assert not export_in_span(Path("P_2025-04-02.csv.gz"), t0, t1)
     assert export_in_span(Path("dump.parquet"), t0, t1)  # no date in the name: always read
+
+
+def test_span_instants_are_utc_and_a_bad_one_names_its_option(tmp_path):
+    assert utc_instant(" 2025-01-01T01:00+01:00 ", "--from") == datetime(2025, 1, 1, tzinfo=UTC)
+    assert utc_instant("2025-01-01T00:00Z") == utc_instant(datetime(2025, 1, 1).date()) == datetime(2025, 1, 1, tzinfo=UTC)
+    plant = Path(__file__).parents[1] / "fixtures" / "plant_example.toml"
+    with pytest.raises(ValvemonError, match=r"^--to: 'tomorrow' is not an ISO-8601 date or date-time$"):
+        backfill_flow.fn(config_path=plant, warehouse=tmp_path, start="2025-01-01", end="tomorrow")  # checked before any work
 
 
 # --- the flow ------------------------------------------------------------------------------------
