@@ -62,6 +62,7 @@ import polars as pl
 from prefect import flow, task
 from prefect.cache_policies import NO_CACHE
 
+from flows.batches import WriteBatch
 from flows.config import load_plant_config
 from flows.errors import ValvemonError
 from flows.instants import utc_instant
@@ -74,7 +75,6 @@ from flows.monitor import (
     _fits_table,
     _latest_baselines,
     baseline_definition,
-    WRITE_BATCH_S,
     ensure_monitor_tables,
     monitor_params,
     monitor_rows,
@@ -684,26 +684,20 @@ def _ingest_phase(config, warehouse, files, summary, concurrency, opts, force, f
                     summary.new_spans.append((v, manifest["time_start"], manifest["time_end"]))
         else:
             summary.files_skipped += 1
-        pending.append({
+        progress_rows.add({
             "unit_kind": "ingest", "unit_key": str(Path(out.path).resolve()), "source_file": out.path,
             "size_bytes": out.size_bytes, "mtime_ns": out.mtime_ns, "file_sha256": out.report.sha256,
             "run_id": summary.run_id, "finished_at": _now(),
         })  # fmt: skip
-        if len(pending) >= WRITE_BATCH_UNITS or time.monotonic() - pending_since[0] >= WRITE_BATCH_S:
-            flush()
         advance()
+
+    def store_progress(rows: list[dict]) -> None:
+        with connect(warehouse) as con:
+            insert_frame(con, PROGRESS_TABLE, _progress_frame(rows), replace=True)
 
     # the progress rows of ingested files are written in batches: one lost in a crash only
     # costs the rerun a read of the file (its content is then found in the manifest)
-    pending: list[dict] = []
-    pending_since = [time.monotonic()]
-
-    def flush() -> None:
-        if pending:
-            with connect(warehouse) as con:
-                insert_frame(con, PROGRESS_TABLE, _progress_frame(pending), replace=True)
-            pending.clear()
-        pending_since[0] = time.monotonic()
+    progress_rows: WriteBatch[dict] = WriteBatch(store_progress, max_items=WRITE_BATCH_UNITS)
 
     def failed(path: Path, exc: BaseException) -> None:
         summary.files_failed += 1
@@ -718,7 +712,7 @@ def _ingest_phase(config, warehouse, files, summary, concurrency, opts, force, f
                 window.submit(f, task_, str(f), config, str(warehouse), known, summary.run_id)
             window.drain()
         finally:
-            flush()
+            progress_rows.flush()
     summary.max_in_flight = max(summary.max_in_flight, window.max_in_flight)
 
 
@@ -800,7 +794,8 @@ def _monitor_phase(config, warehouse, valves, summary, concurrency, opts, unit_d
     advance = bar("monitor units", len(todo))
     fingerprints = dict((u.key, fp) for u, fp in todo)
 
-    def written(batch: list[tuple[MonitorUnit, pl.DataFrame, pl.DataFrame, dict]]) -> None:
+    def store(batch: list[tuple[MonitorUnit, pl.DataFrame, pl.DataFrame, dict]]) -> None:
+        store_units(warehouse, [(u, f, s) for u, f, s, _ in batch], _progress_frame([r for *_, r in batch]))
         for _, fits, _, row in batch:
             summary.units_done += 1
             summary.windows += row["windows"]
@@ -808,7 +803,7 @@ def _monitor_phase(config, warehouse, valves, summary, concurrency, opts, unit_d
             summary.fits_ok += row["fits_ok"]
             summary.rows_read += row["rows_read"]
 
-    writer = UnitWriter(warehouse, on_written=written)
+    writer: WriteBatch[tuple[MonitorUnit, pl.DataFrame, pl.DataFrame, dict]] = WriteBatch(store, max_items=WRITE_BATCH_UNITS)
 
     def done(u: MonitorUnit, out: MonitorOutcome) -> None:
         row = {
@@ -817,7 +812,7 @@ def _monitor_phase(config, warehouse, valves, summary, concurrency, opts, unit_d
             "fits_ok": int((out.fits["status"] == "ok").sum()), "rows_read": out.rows_read, "run_id": summary.run_id,
             "finished_at": _now(),
         }  # fmt: skip
-        writer.add(u, out.fits, out.selection, row)
+        writer.add((u, out.fits, out.selection, row))
         advance()
 
     def failed(u: MonitorUnit, exc: BaseException) -> None:
@@ -837,35 +832,9 @@ def _monitor_phase(config, warehouse, valves, summary, concurrency, opts, unit_d
 
 
 WRITE_BATCH_UNITS = 32
-"""Finished monitor units written in one transaction at most, or once the oldest of them has
-waited :data:`flows.monitor.WRITE_BATCH_S` (per unit, the transaction would be the serial part of
-a large backfill)."""
-
-
-class UnitWriter:
-    """Collects finished monitor units in the flow process and writes them in batches
-    (:func:`store_units`); ``on_written(batch)`` after each write."""
-
-    def __init__(self, warehouse: Path, *, max_units: int = WRITE_BATCH_UNITS, max_wait_s: float = WRITE_BATCH_S,
-                 on_written: Callable[[list], None] | None = None):  # fmt: skip
-        self.warehouse, self.max_units, self.max_wait_s = Path(warehouse), max_units, max_wait_s
-        self.on_written = on_written or (lambda batch: None)
-        self.pending: list[tuple[MonitorUnit, pl.DataFrame, pl.DataFrame, dict]] = []
-        self.oldest = 0.0
-
-    def add(self, unit: MonitorUnit, fits: pl.DataFrame, selection: pl.DataFrame, progress_row: dict) -> None:
-        if not self.pending:
-            self.oldest = time.monotonic()
-        self.pending.append((unit, fits, selection, progress_row))
-        if len(self.pending) >= self.max_units or time.monotonic() - self.oldest >= self.max_wait_s:
-            self.flush()
-
-    def flush(self) -> None:
-        if not self.pending:
-            return
-        batch, self.pending = self.pending, []
-        store_units(self.warehouse, [(u, f, s) for u, f, s, _ in batch], _progress_frame([r for *_, r in batch]))
-        self.on_written(batch)
+"""Finished units whose rows are written in one transaction at most (or once the oldest has
+waited :data:`flows.batches.WRITE_BATCH_S`): per unit, the transaction would be the serial part
+of a large backfill."""
 
 
 def store_units(warehouse: Path, units: list[tuple[MonitorUnit, pl.DataFrame, pl.DataFrame]], progress: pl.DataFrame) -> None:

@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import time
 from dataclasses import dataclass, field
 from datetime import date, datetime, timedelta, timezone
 from pathlib import Path
@@ -38,6 +37,7 @@ from prefect import flow, task
 from prefect.cache_policies import NO_CACHE
 
 from flows.config import load_plant_config
+from flows.batches import WriteBatch
 from flows.errors import ValvemonError
 from flows.instants import utc_instant
 from flows.lake import list_partitions, read_lake
@@ -62,10 +62,6 @@ keep theirs by construction instead: every write deletes the spans it replaces a
 rows in one transaction (:func:`store_spans`). A unique (ART) index on them made each such write
 about 4× as expensive (~45 against ~12 ms CPU for a valve-week), BENCHMARKS.md "Monitoring"."""
 
-WRITE_BATCH_S = 5.0
-"""Finished chunks wait in memory at most this long before they are written together (one
-transaction costs ~20–40 ms whatever its size: per chunk it weighs on short runs)."""
-
 CHUNK_DAYS = 7
 """Days of lake read at once per valve: a week of hourly 10 s windows at 1 kHz is 1.7 M rows."""
 
@@ -75,14 +71,15 @@ piecewise-linear interpolation error is below 0.01 mm² on the open branch)."""
 
 
 def ensure_monitor_tables(con) -> None:
-    """Create ``baselines``, ``edge_fits`` and ``selection_stats`` (with unique keys) if missing."""
+    """Create ``baselines``, ``edge_fits`` and ``selection_stats`` if missing, with a unique index
+    on the :data:`INDEXED_TABLES` (one on the others, made by earlier versions, is dropped)."""
     for name, (fields, key) in MONITOR_TABLES.items():
         con.execute(create_table_sql(name, fields))
         if name in INDEXED_TABLES:
             con.execute(f"CREATE UNIQUE INDEX IF NOT EXISTS {name}_key ON {name} ({', '.join(key)})")
-    indexed = con.sql("SELECT index_name FROM duckdb_indexes() WHERE index_name IN ('edge_fits_key', 'selection_stats_key')").fetchall()
-    for (name,) in indexed:  # made by versions before INDEXED_TABLES
-        con.execute(f"DROP INDEX {name}")
+    stale = [f"{name}_key" for name in MONITOR_TABLES if name not in INDEXED_TABLES]
+    for (index,) in con.sql("SELECT index_name FROM duckdb_indexes() WHERE list_contains(?, index_name)", params=[stale]).fetchall():
+        con.execute(f"DROP INDEX {index}")
 
 
 def monitor_params(valve: ValveSpec, sample_rate_hz: float) -> MonitorParams:
@@ -403,26 +400,20 @@ def monitor_valve(
     baselines = ensure_baselines(valve, params, warehouse)
     report = ValveReport(valve_id, baseline_source=baselines["s1"].source, baseline_plausible=all(b.plausible for b in baselines.values()))
     gap_s = params.gap_limit_periods * params.sample_period_s
-    pending: list[Span] = []
-    oldest = 0.0
+    spans: WriteBatch[Span] = WriteBatch(lambda batch: store_spans(warehouse, batch))
     for rows in lake_chunks(warehouse, valve.id, gap_s, start, end, chunk_days, LAKE_COLUMNS):
         res = monitor_rows(valve, params, baselines, rows)
         now = datetime.now(timezone.utc)
         fits = _fits_table(res.fits, valve, baselines, now)
         selection = res.selection.select([f.name for f in SELECTION_FIELDS]).cast(dict(polars_schema(SELECTION_FIELDS)))
         t = rows["timestamp_utc"]
-        if not pending:
-            oldest = time.monotonic()
-        pending.append((valve.id, t[0], t[-1] + timedelta(microseconds=1), fits, selection))
-        if time.monotonic() - oldest >= WRITE_BATCH_S:
-            store_spans(warehouse, pending)
-            pending = []
+        spans.add((valve.id, t[0], t[-1] + timedelta(microseconds=1), fits, selection))
         report.rows_read += rows.height
         report.windows += res.windows.height
         report.fits_ok += int((fits["status"] == "ok").sum())
         for s, n in fits["status"].value_counts().iter_rows():
             report.status_counts[s] = report.status_counts.get(s, 0) + n
-    store_spans(warehouse, pending)
+    spans.flush()
     return report
 
 
