@@ -30,6 +30,7 @@ import pyarrow as pa
 import pyarrow.compute as pc
 
 from transforms.ingest.errors import IngestError
+from transforms.ingest.iso8601 import parse_iso_column
 
 UTC_NS = pl.Datetime("ns", "UTC")
 
@@ -208,13 +209,18 @@ def parse_timestamps(
 
 
 def _arrow_iso(text: pl.Series, *, zoned: bool) -> pl.Series | None:
-    """Arrow's ISO-8601 parser on the whole column (fast); None if any element is not
-    ISO-8601 of that kind (with an offset when ``zoned``, without otherwise), so the caller
-    falls back to the format-by-format path, which also names the offending line."""
-    try:
-        parsed = pc.cast(text.to_arrow(), pa.timestamp("ns", "UTC" if zoned else None))
-    except (pa.ArrowInvalid, pa.ArrowNotImplementedError, pa.ArrowTypeError):
-        return None
+    """The whole column at once: the compiled reader of the common shape
+    (:func:`transforms.ingest.iso8601.parse_iso_column`, ~10× faster), else Arrow's ISO-8601
+    parser; None if any element is not ISO-8601 of that kind (with an offset when ``zoned``,
+    without otherwise), so the caller falls back to the format-by-format path, which also
+    names the offending line."""
+    arr = text.to_arrow()
+    parsed = parse_iso_column(arr, zoned=zoned)
+    if parsed is None:
+        try:
+            parsed = pc.cast(arr, pa.timestamp("ns", "UTC" if zoned else None))
+        except (pa.ArrowInvalid, pa.ArrowNotImplementedError, pa.ArrowTypeError):
+            return None
     out = pl.from_arrow(parsed)
     return out.alias(text.name) if isinstance(out, pl.Series) else None
 
