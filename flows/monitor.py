@@ -36,6 +36,7 @@ import polars as pl
 from prefect import flow, task
 from prefect.cache_policies import NO_CACHE
 
+from flows.allocator import retain_freed_memory
 from flows.config import load_plant_config
 from flows.batches import WriteBatch
 from flows.errors import ValvemonError
@@ -241,7 +242,9 @@ def ensure_baselines(valve: ValveSpec, params: MonitorParams, warehouse: Path) -
 def monitor_rows(valve: ValveSpec, params: MonitorParams, baselines: dict[str, Baseline], rows: pl.DataFrame) -> MonitorResult:
     """Steps 2–4b on some of the valve's lake rows against its baselines, with the closed-edge
     leakage correction the baselines were built with (what every monitoring path must call).
-    The result carries no points frame (the flows store fits and counts only)."""
+    The result carries no points frame (the flows store fits and counts only). The process keeps
+    freed memory for the next chunk's arrays (:func:`flows.allocator.retain_freed_memory`)."""
+    retain_freed_memory()
     chars = {valve.id: {e: b.characteristic for e, b in baselines.items()}}
     leaks = {e: b.leakage for e, b in baselines.items()}
     if any(v is None for v in leaks.values()):

@@ -10,19 +10,26 @@ on the profile cost f(x̂) = Σ A_i² − (Σ A_i Â_i)² / Σ Â_i² (variable 
 1. a coarse grid of x̂ over [−x_bound, x_bound] (25 points, 0.125 mm apart for the default
    1.5 mm) on an evenly strided subsample (≤ 96 points) of the population finds the basin of the
    global minimum;
-2. a safeguarded Newton iteration on the full population (bisection whenever Newton would leave
-   the bracket or f″ ≤ 0) converges to |Δx̂| < 1 nm; should it end on a bracket edge, the
-   bracket moves on by a grid step. The derivatives are analytic for a piecewise-linear Â
-   (Â″ = 0 between knots): with S_a = Σ A Â, S_b = Σ Â², S_ad = Σ A Â', S_bd = Σ Â Â',
-   S_dd = Σ Â'², α = S_a/S_b,
+2. a safeguarded Newton iteration on the full population converges to |Δx̂| < 1 nm; should it
+   end on a bracket edge, the bracket moves on by a grid step. The derivatives are analytic for
+   a piecewise-linear Â (Â″ = 0 between knots): with S_a = Σ A Â, S_b = Σ Â², S_ad = Σ A Â',
+   S_bd = Σ Â Â', S_dd = Σ Â'², α = S_a/S_b,
 
-       f'  = −2 α S_ad + 2 α² S_bd  (= the gradient of the cost at the optimal α̂: −2 α̂ Σ Â' r)
-       f'' = −2 α' S_ad + 4 α α' S_bd + 2 α² S_dd,   α' = (S_ad − 2 α S_bd) / S_b.
+       f'  = −2 α S_ad + 2 α² S_bd  (= the gradient of the cost at the optimal α̂: −2 α̂ Σ Â' r).
+
+   Each step goes to the exact minimum of the cost with every point kept on its knot segment,
+   where S_a and S_b are linear and quadratic in the shift δ and f′(δ) = 0 is linear:
+   δ = (S_ad S_b − S_a S_bd) / (S_a S_dd − S_ad S_bd) (bisection when that is no descent or
+   leaves the bracket). Without knot crossings this is the optimum in one step;
+3. a step shorter than :data:`TRUST_STEP_M` (1 µm) is not checked by a pass of its own: the
+   residual pass at its end takes the exact sums there too, and their (sub-nanometre) locked
+   step is the last; a longer one sends Newton on. α̂, e and JᵀJ follow from the sums
+   (Σ r² = Σ A² − α̂ S_a at the optimum).
 
 The whole batch (every window and edge of every valve) runs in one compiled (numba) kernel,
-one pass over a population's points per iteration (about 5 full passes in all, plus the grid);
-during the Newton passes each point remembers its knot segment, so evaluating Â costs a few
-nanoseconds whatever the number of knots.
+one pass over a population's points per iteration (2–3 full passes in all from a warm start,
+the residual pass included, plus the grid); during the Newton passes each point remembers its
+knot segment, so evaluating Â costs a few nanoseconds whatever the number of knots.
 
 Confidence intervals come from the Jacobian J = [Â(u_i + x̂), α̂ Â'(u_i + x̂)] at the optimum:
 cov = σ² (JᵀJ)⁻¹ with σ² = Σ r² / (N − 2) and Student's t with N − 2 degrees of freedom. The
@@ -36,7 +43,8 @@ Status of a row: ``ok``, or why there is no (trustworthy) estimate: ``no_points`
 ``too_few_points`` (< min_points), ``too_little_coverage`` (u_max − u_min < min_coverage),
 ``no_baseline`` (no Â for the valve/edge), ``degenerate`` (Â vanishes or α̂ ≤ 0 at the points),
 ``x_hat_at_bound`` (optimum on the search bound; estimates reported), ``not_converged``
-(iteration limit; estimates reported). ``iterations`` counts the full-population Newton passes.
+(iteration limit; estimates reported). ``iterations`` counts the full passes over the population
+(Newton and the confirming residual pass).
 """
 
 from __future__ import annotations
@@ -94,7 +102,11 @@ FIT_COLUMNS = (
 )
 
 # kernel result codes
-_OK, _DEGENERATE, _AT_BOUND, _NOT_CONVERGED, _SKIPPED = 0, 1, 2, 3, 4
+_OK, _DEGENERATE, _AT_BOUND, _NOT_CONVERGED, _SKIPPED, _PREDICTED = 0, 1, 2, 3, 4, 5
+
+TRUST_STEP_M = 1e-6
+"""A Newton step shorter than this (1 µm, a fiftieth of the baseline's knot spacing) is not
+checked by a pass of its own: the residual pass at its end confirms it (:func:`_fit_groups`)."""
 
 
 # --------------------------------------------------------------------------------------------
@@ -165,52 +177,69 @@ def _profile(u, a, jc, s, e, stride, kn, kv, ks, k0, k1, tab, toff, tlo, tinv, t
     return f, fp, fpp, al, True
 
 
-@numba.njit(cache=True)
-def _newton(u, a, jc, s, e, kn, kv, ks, k0, k1, tab, toff, tlo, tinv, tn, x, lo, hi, saa, first_mode, xtol, maxiter):
-    """Safeguarded Newton on f' within [lo, hi] from x.
+@numba.njit(cache=True, inline="always")
+def _locked_step(sa, sb, sad, sbd, sdd):
+    """Exact minimiser of the profile cost with every point kept on its knot segment, as an
+    offset from the point where the sums were taken (NaN if that is no descent): there
+    S_a(δ) = S_a + δ S_ad, S_b(δ) = S_b + 2δ S_bd + δ² S_dd, and f′(δ) = 0 is linear in δ."""
+    den = sa * sdd - sad * sbd
+    if den > 0.0:
+        return (sad * sb - sa * sbd) / den
+    return np.nan
 
-    Returns (x, code, passes, sums): on convergence x is the last point evaluated (within
-    ``xtol`` of the predicted optimum) and ``sums`` = (S_a, S_b, S_bd, S_dd) there, so no extra
-    pass is needed for α̂ and JᵀJ."""
+
+@numba.njit(cache=True, inline="always")
+def _locked_sums(sa, sb, sad, sbd, sdd, d):
+    """The sums δ = d further on, every point kept on its segment."""
+    return sa + d * sad, sb + 2.0 * d * sbd + d * d * sdd, sad, sbd + d * sdd, sdd
+
+
+@numba.njit(cache=True)
+def _newton(u, a, jc, s, e, kn, kv, ks, k0, k1, tab, toff, tlo, tinv, tn, x, lo, hi, saa, first_mode, xtol, trust, maxiter):
+    """Safeguarded Newton on f′ within [lo, hi] from x, each step the exact minimiser of the
+    segment-locked cost (:func:`_locked_step`; bisection when that leaves the bracket).
+
+    Returns (x, code, passes, sums, dx): the last point evaluated, the sums
+    (S_a, S_b, S_ad, S_bd, S_dd) there and the step still to take. On ``_OK`` |dx| < ``xtol``;
+    on ``_PREDICTED`` |dx| < ``trust``: the optimum is x + dx up to the few points that cross a
+    knot on the way, for the caller to confirm in its residual pass. Otherwise the sums are
+    zeros."""
     mode = first_mode
+    zero = (0.0, 0.0, 0.0, 0.0, 0.0)
     for it in range(maxiter):
         sa, sb, sad, sbd, sdd = _sums(u, a, jc, s, e, 1, kn, kv, ks, k0, k1, tab, toff, tlo, tinv, tn, x, mode)
         mode = 2
         if sb <= 0.0 or sa <= 0.0:
-            return x, _DEGENERATE, it + 1, (sa, sb, sbd, sdd)
+            return x, _DEGENERATE, it + 1, zero, 0.0
         al = sa / sb
         fp = -2.0 * al * sad + 2.0 * al * al * sbd
-        alp = (sad - 2.0 * al * sbd) / sb
-        fpp = -2.0 * alp * sad + 4.0 * al * alp * sbd + 2.0 * al * al * sdd
         if fp < 0.0:
             lo = x
         else:
             hi = x
-        if fpp > 0.0:
-            xn = x - fp / fpp
-            if not (lo < xn < hi):
-                xn = 0.5 * (lo + hi)
-        else:
+        xn = x + _locked_step(sa, sb, sad, sbd, sdd)
+        locked = lo < xn < hi  # False for NaN
+        if not locked:
             xn = 0.5 * (lo + hi)
         if abs(xn - x) < xtol:
-            return x, _OK, it + 1, (sa, sb, sbd, sdd)
+            return x, _OK, it + 1, (sa, sb, sad, sbd, sdd), xn - x
+        if locked and abs(xn - x) < trust:
+            return x, _PREDICTED, it + 1, (sa, sb, sad, sbd, sdd), xn - x
         if hi - lo < xtol:
-            return xn, _OK, it + 1, (0.0, 0.0, 0.0, 0.0)  # sums not at xn
+            return xn, _OK, it + 1, zero, 0.0  # sums not at xn
         x = xn
-    return x, _NOT_CONVERGED, maxiter, (0.0, 0.0, 0.0, 0.0)
+    return x, _NOT_CONVERGED, maxiter, zero, 0.0
 
 
 @numba.njit(cache=True)
-def _fit_one(u, a, jc, s, e, kn, kv, ks, k0, k1, tab, toff, tlo, tinv, tn, xb, n_grid, sub_max, xtol, maxiter, x_start):
-    """Returns (x̂, code, passes, sums at x̂ or zeros). A finite ``x_start`` (a previous optimum
-    of nearly the same population) replaces the coarse grid: Newton starts there, bracketed by
-    one grid step on either side (moved on like any bracket if the optimum lies beyond)."""
-    zero = (0.0, 0.0, 0.0, 0.0)
+def _fit_one(u, a, jc, s, e, kn, kv, ks, k0, k1, tab, toff, tlo, tinv, tn, xb, n_grid, sub_max, xtol, trust, maxiter, x_start, saa):
+    """Returns (x, code, passes, sums at x or zeros, dx) as :func:`_newton` does. A finite
+    ``x_start`` (a previous optimum of nearly the same population) replaces the coarse grid:
+    Newton starts there, bracketed by one grid step on either side (moved on like any bracket
+    if the optimum lies beyond)."""
+    zero = (0.0, 0.0, 0.0, 0.0, 0.0)
     n = e - s
     stride = max(1, n // sub_max)
-    saa = 0.0
-    for i in range(s, e):
-        saa += a[i] * a[i]
     step = 2.0 * xb / (n_grid - 1)
     if np.isfinite(x_start):
         x0 = min(max(x_start, -xb), xb)
@@ -228,7 +257,7 @@ def _fit_one(u, a, jc, s, e, kn, kv, ks, k0, k1, tab, toff, tlo, tinv, tn, xb, n
                 best_f = f
                 best_g = g
         if best_g < 0:
-            return 0.0, _DEGENERATE, 0, zero
+            return 0.0, _DEGENERATE, 0, zero, 0.0
         x0 = -xb + best_g * step
     lo = max(-xb, x0 - step)
     hi = min(xb, x0 + step)
@@ -238,25 +267,26 @@ def _fit_one(u, a, jc, s, e, kn, kv, ks, k0, k1, tab, toff, tlo, tinv, tn, xb, n
     mode = 1
     x = x0
     for _expand in range(2 * n_grid):
-        x, code, p, sums = _newton(u, a, jc, s, e, kn, kv, ks, k0, k1, tab, toff, tlo, tinv, tn, x, lo, hi, saa, mode, xtol, maxiter)
+        x, code, p, sums, dx = _newton(u, a, jc, s, e, kn, kv, ks, k0, k1, tab, toff, tlo, tinv, tn, x, lo, hi, saa, mode, xtol, trust, maxiter)
         passes += p
         mode = 2
-        if code != _OK:
-            return x, code, passes, zero
-        if x - lo < 2.0 * xtol and lo > -xb:
+        if code != _OK and code != _PREDICTED:
+            return x, code, passes, zero, 0.0
+        xe = x + dx
+        if xe - lo < 2.0 * xtol and lo > -xb:
             hi = lo
             lo = max(-xb, lo - step)
             x = 0.5 * (lo + hi)
             continue
-        if hi - x < 2.0 * xtol and hi < xb:
+        if hi - xe < 2.0 * xtol and hi < xb:
             lo = hi
             hi = min(xb, hi + step)
             x = 0.5 * (lo + hi)
             continue
-        if x - lo < 2.0 * xtol or hi - x < 2.0 * xtol:
-            return x, _AT_BOUND, passes, zero
-        return x, _OK, passes, sums
-    return x, _NOT_CONVERGED, passes, zero
+        if xe - lo < 2.0 * xtol or hi - xe < 2.0 * xtol:
+            return xe, _AT_BOUND, passes, zero, 0.0
+        return x, code, passes, sums, dx
+    return x, _NOT_CONVERGED, passes, zero, 0.0
 
 
 @numba.njit(cache=True)
@@ -280,16 +310,48 @@ def _fit_groups(u, a, offsets, kstart, kend, kn, kv, ks, tab, tstart, tlo, tinv,
         k0 = kstart[g]
         k1 = kend[g]
         toff, tlo_g, tinv_g, tn_g = tstart[g], tlo[g], tinv[g], tn[g]
-        x, c, p, sums = _fit_one(u, a, jc, s, e, kn, kv, ks, k0, k1, tab, toff, tlo_g, tinv_g, tn_g, xbound[g], n_grid, sub_max, xtol, maxiter, x_start[g])
+        saa = 0.0
+        for i in range(s, e):
+            saa += a[i] * a[i]
+        x, c, p, sums, dx = _fit_one(u, a, jc, s, e, kn, kv, ks, k0, k1, tab, toff, tlo_g, tinv_g, tn_g, xbound[g], n_grid,
+                                     sub_max, xtol, TRUST_STEP_M, maxiter, x_start[g], saa)  # fmt: skip
+        if c == _PREDICTED and residuals:
+            # the residual pass at the predicted optimum x + dx (α from the locked sums there)
+            # also takes the exact sums there; their locked step dx2 is the last one (the few
+            # points crossing a knot within dx2 change nothing measurable). If it is not small,
+            # Newton goes on from there, and the residuals are taken again.
+            x = x + dx
+            ls = _locked_sums(sums[0], sums[1], sums[2], sums[3], sums[4], dx)
+            al_p = ls[0] / ls[1] if ls[1] > 0.0 else 0.0
+            r2, r11, ex = _residual_pass(u, a, jc, s, e, kn, kv, ks, k0, k1, x, al_p)
+            p += 1
+            dx = _locked_step(ex[0], ex[1], ex[2], ex[3], ex[4])
+            if abs(dx) < TRUST_STEP_M and abs(x + dx) < xbound[g]:
+                sums = ex
+                c = _OK
+            else:
+                step = 2.0 * xbound[g] / (n_grid - 1)
+                x, c, p2, sums, dx = _newton(u, a, jc, s, e, kn, kv, ks, k0, k1, tab, toff, tlo_g, tinv_g, tn_g, x,
+                                             max(-xbound[g], x - step), min(xbound[g], x + step), saa, 2, xtol, 0.0, maxiter)  # fmt: skip
+                p += p2
+                r2 = -1.0
+        elif c == _PREDICTED:
+            c = _OK
+            r2 = -1.0
+        else:
+            r2 = -1.0
         iters[g] = p
         code[g] = c
         if c == _DEGENERATE:
             continue
-        # α̂ and the JᵀJ pieces at the optimum (from the last Newton pass, else one more pass),
-        # then the residuals: their sum of squares and lag-1 autocorrelation
-        sa, sb, sbd, sdd_ = sums
+        # α̂ and the JᵀJ pieces at the optimum x + dx (from the sums taken at x, else one more
+        # pass), then the residuals: their sum of squares and lag-1 autocorrelation
+        sa, sb, sad, sbd, sdd_ = sums
         if sb <= 0.0:
-            sa, sb, _sad, sbd, sdd_ = _sums(u, a, jc, s, e, 1, kn, kv, ks, k0, k1, tab, toff, tlo_g, tinv_g, tn_g, x, 2)
+            sa, sb, sad, sbd, sdd_ = _sums(u, a, jc, s, e, 1, kn, kv, ks, k0, k1, tab, toff, tlo_g, tinv_g, tn_g, x, 2)
+            dx = 0.0
+        sa, sb, sad, sbd, sdd_ = _locked_sums(sa, sb, sad, sbd, sdd_, dx)
+        x = x + dx
         if sb <= 0.0 or sa <= 0.0:
             code[g] = _DEGENERATE
             continue
@@ -298,22 +360,52 @@ def _fit_groups(u, a, offsets, kstart, kend, kn, kv, ks, tab, tstart, tlo, tinv,
         xhat[g] = x
         if not residuals:
             continue
-        r2 = 0.0
-        r11 = 0.0
-        prev = 0.0
-        for i in range(s, e):
-            j = jc[i]
-            r = a[i] - al * (kv[j] + ks[j] * (u[i] + x - kn[j]))
-            r2 += r * r
-            if i > s:
-                r11 += r * prev
-            prev = r
-        ssr[g] = r2
+        if r2 < 0.0:
+            r2, r11, _ex = _residual_pass(u, a, jc, s, e, kn, kv, ks, k0, k1, x, al)
+        # Σ r² at (α̂, x̂) from the sums (exact for the locked segments; the pass's own Σ r²
+        # was taken at the predicted α, a hair away)
+        ssr[g] = max(saa - al * sa, 0.0)
         shh[g] = sb
         shd[g] = al * sbd
         sdd[g] = al * al * sdd_
         rho[g] = r11 / r2 if r2 > 0.0 else 0.0
     return alpha, xhat, ssr, shh, shd, sdd, rho, code, iters
+
+
+@numba.njit(cache=True)
+def _residual_pass(u, a, jc, s, e, kn, kv, ks, k0, k1, x, al):
+    """Residuals r = A − α Â(u + x) (segments walked from ``jc``): Σ r², Σ rᵢ rᵢ₋₁ and the sums
+    (S_a, S_b, S_ad, S_bd, S_dd) at x."""
+    r2 = 0.0
+    r11 = 0.0
+    prev = 0.0
+    sa = 0.0
+    sb = 0.0
+    sad = 0.0
+    sbd = 0.0
+    sdd = 0.0
+    for i in range(s, e):
+        t = u[i] + x
+        j = jc[i]
+        while j > k0 and t < kn[j]:
+            j -= 1
+        while j < k1 - 2 and t >= kn[j + 1]:
+            j += 1
+        jc[i] = j
+        d = ks[j]
+        h = kv[j] + d * (t - kn[j])
+        ai = a[i]
+        r = ai - al * h
+        r2 += r * r
+        if i > s:
+            r11 += r * prev
+        prev = r
+        sa += ai * h
+        sb += h * h
+        sad += ai * d
+        sbd += h * d
+        sdd += d * d
+    return r2, r11, (sa, sb, sad, sbd, sdd)
 
 
 # --------------------------------------------------------------------------------------------

@@ -212,6 +212,9 @@ def _constants(params: MonitorParams) -> np.ndarray:
 
 @numba.njit(cache=True)
 def _selection_kernel(win, n_windows, valid, ps, pr, p1, p2, x, xc, dp1, dp2, v, c):
+    """One pass over the rows. Rules shared by edges (no_derivative, standstill, the pressure
+    peaks of a port, the spool range of a side) are counted once per row, in per-window
+    counters that are added to the tables whenever the window changes."""
     vmin, pmax, kr, beta, a1, a2, v01, v02, lim_pos, lim_neg, min_dp = (
         c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7], c[8], c[9], c[10])
     n = x.shape[0]
@@ -220,59 +223,80 @@ def _selection_kernel(win, n_windows, valid, ps, pr, p1, p2, x, xc, dp1, dp2, v,
     removed = np.zeros((n_windows, 4, 5), dtype=np.int64)
     selected = np.zeros((n_windows, 4), dtype=np.int64)
     n_samples = np.zeros(n_windows, dtype=np.int64)
-    for i in range(n):
-        w = win[i]
-        n_samples[w] += 1
+    # per window: [no_derivative, standstill, peak port 1, peak port 2, spool x < limit,
+    # spool x > −limit, small_dp s1, 1r, s2, 2r, rows]; per edge and code
+    shared = np.zeros(11, dtype=np.int64)
+    by_code = np.zeros((4, 6), dtype=np.int64)
+    if n == 0:
+        return codes, flagged, removed, selected, n_samples
+    w = win[0]
+    for i in range(n + 1):
+        if i == n or win[i] != w:
+            n_samples[w] += shared[10]
+            for e in range(4):
+                port = 2 if e < 2 else 3
+                side = 4 if e == 0 or e == 3 else 5
+                flagged[w, e, 0] += shared[0]
+                flagged[w, e, 1] += shared[1]
+                flagged[w, e, 2] += shared[port]
+                flagged[w, e, 3] += shared[side]
+                flagged[w, e, 4] += shared[6 + e]
+                for k in range(5):
+                    removed[w, e, k] += by_code[e, k]
+                selected[w, e] += by_code[e, 5]
+            shared[:] = 0
+            by_code[:, :] = 0
+            if i == n:
+                break
+            w = win[i]
         # the Savitzky–Golay values of an invalid stencil count as missing (like nulls)
         if valid[i]:
             p1i, p2i, dp1i, dp2i, vi = p1[i], p2[i], dp1[i], dp2[i], v[i]
         else:
             p1i = p2i = dp1i = dp2i = vi = np.nan
-        nd = (np.isnan(ps[i]) or np.isnan(pr[i]) or np.isnan(p1i) or np.isnan(p2i) or np.isnan(x[i])
-              or np.isnan(xc[i]) or np.isnan(dp1i) or np.isnan(dp2i) or np.isnan(vi))
+        xi, xci, psi, pri = x[i], xc[i], ps[i], pr[i]
+        nd = (np.isnan(psi) or np.isnan(pri) or np.isnan(p1i) or np.isnan(p2i) or np.isnan(xi)
+              or np.isnan(xci) or np.isnan(dp1i) or np.isnan(dp2i) or np.isnan(vi))
         av = abs(vi)
         ss = av < vmin
         absp = abs(dp1i) > pmax or abs(dp2i) > pmax
-        pk1 = absp or abs(dp1i * (v01 + a1 * xc[i])) > (kr * beta * a1) * av
-        pk2 = absp or abs(dp2i * (v02 - a2 * xc[i])) > (kr * beta * a2) * av
-        sp_pos = x[i] < lim_pos
-        sp_neg = x[i] > -lim_neg
-        for e in range(4):
-            if e == 0:
-                pk, sp, sd = pk1, sp_pos, abs(ps[i] - p1i) < min_dp
-            elif e == 1:
-                pk, sp, sd = pk1, sp_neg, abs(pr[i] - p1i) < min_dp
-            elif e == 2:
-                pk, sp, sd = pk2, sp_neg, abs(p2i - ps[i]) < min_dp
-            else:
-                pk, sp, sd = pk2, sp_pos, abs(p2i - pr[i]) < min_dp
-            if nd:
-                flagged[w, e, 0] += 1
-            if ss:
-                flagged[w, e, 1] += 1
-            if pk:
-                flagged[w, e, 2] += 1
-            if sp:
-                flagged[w, e, 3] += 1
-            if sd:
-                flagged[w, e, 4] += 1
-            if nd:
-                code = 0
-            elif ss:
-                code = 1
-            elif pk:
-                code = 2
-            elif sp:
-                code = 3
-            elif sd:
-                code = 4
-            else:
-                code = 5
-            if code < 5:
-                removed[w, e, code] += 1
-            else:
-                selected[w, e] += 1
-            codes[i, e] = code
+        pk1 = absp or abs(dp1i * (v01 + a1 * xci)) > (kr * beta * a1) * av
+        pk2 = absp or abs(dp2i * (v02 - a2 * xci)) > (kr * beta * a2) * av
+        sp_pos = xi < lim_pos
+        sp_neg = xi > -lim_neg
+        sd0 = abs(psi - p1i) < min_dp
+        sd1 = abs(pri - p1i) < min_dp
+        sd2 = abs(p2i - psi) < min_dp
+        sd3 = abs(p2i - pri) < min_dp
+        shared[0] += nd
+        shared[1] += ss
+        shared[2] += pk1
+        shared[3] += pk2
+        shared[4] += sp_pos
+        shared[5] += sp_neg
+        shared[6] += sd0
+        shared[7] += sd1
+        shared[8] += sd2
+        shared[9] += sd3
+        shared[10] += 1
+        # the first rule that removes the sample (5: selected)
+        if nd:
+            c0 = c1 = c2 = c3 = 0
+        elif ss:
+            c0 = c1 = c2 = c3 = 1
+        else:
+            c0 = 2 if pk1 else (3 if sp_pos else (4 if sd0 else 5))
+            c1 = 2 if pk1 else (3 if sp_neg else (4 if sd1 else 5))
+            c2 = 2 if pk2 else (3 if sp_neg else (4 if sd2 else 5))
+            c3 = 2 if pk2 else (3 if sp_pos else (4 if sd3 else 5))
+        by_code[0, c0] += 1
+        by_code[1, c1] += 1
+        by_code[2, c2] += 1
+        by_code[3, c3] += 1
+        codes[i, 0] = c0
+        codes[i, 1] = c1
+        codes[i, 2] = c2
+        codes[i, 3] = c3
     return codes, flagged, removed, selected, n_samples
 
 

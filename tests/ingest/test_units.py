@@ -169,7 +169,7 @@ def test_partition_file_layout_codec_and_sorting(tmp_path):
     path = partition_path(tmp_path, "V017", date(2025, 3, 1))
     write_partition(path, frame, gap_us=2_500_000)
     meta = pq.ParquetFile(path).metadata
-    assert meta.num_rows == 5 and meta.row_group(0).column(3).compression == "ZSTD"
+    assert meta.num_rows == 5 and meta.row_group(0).column(3).compression == "LZ4"
     schema = pq.read_schema(path)
     assert schema.field("timestamp_utc").type.unit == "us" and str(schema.field("timestamp_utc").type.tz) == "UTC"
     assert schema.field("p1_pa").metadata[b"unit"] == b"Pa"
