@@ -232,6 +232,47 @@ def _newton(u, a, jc, s, e, kn, kv, ks, k0, k1, tab, toff, tlo, tinv, tn, x, lo,
 
 
 @numba.njit(cache=True)
+def _grid_start(u, a, s, e, stride, kn, kv, ks, k0, k1, x_first, step, n_grid):
+    """Step 1: the grid point x_first + g·step (g < n_grid) of least profile cost on the strided
+    subsample of the population (-1 if Â vanishes or α ≤ 0 at every one). The subsample is
+    sorted by u first, so at each grid point the knot segment is found by walking forward."""
+    m = (e - s + stride - 1) // stride
+    us = np.empty(m)
+    for k in range(m):
+        us[k] = u[s + k * stride]
+    order = np.argsort(us)
+    us = us[order]
+    aa = np.empty(m)
+    saa = 0.0
+    for k in range(m):
+        aa[k] = a[s + order[k] * stride]
+        saa += aa[k] * aa[k]
+    best_g = -1
+    best_f = np.inf
+    j_first = k0
+    for g in range(n_grid):
+        x = x_first + g * step
+        j = j_first
+        sa = 0.0
+        sb = 0.0
+        for k in range(m):
+            t = us[k] + x
+            while j < k1 - 2 and t >= kn[j + 1]:
+                j += 1
+            if k == 0:
+                j_first = j
+            h = kv[j] + ks[j] * (t - kn[j])
+            sa += aa[k] * h
+            sb += h * h
+        if sb > 0.0 and sa > 0.0:
+            f = saa - sa * (sa / sb)
+            if f < best_f:
+                best_f = f
+                best_g = g
+    return best_g
+
+
+@numba.njit(cache=True)
 def _fit_one(u, a, jc, s, e, kn, kv, ks, k0, k1, tab, toff, tlo, tinv, tn, xb, n_grid, sub_max, xtol, trust, maxiter, x_start, saa):
     """Returns (x, code, passes, sums at x or zeros, dx) as :func:`_newton` does. A finite
     ``x_start`` (a previous optimum of nearly the same population) replaces the coarse grid:
@@ -244,18 +285,7 @@ def _fit_one(u, a, jc, s, e, kn, kv, ks, k0, k1, tab, toff, tlo, tinv, tn, xb, n
     if np.isfinite(x_start):
         x0 = min(max(x_start, -xb), xb)
     else:
-        saa_sub = 0.0
-        for i in range(s, e, stride):
-            saa_sub += a[i] * a[i]
-        # 1. coarse grid on a strided subsample
-        best_g = -1
-        best_f = np.inf
-        for g in range(n_grid):
-            xg = -xb + g * step
-            f, fp, fpp, al, good = _profile(u, a, jc, s, e, stride, kn, kv, ks, k0, k1, tab, toff, tlo, tinv, tn, xg, 0, saa_sub)
-            if good and f < best_f:
-                best_f = f
-                best_g = g
+        best_g = _grid_start(u, a, s, e, stride, kn, kv, ks, k0, k1, -xb, step, n_grid)
         if best_g < 0:
             return 0.0, _DEGENERATE, 0, zero, 0.0
         x0 = -xb + best_g * step
