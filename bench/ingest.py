@@ -142,7 +142,7 @@ def throughput(seconds: int, repeat: int) -> None:
 
 
 STAGES = [
-    ("flows.ingest", "read_export", "read file + SHA-256 + CSV/Parquet decode"),
+    ("flows.ingest", "read_export", "read file + BLAKE3 + CSV/Parquet decode"),
     ("transforms.ingest.export", "samples_of", "samples: tags, timestamps, values, quarantine"),
     ("transforms.ingest.samples", "parse_timestamps", "  of which: timestamps to UTC"),
     ("transforms.ingest.export", "validate_raw_rows", "pandera: raw rows"),

@@ -66,7 +66,7 @@ from flows.batches import WriteBatch
 from flows.config import load_plant_config
 from flows.errors import ValvemonError
 from flows.instants import utc_instant
-from flows.ingest import FileReport, discover_files, ingest_lock, merge_export, read_export, record_file
+from flows.ingest import LEGACY_HASH_PREFIX, FileReport, discover_files, ingest_lock, legacy_hash, merge_export, read_export, record_file, rekey_file
 from flows.lake import list_partitions, read_lake
 from flows.locks import file_lock
 from flows.monitor import (
@@ -80,7 +80,7 @@ from flows.monitor import (
     monitor_rows,
     store_spans,
 )
-from flows.warehouse_db import connect, ensure_ingest_tables, insert_frame, query_frame
+from flows.warehouse_db import connect, ensure_ingest_tables, insert_frame, migrate_hash_column, query_frame
 from schemas.fields import EDGE_FIT_FIELDS, EDGES, SELECTION_FIELDS, polars_schema
 from schemas.plant_config import ConfigError, PlantConfig
 from transforms.ingest import Grid, IngestError, TagTable
@@ -107,7 +107,7 @@ CREATE TABLE IF NOT EXISTS {PROGRESS_TABLE} (
     source_file VARCHAR,
     size_bytes BIGINT,
     mtime_ns BIGINT,
-    file_sha256 VARCHAR,
+    file_hash VARCHAR,
     fingerprint VARCHAR,
     windows INTEGER,
     fits INTEGER,
@@ -147,7 +147,7 @@ CREATE TABLE IF NOT EXISTS {RUNS_TABLE} (
 _PROGRESS_SCHEMA = {
     "unit_kind": pl.String, "unit_key": pl.String, "valve_id": pl.String,
     "span_start": pl.Datetime("us", "UTC"), "span_end": pl.Datetime("us", "UTC"),
-    "source_file": pl.String, "size_bytes": pl.Int64, "mtime_ns": pl.Int64, "file_sha256": pl.String,
+    "source_file": pl.String, "size_bytes": pl.Int64, "mtime_ns": pl.Int64, "file_hash": pl.String,
     "fingerprint": pl.String, "windows": pl.Int32, "fits": pl.Int32, "fits_ok": pl.Int32, "rows_read": pl.Int64,
     "run_id": pl.String, "finished_at": pl.Datetime("us", "UTC"),
 }  # fmt: skip
@@ -156,7 +156,9 @@ _DATE_IN_NAME = re.compile(r"(?<!\d)(\d{4}-\d{2}-\d{2})(?!\d)")
 
 
 def ensure_backfill_tables(con) -> None:
-    """Create ``backfill_progress`` and ``backfill_runs`` if missing."""
+    """Create ``backfill_progress`` and ``backfill_runs`` if missing (and migrate an older
+    warehouse's ``file_sha256`` column, ``flows.warehouse_db.migrate_hash_column``)."""
+    migrate_hash_column(con, PROGRESS_TABLE)
     con.execute(_PROGRESS_SQL)
     con.execute(_RUNS_SQL)
 
@@ -248,10 +250,12 @@ class IngestOutcome:
     mtime_ns: int
     report: FileReport
     records: tuple[dict, pl.DataFrame, pl.DataFrame] | None = None
+    rekey: tuple[str, str] | None = None
+    """(legacy SHA-256 hash, BLAKE3 hash) of a skipped file the manifest knew by its SHA-256."""
 
 
-def ingest_export(path: str | Path, config: PlantConfig, warehouse: str | Path, known: frozenset[str], run_id: str) -> IngestOutcome:
-    """Read one export, skip it if its content hash is ``known``, else merge it into the lake.
+def ingest_export(path: str | Path, config: PlantConfig, warehouse: str | Path, known: KnownFiles, run_id: str) -> IngestOutcome:
+    """Read one export, skip it if its content is ``known``, else merge it into the lake.
 
     Like :func:`flows.ingest.ingest_file`, but the partitions are locked while merged (other
     files are being ingested at the same time) and the database rows are returned, not written.
@@ -260,8 +264,13 @@ def ingest_export(path: str | Path, config: PlantConfig, warehouse: str | Path, 
     st = path.stat()
     tags = TagTable.from_config(config)
     ef = read_export(path, config.export, tags)
-    if ef.sha256 in known:
-        return IngestOutcome(str(path), st.st_size, st.st_mtime_ns, FileReport(str(path), ef.sha256, skipped=True))
+    if ef.file_hash in known:
+        return IngestOutcome(str(path), st.st_size, st.st_mtime_ns, FileReport(str(path), ef.file_hash, skipped=True))
+    if ef.size_bytes in known.legacy_sizes:
+        old = legacy_hash(path)
+        if old in known:
+            report = FileReport(str(path), ef.file_hash, skipped=True)
+            return IngestOutcome(str(path), st.st_size, st.st_mtime_ns, report, rekey=(old, ef.file_hash))
     report, records = merge_export(path, ef, config, warehouse, run_id, tags, lock=lambda target: partition_lock(warehouse, target))
     return IngestOutcome(str(path), st.st_size, st.st_mtime_ns, report, records)
 
@@ -348,7 +357,7 @@ def baseline_rows(config: PlantConfig, valve_id: str, warehouse: str | Path, ver
 
 
 @task(name="backfill-ingest-file", cache_policy=NO_CACHE, persist_result=False, retries=RETRIES, retry_delay_seconds=list(RETRY_DELAY_S))
-def ingest_export_task(path: str, config: PlantConfig, warehouse: str, known: frozenset[str], run_id: str) -> IngestOutcome:
+def ingest_export_task(path: str, config: PlantConfig, warehouse: str, known: KnownFiles, run_id: str) -> IngestOutcome:
     """One export file into the lake (:func:`ingest_export`)."""
     return ingest_export(path, config, warehouse, known, run_id)
 
@@ -473,7 +482,7 @@ def _progress_rows(warehouse: Path) -> dict[tuple[str, str], dict]:
         return {}
     with connect(warehouse) as con:
         ensure_backfill_tables(con)
-        rows = query_frame(con, f"SELECT unit_kind, unit_key, size_bytes, mtime_ns, file_sha256, fingerprint FROM {PROGRESS_TABLE}")
+        rows = query_frame(con, f"SELECT unit_kind, unit_key, size_bytes, mtime_ns, file_hash, fingerprint FROM {PROGRESS_TABLE}")
     return {(r["unit_kind"], r["unit_key"]): r for r in rows.iter_rows(named=True)}
 
 
@@ -665,7 +674,7 @@ def _ingest_phase(config, warehouse, files, summary, concurrency, opts, force, f
         done = progress.get(("ingest", key))
         if done and not force:
             st = f.stat()
-            if done["size_bytes"] == st.st_size and done["mtime_ns"] == st.st_mtime_ns and done["file_sha256"] in known:
+            if done["size_bytes"] == st.st_size and done["mtime_ns"] == st.st_mtime_ns and done["file_hash"] in known:
                 summary.files_resumed += 1
                 continue
         todo.append(f)
@@ -684,9 +693,12 @@ def _ingest_phase(config, warehouse, files, summary, concurrency, opts, force, f
                     summary.new_spans.append((v, manifest["time_start"], manifest["time_end"]))
         else:
             summary.files_skipped += 1
+            if out.rekey is not None:
+                with connect(warehouse) as con:
+                    rekey_file(con, *out.rekey)
         progress_rows.add({
             "unit_kind": "ingest", "unit_key": str(Path(out.path).resolve()), "source_file": out.path,
-            "size_bytes": out.size_bytes, "mtime_ns": out.mtime_ns, "file_sha256": out.report.sha256,
+            "size_bytes": out.size_bytes, "mtime_ns": out.mtime_ns, "file_hash": out.report.file_hash,
             "run_id": summary.run_id, "finished_at": _now(),
         })  # fmt: skip
         advance()
@@ -716,10 +728,25 @@ def _ingest_phase(config, warehouse, files, summary, concurrency, opts, force, f
     summary.max_in_flight = max(summary.max_in_flight, window.max_in_flight)
 
 
-def manifest_hashes(warehouse: Path) -> frozenset[str]:
+@dataclass(frozen=True)
+class KnownFiles:
+    """The content hashes of the ingest manifest, and the sizes of its files that it knows only by
+    their legacy SHA-256 (``flows.ingest.in_manifest``)."""
+
+    hashes: frozenset[str]
+    legacy_sizes: frozenset[int] = frozenset()
+
+    def __contains__(self, file_hash: object) -> bool:
+        return file_hash in self.hashes
+
+
+def manifest_hashes(warehouse: Path) -> KnownFiles:
     """Content hashes of the files the ingest manifest holds."""
     with connect(warehouse) as con:
-        return frozenset(query_frame(con, "SELECT file_sha256 FROM ingest_manifest")["file_sha256"].to_list())
+        ensure_ingest_tables(con)
+        rows = query_frame(con, "SELECT file_hash, size_bytes FROM ingest_manifest")
+    legacy = rows.filter(pl.col("file_hash").str.starts_with(LEGACY_HASH_PREFIX))["size_bytes"]
+    return KnownFiles(frozenset(rows["file_hash"].to_list()), frozenset(legacy.to_list()))
 
 
 def _current_baselines(warehouse: Path, valves: list[str]) -> dict[str, pl.DataFrame]:

@@ -17,8 +17,9 @@ from __future__ import annotations
 
 import gzip
 import hashlib
-import io
+import mmap
 import os
+import re
 import uuid
 import zlib
 from contextlib import AbstractContextManager, contextmanager, nullcontext
@@ -28,6 +29,8 @@ from pathlib import Path
 from typing import Callable, Iterator
 
 import polars as pl
+import pyarrow as pa
+from blake3 import blake3
 from prefect import flow, task
 from prefect.cache_policies import NO_CACHE
 
@@ -45,6 +48,37 @@ EXPORT_SUFFIXES = (".csv", ".csv.gz", ".txt", ".tsv", ".tsv.gz", ".txt.gz", ".pa
 
 _GZIP_MAGIC = b"\x1f\x8b"
 _PARQUET_MAGIC = b"PAR1"
+_NOT_BLANK = re.compile(rb"\S")
+
+HASH_PREFIX = "blake3:"
+"""The manifest's content hash is ``blake3:<64 hex digits>`` (BLAKE3-256 of the file's bytes)."""
+LEGACY_HASH_PREFIX = "sha256:"
+"""Files ingested before BLAKE3 keep their SHA-256, ``sha256:<64 hex digits>`` (docs/ingest.md)."""
+
+
+def content_hash(data) -> str:
+    """The manifest's content hash of a file's bytes (any buffer: bytes, mmap): ``blake3:<hex>``."""
+    return HASH_PREFIX + blake3(data).hexdigest()
+
+
+def legacy_hash(path: Path) -> str:
+    """The content hash the manifest held before BLAKE3: ``sha256:<hex>`` of the file's bytes."""
+    with _mapped(path) as data:
+        return LEGACY_HASH_PREFIX + hashlib.sha256(data).hexdigest()
+
+
+@contextmanager
+def _mapped(path: Path) -> Iterator[mmap.mmap | bytes]:
+    """The file's bytes, memory-mapped (no copy; ``b""`` for an empty file)."""
+    with open(path, "rb") as fh:
+        if os.fstat(fh.fileno()).st_size == 0:
+            yield b""
+            return
+        data = mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ)
+        try:
+            yield data
+        finally:
+            data.close()
 
 
 # --- files -----------------------------------------------------------------------------------
@@ -105,8 +139,8 @@ def _value_columns(columns: list[str], export: ExportSpec) -> list[str]:
     return [c for c in columns if c not in skip]
 
 
-def read_csv_export(data: bytes, export: ExportSpec, tags: TagTable | None = None) -> pl.DataFrame:
-    """A CSV export's bytes (decompressed) → frame in file order.
+def read_csv_export(data: bytes | Path, export: ExportSpec, tags: TagTable | None = None) -> pl.DataFrame:
+    """A CSV export's bytes (decompressed), or its file, → frame in file order.
 
     Value columns are read as Float64 and, in the long layout, the tag column as an Enum of
     the plant's tags (the fast path). Only if that fails (a cell that is no number, a tag the
@@ -138,6 +172,11 @@ def read_csv_export(data: bytes, export: ExportSpec, tags: TagTable | None = Non
     return df
 
 
+def read_parquet_export(path: Path) -> pl.DataFrame:
+    """A Parquet export → frame in file order."""
+    return pl.read_parquet(path)
+
+
 @dataclass
 class ExportFile:
     """An export as read: its frame, where its rows start, and what identifies the file."""
@@ -145,32 +184,34 @@ class ExportFile:
     frame: pl.DataFrame
     first_line: int
     file_format: str
-    sha256: str
+    file_hash: str
+    """:func:`content_hash` of the file's bytes."""
     size_bytes: int
+    path: Path | None = None
 
 
 def read_export(path: Path, export: ExportSpec, tags: TagTable | None = None) -> ExportFile:
     """Read one export file (CSV, gzip CSV or Parquet) and hash its bytes.
+
+    The file is memory-mapped and hashed (:func:`content_hash`) without a copy; a plain CSV or
+    Parquet file is then decoded from the file by polars / Arrow (a gzip file from the
+    decompressed bytes).
 
     Raises
     ------
     ValvemonError
         Naming the file: unreadable, empty, truncated gzip, not CSV/Parquet.
     """
+    path = Path(path)
+    empty = f"{path}: empty file (expected a {export.layout} export with a header line)"
     try:
-        raw = path.read_bytes()
-    except OSError as exc:
-        raise ValvemonError(f"{path}: cannot read the file ({exc.strerror or exc})") from None
-    if not raw:
-        raise ValvemonError(f"{path}: empty file (expected a {export.layout} export with a header line)")
-    digest = hashlib.sha256(raw).hexdigest()
-    fmt = sniff_format(path, raw[:4])
-    try:
-        if fmt == "parquet":
-            df = pl.read_parquet(io.BytesIO(raw))
-            first_line = 1
-        else:
-            data = raw
+        with _mapped(path) as raw:
+            size = len(raw)
+            if not size:
+                raise ValvemonError(empty)
+            digest = content_hash(raw)
+            fmt = sniff_format(path, bytes(raw[:4]))
+            data: bytes | Path = path
             if fmt == "csv.gz":
                 try:
                     data = gzip.decompress(raw)
@@ -178,19 +219,26 @@ def read_export(path: Path, export: ExportSpec, tags: TagTable | None = None) ->
                     raise ValvemonError(f"{path}: truncated or corrupt gzip file ({exc})") from None
                 if not data or data.isspace():
                     raise ValvemonError(f"{path}: empty file inside the gzip (expected a {export.layout} export with a header line)")
-            if not data or data.isspace():
-                raise ValvemonError(f"{path}: empty file (expected a {export.layout} export with a header line)")
+            elif fmt == "csv" and _NOT_BLANK.search(raw) is None:
+                raise ValvemonError(empty)
+    except (OSError, ValueError) as exc:
+        raise ValvemonError(f"{path}: cannot read the file ({getattr(exc, 'strerror', None) or exc})") from None
+    try:
+        if fmt == "parquet":
+            df = read_parquet_export(path)
+            first_line = 1
+        else:
             df = read_csv_export(data, export, tags)
             first_line = 2
     except ValvemonError:
         raise
-    except (pl.exceptions.PolarsError, OSError, ValueError) as exc:
+    except (pl.exceptions.PolarsError, pa.ArrowException, OSError, ValueError) as exc:
         kind = "Parquet" if fmt == "parquet" else "CSV"
         reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise ValvemonError(f"{path}: not a readable {kind} export ({reason})") from None
     if df.height == 0:
         raise ValvemonError(f"{path}: no data rows (only a header)")
-    return ExportFile(df, first_line, fmt, digest, len(raw))
+    return ExportFile(df, first_line, fmt, digest, size, path)
 
 
 # --- one file --------------------------------------------------------------------------------
@@ -201,7 +249,7 @@ class FileReport:
     """What ingesting one file did."""
 
     path: str
-    sha256: str
+    file_hash: str
     skipped: bool = False
     rows_in: int = 0
     samples_in: int = 0
@@ -221,13 +269,49 @@ def _now() -> datetime:
     return datetime.now(timezone.utc)
 
 
-def in_manifest(warehouse: Path, sha256: str) -> bool:
-    """Whether the manifest already holds a file with this content hash."""
+def in_manifest(warehouse: Path, ef: ExportFile | str) -> bool:
+    """Whether the manifest already holds a file with this content (an :class:`ExportFile`, or a
+    content hash).
+
+    A manifest row of an older warehouse holds the file's SHA-256 (``sha256:…``); only when one
+    such row has the file's size is the file's SHA-256 computed, and on a match the file's rows
+    are re-keyed to its BLAKE3 hash (:func:`rekey_file`), so the next run matches it at once.
+    """
     if not (Path(warehouse) / "valvemon.duckdb").exists():
         return False
+    file_hash = ef if isinstance(ef, str) else ef.file_hash
     with connect(warehouse) as con:
         ensure_ingest_tables(con)
-        return con.execute("SELECT count(*) FROM ingest_manifest WHERE file_sha256 = ?", [sha256]).fetchone()[0] > 0
+        if con.execute("SELECT count(*) FROM ingest_manifest WHERE file_hash = ?", [file_hash]).fetchone()[0] > 0:
+            return True
+        if isinstance(ef, str) or ef.path is None:
+            return False
+        legacy = {r[0] for r in con.execute(
+            "SELECT file_hash FROM ingest_manifest WHERE size_bytes = ? AND starts_with(file_hash, ?)", [ef.size_bytes, LEGACY_HASH_PREFIX]
+        ).fetchall()}  # fmt: skip
+        if not legacy:
+            return False
+        old = legacy_hash(ef.path)
+        if old not in legacy:
+            return False
+        rekey_file(con, old, file_hash)
+        return True
+
+
+def rekey_file(con, old: str, new: str) -> None:
+    """Give a file's rows (manifest, quarantine, gaps, backfill progress) the content hash ``new``
+    instead of ``old`` (its legacy SHA-256), in one transaction."""
+    tables = ["ingest_manifest", "quarantine", "ingest_gaps"]
+    if con.execute("SELECT count(*) FROM duckdb_tables() WHERE database_name = current_database() AND table_name = 'backfill_progress'").fetchone()[0]:
+        tables.append("backfill_progress")
+    con.execute("BEGIN TRANSACTION")
+    try:
+        for t in tables:
+            con.execute(f"UPDATE {t} SET file_hash = ? WHERE file_hash = ?", [new, old])
+        con.execute("COMMIT")
+    except BaseException:
+        con.execute("ROLLBACK")
+        raise
 
 
 def _table(frame: pl.DataFrame, fields) -> pl.DataFrame:
@@ -245,8 +329,8 @@ def ingest_file(path: str | Path, config: PlantConfig, warehouse: str | Path, ru
     path, warehouse = Path(path), Path(warehouse)
     tags = tags or TagTable.from_config(config)
     ef = read_export(path, config.export, tags)
-    if not force and in_manifest(warehouse, ef.sha256):
-        return FileReport(str(path), ef.sha256, skipped=True)
+    if not force and in_manifest(warehouse, ef):
+        return FileReport(str(path), ef.file_hash, skipped=True)
     report, records = merge_export(path, ef, config, warehouse, run_id, tags)
     record_file(warehouse, *records)
     return report
@@ -276,7 +360,7 @@ def merge_export(
         Naming the file and what is wrong with its content.
     """
     export = config.export
-    report = FileReport(str(path), ef.sha256)
+    report = FileReport(str(path), ef.file_hash)
     try:
         result = process_export(ef.frame, config, first_line=ef.first_line, tags=tags)
     except IngestError as exc:
@@ -305,14 +389,14 @@ def merge_export(
 def file_records(path: Path, ef: ExportFile, result, report: FileReport, run_id: str, layout: str) -> tuple[dict, pl.DataFrame, pl.DataFrame]:
     """The manifest row, quarantine rows and gap rows of one ingested file, per the registry."""
     now = _now()
-    extra = {"file_sha256": ef.sha256, "source_file": str(path), "run_id": run_id, "ingested_at": now}
+    extra = {"file_hash": ef.file_hash, "source_file": str(path), "run_id": run_id, "ingested_at": now}
     quarantine = _table(result.quarantine.with_columns(**{k: pl.lit(v) for k, v in extra.items()}), QUARANTINE_FIELDS)
     QUARANTINE_SCHEMA.validate(quarantine, lazy=True)
-    gaps = _table(result.gaps.with_columns(file_sha256=pl.lit(ef.sha256), source_file=pl.lit(str(path))), GAP_FIELDS)
+    gaps = _table(result.gaps.with_columns(file_hash=pl.lit(ef.file_hash), source_file=pl.lit(str(path))), GAP_FIELDS)
     GAP_SCHEMA.validate(gaps, lazy=True)
     c = result.counts
     manifest = {
-        "file_sha256": ef.sha256,
+        "file_hash": ef.file_hash,
         "source_file": str(path),
         "size_bytes": ef.size_bytes,
         "file_format": ef.file_format,
@@ -342,13 +426,13 @@ def record_file(warehouse: Path, manifest: dict, quarantine: pl.DataFrame, gaps:
     Earlier quarantine and gap rows of the same content hash are replaced, so a file ingested
     again (``force``, or after a crash) is never counted twice.
     """
-    sha = manifest["file_sha256"]
+    key = manifest["file_hash"]
     with connect(warehouse) as con:
         ensure_ingest_tables(con)
         con.execute("BEGIN TRANSACTION")
         try:
-            con.execute("DELETE FROM quarantine WHERE file_sha256 = ?", [sha])
-            con.execute("DELETE FROM ingest_gaps WHERE file_sha256 = ?", [sha])
+            con.execute("DELETE FROM quarantine WHERE file_hash = ?", [key])
+            con.execute("DELETE FROM ingest_gaps WHERE file_hash = ?", [key])
             insert_frame(con, "quarantine", quarantine)
             insert_frame(con, "ingest_gaps", gaps)
             insert_frame(con, "ingest_manifest", pl.DataFrame([manifest], schema=polars_schema(MANIFEST_FIELDS)), replace=True)

@@ -144,7 +144,7 @@ SENSOR_SCHEMA = pandera_schema(SENSOR_FIELDS, "sensor_frame")
 UTC_NS = pl.Datetime("ns", "UTC")
 """Export timestamps before they are put on the lake's grid (PI writes 100 ns)."""
 
-_FILE_SHA256 = Field("file_sha256", pl.Utf8, "", "Content hash of the source file.")
+_FILE_HASH = Field("file_hash", pl.Utf8, "", "Content hash of the source file (as in ingest_manifest.file_hash).")
 _SOURCE_FILE = Field("source_file", pl.Utf8, "", "Path of the source file as given to the ingest.")
 _LINE = Field("line", pl.Int64, "", "Line of the source file (CSV, header = line 1) or row (Parquet, first row = 1).", ge=1)
 
@@ -157,7 +157,7 @@ RAW_ROW_FIELDS: tuple[Field, ...] = (
 """One accepted sample of one tag, as the ingest reads it from an export (long form)."""
 
 QUARANTINE_FIELDS: tuple[Field, ...] = (
-    _FILE_SHA256,
+    _FILE_HASH,
     _SOURCE_FILE,
     _LINE,
     Field("tag", pl.Utf8, "", "Historian tag name.", nullable=True),
@@ -171,7 +171,7 @@ QUARANTINE_FIELDS: tuple[Field, ...] = (
 """Samples of an export set aside by the ingest (table ``quarantine``)."""
 
 GAP_FIELDS: tuple[Field, ...] = (
-    _FILE_SHA256,
+    _FILE_HASH,
     _SOURCE_FILE,
     _VALVE_ID,
     Field("signal", pl.Utf8, "", "Signal of the plant configuration's [valves.tags].", isin=SIGNALS),
@@ -183,7 +183,7 @@ GAP_FIELDS: tuple[Field, ...] = (
 """Gaps longer than ``export.max_gap_s`` between consecutive accepted samples of a tag (table ``ingest_gaps``)."""
 
 MANIFEST_FIELDS: tuple[Field, ...] = (
-    Field("file_sha256", pl.Utf8, "", "Content hash (SHA-256) of the file; the table's key."),
+    Field("file_hash", pl.Utf8, "", "Content hash of the file, 'blake3:' + BLAKE3-256 in hex ('sha256:' + SHA-256 for files ingested before BLAKE3); the table's key."),
     Field("source_file", pl.Utf8, "", "Path of the file when it was ingested."),
     Field("size_bytes", pl.Int64, "B", "File size.", ge=0),
     Field("file_format", pl.Utf8, "", "How the file was read.", isin=("csv", "csv.gz", "parquet")),

@@ -5,6 +5,7 @@ from __future__ import annotations
 from datetime import timedelta
 
 import pytest
+from blake3 import blake3
 from polars.testing import assert_frame_equal
 
 import flows.ingest
@@ -86,12 +87,10 @@ def test_a_later_export_that_disagrees_is_refused_under_rule_error(plant, tmp_pa
 
 
 def test_manifest_records_hash_counts_and_time_range(plant, tmp_path):
-    import hashlib
-
     cfg, _ = plant()
     ingest(cfg, DATA / "duplicates.csv", tmp_path / "wh")
     m = table(tmp_path / "wh", "ingest_manifest").row(0, named=True)
-    assert m["file_sha256"] == hashlib.sha256((DATA / "duplicates.csv").read_bytes()).hexdigest()
+    assert m["file_hash"] == "blake3:" + blake3((DATA / "duplicates.csv").read_bytes()).hexdigest()
     assert (m["rows_in"], m["samples_in"], m["rows_out"], m["rows_added"], m["quarantined"], m["partitions"]) == (21, 21, 3, 3, 0, 1)
     assert (m["time_start"], m["time_end"]) == (T0, T0 + timedelta(seconds=2))
     assert m["valves"] == "V017" and m["layout"] == "long" and m["file_format"] == "csv"
@@ -217,3 +216,60 @@ def test_crash_before_the_manifest_then_rerun_counts_nothing_twice(plant, tmp_pa
     assert report.files_ingested == 1 and report.rows_added == 0  # the lake already had the rows
     assert table(wh, "quarantine").height == 3 and table(wh, "ingest_manifest").height == 1
     assert lake(wh).height == 5
+
+
+def _make_legacy(wh):
+    """Turn a warehouse into one written before BLAKE3: column file_sha256 holding bare SHA-256 hex."""
+    import hashlib
+
+    import duckdb
+
+    con = duckdb.connect(str(wh / "valvemon.duckdb"))
+    try:
+        files = con.execute("SELECT file_hash, source_file FROM ingest_manifest").fetchall()
+        for t in ("ingest_manifest", "quarantine", "ingest_gaps"):
+            for h, src in files:
+                sha = hashlib.sha256(open(src, "rb").read()).hexdigest()
+                con.execute(f"UPDATE {t} SET file_hash = ? WHERE file_hash = ?", [sha, h])
+            con.execute(f"ALTER TABLE {t} RENAME COLUMN file_hash TO file_sha256")
+    finally:
+        con.close()
+
+
+def test_a_warehouse_from_before_blake3_still_knows_its_files(plant, tmp_path):
+    import hashlib
+
+    cfg, _ = plant()
+    wh = tmp_path / "wh"
+    lines = (DATA / "base_long.csv").read_text().splitlines()
+    gapped = tmp_path / "gap.csv"  # seconds 1 and 2 missing: a 3 s gap per tag, one quarantined sample
+    kept = [ln for ln in lines if "12:00:01" not in ln and "12:00:02" not in ln]
+    kept[-1] = kept[-1].rsplit(",", 1)[0] + ",Bad"
+    gapped.write_text("\n".join(kept) + "\n")
+    ingest(cfg, [DATA / "duplicates.csv", gapped], wh)
+    before = {t: table(wh, t) for t in ("ingest_manifest", "quarantine", "ingest_gaps")}
+    assert before["ingest_gaps"].height == 6 and before["quarantine"].height == 1
+    _make_legacy(wh)
+    sha = {p.name: "sha256:" + hashlib.sha256(p.read_bytes()).hexdigest() for p in (DATA / "duplicates.csv", gapped)}
+
+    # the first connection migrates: column renamed, values marked as SHA-256, nothing lost
+    summary = ingest(cfg, [DATA / "duplicates.csv"], wh)
+    assert (summary.files_skipped, summary.files_ingested) == (1, 0)  # known by its SHA-256
+    m = table(wh, "ingest_manifest").sort("source_file")
+    new = "blake3:" + blake3((DATA / "duplicates.csv").read_bytes()).hexdigest()
+    assert sorted(m["file_hash"].to_list()) == sorted([new, sha["gap.csv"]])  # the file seen again was re-keyed
+    gaps, quarantine = table(wh, "ingest_gaps"), table(wh, "quarantine")
+    assert gaps.height == 6 and set(gaps["file_hash"]) == {sha["gap.csv"]}
+    assert quarantine.height == 1 and set(quarantine["file_hash"]) == {sha["gap.csv"]}
+    assert_frame_equal(m.drop("file_hash"), before["ingest_manifest"].sort("source_file").drop("file_hash"))
+
+    # the re-keyed file is now matched by its BLAKE3 hash; the other still by its SHA-256
+    summary = ingest(cfg, [DATA / "duplicates.csv", gapped], wh)
+    assert (summary.files_skipped, summary.files_ingested) == (2, 0)
+    assert table(wh, "ingest_manifest").height == 2 and table(wh, "ingest_gaps").height == 6 and table(wh, "quarantine").height == 1
+    key = "blake3:" + blake3(gapped.read_bytes()).hexdigest()
+    assert set(table(wh, "ingest_gaps")["file_hash"]) == {key} and set(table(wh, "quarantine")["file_hash"]) == {key}
+
+    # --force reads it again and replaces (not doubles) its quarantine and gap rows
+    ingest(cfg, [gapped], wh, force=True)
+    assert table(wh, "ingest_manifest").height == 2 and table(wh, "ingest_gaps").height == 6 and table(wh, "quarantine").height == 1
