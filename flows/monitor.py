@@ -73,14 +73,21 @@ piecewise-linear interpolation error is below 0.01 mm² on the open branch)."""
 
 def ensure_monitor_tables(con) -> None:
     """Create ``baselines``, ``edge_fits`` and ``selection_stats`` if missing, with a unique index
-    on the :data:`INDEXED_TABLES` (one on the others, made by earlier versions, is dropped)."""
+    on the :data:`INDEXED_TABLES` (one on the others, made by earlier versions, is dropped).
+    One catalog query first, so that a warehouse that has them costs no DDL."""
+    have = con.sql(
+        "SELECT 'table', table_name FROM duckdb_tables() WHERE database_name = current_database() "
+        "UNION ALL SELECT 'index', index_name FROM duckdb_indexes() WHERE database_name = current_database()"
+    ).fetchall()
+    tables = {name for kind, name in have if kind == "table"}
+    indexes = {name for kind, name in have if kind == "index"}
     for name, (fields, key) in MONITOR_TABLES.items():
-        con.execute(create_table_sql(name, fields))
-        if name in INDEXED_TABLES:
+        if name not in tables:
+            con.execute(create_table_sql(name, fields))
+        if name in INDEXED_TABLES and f"{name}_key" not in indexes:
             con.execute(f"CREATE UNIQUE INDEX IF NOT EXISTS {name}_key ON {name} ({', '.join(key)})")
-    stale = [f"{name}_key" for name in MONITOR_TABLES if name not in INDEXED_TABLES]
-    for (index,) in con.sql("SELECT index_name FROM duckdb_indexes() WHERE list_contains(?, index_name)", params=[stale]).fetchall():
-        con.execute(f"DROP INDEX {index}")
+        if name not in INDEXED_TABLES and f"{name}_key" in indexes:
+            con.execute(f"DROP INDEX {name}_key")
 
 
 def monitor_params(valve: ValveSpec, sample_rate_hz: float) -> MonitorParams:
