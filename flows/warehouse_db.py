@@ -2,7 +2,9 @@
 
 A read-write DuckDB connection locks the file against other processes, so every user opens a
 connection for one unit of work and closes it (:func:`connect`); a locked file is retried for a
-while before the caller gets a :class:`ValvemonError`. Results are fetched before the next
+while before the caller gets a :class:`ValvemonError`. The file is attached to one in-memory
+DuckDB instance per process (:class:`_Host`) rather than opened as an instance of its own: the
+same lock, at ~1.5 instead of ~30 ms of CPU per unit of work. Results are fetched before the next
 statement (DuckDB 2.0 requires it). Tables are created from the field registry
 (:func:`create_table_sql`), so their columns are the ones ``schemas.fields`` documents.
 
@@ -15,6 +17,7 @@ Warehouses from before the BLAKE3 content hash are migrated when the tables are 
 
 from __future__ import annotations
 
+import atexit
 import os
 import threading
 import time
@@ -120,14 +123,27 @@ class _Host:
                 del self.attached[key]
                 self.instance.execute(f"DETACH {entry[0]}")
 
+    def close(self) -> None:
+        """At exit: detach everything (a checkpoint each) and close the instance."""
+        with self.guard:
+            if self.instance is not None:
+                self.instance.close()
+            self.instance = None
+            self.attached = {}
+
     def forget(self) -> None:
-        """In a forked child: the parent's instance and its threads are not ours to use."""
+        """In a forked child: the parent's instance and its threads are not ours to use (nor to
+        destroy: it is kept, unused, until the child exits)."""
+        if self.instance is not None:
+            _ABANDONED.append(self.instance)
         self.guard = threading.Lock()
         self.instance = None
         self.attached = {}
 
 
+_ABANDONED: list[duckdb.DuckDBPyConnection] = []
 _HOST = _Host()
+atexit.register(_HOST.close)
 if hasattr(os, "register_at_fork"):
     os.register_at_fork(after_in_child=_HOST.forget)
 
