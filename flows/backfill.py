@@ -62,6 +62,7 @@ import polars as pl
 from prefect import flow, task
 from prefect.cache_policies import NO_CACHE
 
+from flows.allocator import retain_freed_memory
 from flows.batches import WriteBatch
 from flows.config import load_plant_config
 from flows.errors import ValvemonError
@@ -261,6 +262,7 @@ def ingest_export(path: str | Path, config: PlantConfig, warehouse: str | Path, 
     files are being ingested at the same time) and the database rows are returned, not written.
     """
     path, warehouse = Path(path), Path(warehouse)
+    retain_freed_memory()  # the next file's arrays reuse this one's heap (flows/allocator.py)
     st = path.stat()
     tags = TagTable.from_config(config)
     ef = read_export(path, config.export, tags)

@@ -125,9 +125,6 @@ def process_export(df: pl.DataFrame, config: PlantConfig, *, first_line: int = 2
     acc = samples.accepted
     validate_raw_rows(acc)
     counts = ExportCounts(rows_in=samples.rows_in, samples_in=samples.samples_in, quarantined=samples.quarantine.height, valves=tuple(valves))
-    if acc.height:
-        counts.time_start = acc["timestamp_utc"].min()
-        counts.time_end = acc["timestamp_utc"].max()
 
     tag_id = acc["tag"].to_physical().to_numpy()
     t_all = acc["timestamp_utc"].to_physical().to_numpy()
@@ -136,12 +133,15 @@ def process_export(df: pl.DataFrame, config: PlantConfig, *, first_line: int = 2
 
     gridded: dict[str, dict] = {}
     gap_frames = []
+    first_ns, last_ns = [], []  # of each tag's sorted samples: the accepted samples' time range
     for tid, t_tag, v_tag, sel in split_by_tag(tag_id, t_all, v_all):
         tag, valve_id, signal = tags.tags[tid], tags.valve_ids[tid], tags.signals[tid]
         series = prepare_tag(t_tag, v_tag, lambda sel=sel: line_all[sel], export.duplicate_rule, tag)
         counts.duplicates += series.duplicates
         counts.conflicts += series.conflicts
         counts.accepted += len(series.t_ns)
+        first_ns.append(int(series.t_ns[0]))
+        last_ns.append(int(series.t_ns[-1]))
         g = to_grid(series.t_ns, series.values, grid)
         gridded.setdefault(valve_id, {})[signal] = g
         if len(g.gap_start_ns):
@@ -159,6 +159,9 @@ def process_export(df: pl.DataFrame, config: PlantConfig, *, first_line: int = 2
                     schema=GAP_COLUMNS,
                 )
             )
+
+    if first_ns:
+        counts.time_start, counts.time_end = pl.Series([min(first_ns), max(last_ns)], dtype=pl.Int64).cast(acc.schema["timestamp_utc"]).to_list()
 
     frames = []
     for valve_id in valves:

@@ -162,7 +162,7 @@ def to_grid(t_ns: np.ndarray, values: np.ndarray, grid: Grid) -> Gridded:
     d = np.diff(t_ns)
     breaks = np.flatnonzero(d > grid.max_gap_ns)
     gap_start, gap_end = t_ns[breaks], t_ns[breaks + 1]
-    if t_ns[0] % P == 0 and (np.array_equal(d, np.full_like(d, P)) or (np.all(t_ns % P == 0) and np.all((d == P) | (d > grid.max_gap_ns)))):
+    if t_ns[0] % P == 0 and ((n == 1 or (d.min() == P and d.max() == P)) or (np.all(t_ns % P == 0) and np.all((d == P) | (d > grid.max_gap_ns)))):
         # exactly gridded and nothing missing inside a segment: the samples are the grid
         return Gridded(t_ns // NS_PER_US, values, gap_start, gap_end)
     seg_first = np.r_[0, breaks + 1]
