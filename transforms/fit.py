@@ -195,7 +195,7 @@ def _locked_sums(sa, sb, sad, sbd, sdd, d):
 
 
 @numba.njit(cache=True)
-def _newton(u, a, jc, s, e, kn, kv, ks, k0, k1, tab, toff, tlo, tinv, tn, x, lo, hi, saa, first_mode, xtol, trust, maxiter):
+def _newton(u, a, jc, s, e, kn, kv, ks, k0, k1, tab, toff, tlo, tinv, tn, x, lo, hi, first_mode, xtol, trust, maxiter):
     """Safeguarded Newton on f′ within [lo, hi] from x, each step the exact minimiser of the
     segment-locked cost (:func:`_locked_step`; bisection when that leaves the bracket).
 
@@ -273,7 +273,7 @@ def _grid_start(u, a, s, e, stride, kn, kv, ks, k0, k1, x_first, step, n_grid):
 
 
 @numba.njit(cache=True)
-def _fit_one(u, a, jc, s, e, kn, kv, ks, k0, k1, tab, toff, tlo, tinv, tn, xb, n_grid, sub_max, xtol, trust, maxiter, x_start, saa):
+def _fit_one(u, a, jc, s, e, kn, kv, ks, k0, k1, tab, toff, tlo, tinv, tn, xb, n_grid, sub_max, xtol, trust, maxiter, x_start):
     """Returns (x, code, passes, sums at x or zeros, dx) as :func:`_newton` does. A finite
     ``x_start`` (a previous optimum of nearly the same population) replaces the coarse grid:
     Newton starts there, bracketed by one grid step on either side (moved on like any bracket
@@ -297,7 +297,7 @@ def _fit_one(u, a, jc, s, e, kn, kv, ks, k0, k1, tab, toff, tlo, tinv, tn, xb, n
     mode = 1
     x = x0
     for _expand in range(2 * n_grid):
-        x, code, p, sums, dx = _newton(u, a, jc, s, e, kn, kv, ks, k0, k1, tab, toff, tlo, tinv, tn, x, lo, hi, saa, mode, xtol, trust, maxiter)
+        x, code, p, sums, dx = _newton(u, a, jc, s, e, kn, kv, ks, k0, k1, tab, toff, tlo, tinv, tn, x, lo, hi, mode, xtol, trust, maxiter)
         passes += p
         mode = 2
         if code != _OK and code != _PREDICTED:
@@ -340,11 +340,10 @@ def _fit_groups(u, a, offsets, kstart, kend, kn, kv, ks, tab, tstart, tlo, tinv,
         k0 = kstart[g]
         k1 = kend[g]
         toff, tlo_g, tinv_g, tn_g = tstart[g], tlo[g], tinv[g], tn[g]
-        saa = 0.0
-        for i in range(s, e):
-            saa += a[i] * a[i]
+        r2 = -1.0  # no residual pass yet
+        r11 = saa = 0.0
         x, c, p, sums, dx = _fit_one(u, a, jc, s, e, kn, kv, ks, k0, k1, tab, toff, tlo_g, tinv_g, tn_g, xbound[g], n_grid,
-                                     sub_max, xtol, TRUST_STEP_M, maxiter, x_start[g], saa)  # fmt: skip
+                                     sub_max, xtol, TRUST_STEP_M, maxiter, x_start[g])  # fmt: skip
         if c == _PREDICTED and residuals:
             # the residual pass at the predicted optimum x + dx (α from the locked sums there)
             # also takes the exact sums there; their locked step dx2 is the last one (the few
@@ -353,7 +352,7 @@ def _fit_groups(u, a, offsets, kstart, kend, kn, kv, ks, tab, tstart, tlo, tinv,
             x = x + dx
             ls = _locked_sums(sums[0], sums[1], sums[2], sums[3], sums[4], dx)
             al_p = ls[0] / ls[1] if ls[1] > 0.0 else 0.0
-            r2, r11, ex = _residual_pass(u, a, jc, s, e, kn, kv, ks, k0, k1, x, al_p)
+            r2, r11, saa, ex = _residual_pass(u, a, jc, s, e, kn, kv, ks, k0, k1, x, al_p)
             p += 1
             dx = _locked_step(ex[0], ex[1], ex[2], ex[3], ex[4])
             if abs(dx) < TRUST_STEP_M and abs(x + dx) < xbound[g]:
@@ -362,14 +361,11 @@ def _fit_groups(u, a, offsets, kstart, kend, kn, kv, ks, tab, tstart, tlo, tinv,
             else:
                 step = 2.0 * xbound[g] / (n_grid - 1)
                 x, c, p2, sums, dx = _newton(u, a, jc, s, e, kn, kv, ks, k0, k1, tab, toff, tlo_g, tinv_g, tn_g, x,
-                                             max(-xbound[g], x - step), min(xbound[g], x + step), saa, 2, xtol, 0.0, maxiter)  # fmt: skip
+                                             max(-xbound[g], x - step), min(xbound[g], x + step), 2, xtol, 0.0, maxiter)  # fmt: skip
                 p += p2
                 r2 = -1.0
         elif c == _PREDICTED:
             c = _OK
-            r2 = -1.0
-        else:
-            r2 = -1.0
         iters[g] = p
         code[g] = c
         if c == _DEGENERATE:
@@ -391,7 +387,7 @@ def _fit_groups(u, a, offsets, kstart, kend, kn, kv, ks, tab, tstart, tlo, tinv,
         if not residuals:
             continue
         if r2 < 0.0:
-            r2, r11, _ex = _residual_pass(u, a, jc, s, e, kn, kv, ks, k0, k1, x, al)
+            r2, r11, saa, _ex = _residual_pass(u, a, jc, s, e, kn, kv, ks, k0, k1, x, al)
         # Σ r² at (α̂, x̂) from the sums (exact for the locked segments; the pass's own Σ r²
         # was taken at the predicted α, a hair away)
         ssr[g] = max(saa - al * sa, 0.0)
@@ -404,8 +400,9 @@ def _fit_groups(u, a, offsets, kstart, kend, kn, kv, ks, tab, tstart, tlo, tinv,
 
 @numba.njit(cache=True)
 def _residual_pass(u, a, jc, s, e, kn, kv, ks, k0, k1, x, al):
-    """Residuals r = A − α Â(u + x) (segments walked from ``jc``): Σ r², Σ rᵢ rᵢ₋₁ and the sums
-    (S_a, S_b, S_ad, S_bd, S_dd) at x."""
+    """Residuals r = A − α Â(u + x) (segments walked from ``jc``): Σ r², Σ rᵢ rᵢ₋₁, Σ A² and
+    the sums (S_a, S_b, S_ad, S_bd, S_dd) at x."""
+    saa = 0.0
     r2 = 0.0
     r11 = 0.0
     prev = 0.0
@@ -425,6 +422,7 @@ def _residual_pass(u, a, jc, s, e, kn, kv, ks, k0, k1, x, al):
         d = ks[j]
         h = kv[j] + d * (t - kn[j])
         ai = a[i]
+        saa += ai * ai
         r = ai - al * h
         r2 += r * r
         if i > s:
@@ -435,7 +433,15 @@ def _residual_pass(u, a, jc, s, e, kn, kv, ks, k0, k1, x, al):
         sad += ai * d
         sbd += h * d
         sdd += d * d
-    return r2, r11, (sa, sb, sad, sbd, sdd)
+    return r2, r11, saa, (sa, sb, sad, sbd, sdd)
+
+
+@numba.njit(cache=True)
+def _all_finite(x):
+    for v in x:
+        if not np.isfinite(v):
+            return False
+    return True
 
 
 # --------------------------------------------------------------------------------------------
@@ -569,8 +575,7 @@ def fit_arrays(
         u_min[nonempty] = np.minimum.reduceat(u, starts)
         u_max[nonempty] = np.maximum.reduceat(u, starts)
     has_base = np.array([c is not None for c in characteristics], dtype=bool)
-    finite = np.isfinite(u).all() and np.isfinite(area).all()
-    if not finite:
+    if not (_all_finite(u) and _all_finite(area)):
         raise ValueError("u and area must be finite (drop non-finite points before fitting)")
 
     status = np.full(g_n, "ok", dtype=object)

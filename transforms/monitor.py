@@ -307,11 +307,15 @@ def _monitor_points(lake, params, leakage, engine, with_ratio=False, want_points
         windows=pl.concat([q.windows for q in parts], how="vertical"),
     )
     sizes = np.concatenate([q.sizes for q in parts]).astype(np.int64)
+
+    def joined(arrays):  # one valve (what the flows pass): its arrays as they are
+        return arrays[0] if len(arrays) == 1 else np.concatenate(arrays)
+
     return _Points(
         res,
-        np.concatenate([q.u for q in parts]),
-        np.concatenate([q.area for q in parts]),
-        np.concatenate([q.ratio for q in parts]) if with_ratio else None,
+        joined([q.u for q in parts]),
+        joined([q.area for q in parts]),
+        joined([q.ratio for q in parts]) if with_ratio else None,
         pl.concat([q.groups for q in parts], how="vertical"),
         np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64),
     )
