@@ -112,7 +112,9 @@ def _text(col: pl.Series) -> pl.Series:
 
 def _bad_quality(col: pl.Series, good: tuple[str, ...]) -> pl.Series:
     """Rows whose quality code is not one of ``export.good_quality`` (a missing code is bad)."""
-    if isinstance(col.dtype, (pl.Categorical, pl.Enum)) or col.dtype == pl.String:
+    if col.dtype == pl.String and len(good) == 1:
+        ok = col == good[0]  # one good code (the usual case): a comparison, no hashing
+    elif isinstance(col.dtype, (pl.Categorical, pl.Enum)) or col.dtype == pl.String:
         ok = col.is_in(list(good))
     else:
         ok = col.cast(pl.String).is_in(list(good))
@@ -151,6 +153,8 @@ def _reason(missing_tag, bad_quality, missing, non_numeric, non_finite) -> pl.Ex
 
 def _any(masks) -> pl.Series | None:
     used = [m for m in masks if m is not None]
+    if len(used) == 1:
+        return used[0]
     return pl.select(pl.any_horizontal([pl.lit(m) for m in used])).to_series() if used else None
 
 
