@@ -220,3 +220,48 @@ def test_fit_windows_reports_every_window_and_edge():
     out3 = fit_windows(pts, {"V1": {"s1": BASELINE}}, {"V1": sv.params(min_points=500)})
     assert out3.height == 8
     assert set(out3.filter(pl.col("edge") == "2r")["status"]) == {"no_baseline"}
+
+
+@settings(max_examples=20, deadline=None)
+@given(offset=st.floats(-20e-6, 20e-6), seed=st.integers(0, 10**6))
+def test_warm_start_reaches_the_optimum_of_the_cold_start(offset, seed):
+    # the 701-knot nominal: knots 10 µm apart, so a step of a few µm moves many points across
+    # knots and the segment-locked prediction must be confirmed (or corrected) by a full pass
+    rng = np.random.default_rng(seed)
+    u, a = _population(rng, 2000, base=NOMINAL)
+    cold = _fit_one(u, a, base=NOMINAL)
+    warm = _fit_one(u, a, base=NOMINAL, x_start_m=np.array([cold["x_hat_m"] + offset]))
+    assert warm["status"] == cold["status"] == "ok"
+    assert warm["x_hat_m"] == pytest.approx(cold["x_hat_m"], abs=2e-9)
+    assert warm["alpha_hat"] == pytest.approx(cold["alpha_hat"], rel=1e-7)
+    assert warm["e_m2"] == pytest.approx(cold["e_m2"], rel=1e-7)
+    # the optimum: e's gradient vanishes (relative to its scale) and a step of 10 nm either way costs
+    h = NOMINAL.evaluate(u + warm["x_hat_m"])
+    assert warm["alpha_hat"] == pytest.approx((a @ h) / (h @ h), rel=1e-10)  # the best α̂ at x̂
+    e, g_alpha, g_x = eq8_cost_gradient(u, a, NOMINAL, warm["alpha_hat"], warm["x_hat_m"])
+    assert e == pytest.approx(warm["e_m2"], rel=1e-9)
+    assert abs(g_alpha) * warm["alpha_hat"] < 1e-6 * e and abs(g_x) * 1e-6 < 1e-3 * e
+    for dx in (-1e-8, 1e-8):
+        h = NOMINAL.evaluate(u + warm["x_hat_m"] + dx)
+        best_alpha = (a @ h) / (h @ h)
+        assert np.sqrt(np.mean((a - best_alpha * h) ** 2)) >= e * (1 - 1e-12)
+
+
+@pytest.mark.parametrize("offset", [0.0, 0.3e-6, 0.9e-6, 2e-6, 10e-6])
+def test_warm_start_on_a_rough_characteristic_stays_consistent(offset):
+    # a baseline that zigzags ±3 % from knot to knot 3 µm apart: every nanometre of shift moves
+    # points across knots, the segment-locked steps are poor predictions, and Newton must take
+    # over after the residual pass; what it returns must still be self-consistent
+    knots = np.arange(0.5e-3, 4e-3, 3e-6)
+    rough = Characteristic.from_arrays(knots, NOMINAL.evaluate(knots) * (1 + 0.03 * (-1.0) ** np.arange(knots.size)))
+    rng = np.random.default_rng(3)
+    u, a = _population(rng, 2000, base=NOMINAL)
+    x0 = XHAT + offset
+    r = _fit_one(u, a, base=rough, x_start_m=np.array([x0]))
+    assert r["status"] == "ok"
+    h = rough.evaluate(u + r["x_hat_m"])
+    # the best α̂ at x̂ (the last sub-nanometre step moves points across these dense knots, which
+    # the step's segment-locked sums do not see: 1e-6 here, 1e-10 on the smooth nominal)
+    assert r["alpha_hat"] == pytest.approx((a @ h) / (h @ h), rel=1e-6)
+    assert r["e_m2"] == pytest.approx(np.sqrt(np.mean((a - r["alpha_hat"] * h) ** 2)), rel=1e-6)
+    assert abs(r["x_hat_m"] - x0) < 0.1e-3  # a nearby minimum, not a jump across the search range
