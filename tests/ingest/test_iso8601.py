@@ -29,6 +29,9 @@ def _arrow(arr: pa.Array, zoned: bool) -> pa.Array | None:
 def _agree(texts: list[str | None], zoned: bool) -> pa.Array | None:
     arr = pa.array(texts, pa.large_string())
     fast, slow = parse_iso_column(arr, zoned=zoned), _arrow(arr, zoned)
+    for layout in (pa.string_view(), pa.string()):  # what polars hands over, and plain Arrow text
+        other = parse_iso_column(arr.cast(layout), zoned=zoned)
+        assert (other is None) == (fast is None) and (other is None or other.equals(fast)), (layout, texts)
     if slow is None:
         assert fast is None, texts
     if fast is not None:
@@ -88,6 +91,15 @@ def test_naive_shapes_read_as_arrow_does(text):
 def test_what_it_does_not_know_it_leaves_to_arrow(text, zoned):
     assert parse_iso_column(pa.array(["2025-03-01T12:00:00Z" if zoned else "2025-03-01T12:00:00", text]), zoned=zoned) is None
     _agree([text], zoned)
+
+
+def test_views_of_a_sliced_polars_column_are_read_in_place():
+    texts = ["2025-03-01T12:00:00.5Z", None, "2025-03-01 13:00:00.25+01:00", "2025-03-01T12:00:01Z", "2025-03-01T12:00:01.000000001Z"]
+    arr = pl.Series(texts).to_arrow(compat_level=pl.CompatLevel.newest()).slice(1)
+    assert arr.type == pa.string_view()
+    out = parse_iso_column(arr, zoned=True)
+    assert out.equals(_arrow(arr.cast(pa.large_string()), True))
+    assert out.null_count == 1
 
 
 def test_a_mix_of_zoned_and_naive_text_gives_up():

@@ -16,6 +16,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 import pyarrow as pa
+from numba import types
+from numba.extending import intrinsic
 
 _NS_PER_S = 1_000_000_000
 
@@ -33,6 +35,17 @@ def _days_from_civil(y: int, m: int, d: int) -> int:
     return era * 146097 + doe - 719468
 
 
+@intrinsic
+def _byte_ptr(typingctx, address):
+    """The int64 ``address`` as a pointer to bytes (the Arrow buffers are read where they are)."""
+    sig = types.CPointer(types.uint8)(types.int64)
+
+    def codegen(context, builder, signature, args):
+        return builder.inttoptr(args[0], context.get_value_type(types.CPointer(types.uint8)))
+
+    return sig, codegen
+
+
 @numba.njit(cache=True, nogil=True)
 def _digits(data, a: int, k: int) -> int:
     """The number written by ``k`` ASCII digits at ``data[a:]``; -1 if one is no digit."""
@@ -46,24 +59,43 @@ def _digits(data, a: int, k: int) -> int:
 
 
 @numba.njit(cache=True, nogil=True)
-def _parse_column(offsets, data, valid, zoned: bool, out) -> int:
+def _parse_column(view_layout: bool, offsets, data_address: int, views, views_address: int, buffer_addresses, buffer_sizes, valid, zoned: bool, out) -> int:
     """Parse every valid element into ``out`` (int64 ns); the index of the first element it
-    does not accept, or -1 when all were read."""
+    does not accept, or -1 when all were read.
+
+    ``large_string`` layout: element i is ``offsets[i]:offsets[i + 1]`` of the data buffer at
+    ``data_address``. ``string_view`` layout (``view_layout``): ``views[i]`` is (length, prefix,
+    buffer, offset), the bytes inline in the view up to 12 bytes, else in that data buffer.
+    """
     n = len(out)
-    prev = -1  # start of the last element whose date and time (to the second) were read
+    prev = np.int64(-1)  # address of the last element whose date and time (to the second) were read
     base = 0  # those as seconds since the epoch
     for i in range(n):
         if not valid[i]:
             out[i] = 0
             continue
-        a = offsets[i]
-        e = offsets[i + 1]
-        if e - a < 19:
+        if view_layout:
+            e = np.int64(views[i, 0])
+            if e <= 12:
+                address = views_address + i * 16 + 4
+            else:
+                k = views[i, 2]
+                off = np.int64(views[i, 3])
+                if k < 0 or k >= len(buffer_addresses) or off < 0 or off + e > buffer_sizes[k]:
+                    return i
+                address = buffer_addresses[k] + off
+        else:
+            address = data_address + offsets[i]
+            e = offsets[i + 1] - offsets[i]
+        data = _byte_ptr(address)
+        a = 0
+        if e < 19:
             return i
         same = prev >= 0
         if same:  # consecutive rows often share the second: compare, latest digit first
+            before = _byte_ptr(prev)
             for j in range(18, -1, -1):
-                if data[a + j] != data[prev + j]:
+                if data[j] != before[j]:
                     same = False
                     break
         if not same:
@@ -90,7 +122,7 @@ def _parse_column(offsets, data, valid, zoned: bool, out) -> int:
             if d > dim:
                 return i
             base = _days_from_civil(y, mo, d) * 86400 + h * 3600 + mi * 60 + s
-            prev = a
+            prev = address
         p = a + 19
         frac = 0
         if p < e and data[p] == 46:  # '.'
@@ -146,20 +178,38 @@ def _parse_column(offsets, data, valid, zoned: bool, out) -> int:
 def parse_iso_column(arr: pa.Array | pa.ChunkedArray, *, zoned: bool) -> pa.Array | None:
     """Text → ``timestamp[ns, UTC]`` (``zoned``, every element with an offset) or naive
     ``timestamp[ns]`` (no element with an offset); None when an element is not of the accepted
-    shape (module doc). Nulls stay null."""
+    shape (module doc). Nulls stay null.
+
+    ``string_view`` (what polars hands over without a copy: ``to_arrow(compat_level=newest)``),
+    ``large_string`` and ``string`` arrays are read in place.
+    """
     if isinstance(arr, pa.ChunkedArray):
         arr = arr.combine_chunks() if arr.num_chunks != 1 else arr.chunk(0)
     if arr.type == pa.string():
         arr = arr.cast(pa.large_string())
-    elif arr.type != pa.large_string():
-        return None
     n = len(arr)
-    validity, offsets_buf, data_buf = arr.buffers()
-    offsets = np.frombuffer(offsets_buf, dtype=np.int64, count=n + 1, offset=arr.offset * 8)
-    data = np.frombuffer(data_buf, dtype=np.uint8) if data_buf is not None and data_buf.size else np.zeros(1, dtype=np.uint8)
-    valid = np.ones(n, dtype=np.bool_) if arr.null_count == 0 else arr.is_valid().to_numpy(zero_copy_only=False)
     out = np.empty(n, dtype=np.int64)
-    if _parse_column(offsets, data, valid, zoned, out) != -1:
+    if n == 0:
+        return pa.array(out, type=pa.timestamp("ns", "UTC" if zoned else None))
+    valid = np.ones(n, dtype=np.bool_) if arr.null_count == 0 else arr.is_valid().to_numpy(zero_copy_only=False)
+    no_offsets = np.zeros(1, dtype=np.int64)
+    if arr.type == pa.large_string():
+        _, offsets_buf, data_buf = arr.buffers()
+        offsets = np.frombuffer(offsets_buf, dtype=np.int64, count=n + 1, offset=arr.offset * 8)
+        data_address = data_buf.address if data_buf is not None else 0
+        if data_buf is None or offsets[-1] > data_buf.size:
+            return None
+        status = _parse_column(False, offsets, data_address, np.zeros((1, 4), np.int32), 0, no_offsets, no_offsets, valid, zoned, out)
+    elif arr.type == pa.string_view():
+        buffers = arr.buffers()
+        views_buf, data_bufs = buffers[1], buffers[2:]
+        views = np.frombuffer(views_buf, dtype=np.int32, count=n * 4, offset=arr.offset * 16).reshape(n, 4)
+        addresses = np.array([b.address if b is not None else 0 for b in data_bufs] or [0], dtype=np.int64)
+        sizes = np.array([b.size if b is not None else 0 for b in data_bufs] or [0], dtype=np.int64)
+        status = _parse_column(True, no_offsets, 0, views, views_buf.address + arr.offset * 16, addresses, sizes, valid, zoned, out)
+    else:
+        return None
+    if status != -1:
         return None
     mask = None if arr.null_count == 0 else ~valid
     return pa.array(out, type=pa.timestamp("ns", "UTC" if zoned else None), mask=mask)

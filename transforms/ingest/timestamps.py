@@ -214,11 +214,11 @@ def _arrow_iso(text: pl.Series, *, zoned: bool) -> pl.Series | None:
     parser; None if any element is not ISO-8601 of that kind (with an offset when ``zoned``,
     without otherwise), so the caller falls back to the format-by-format path, which also
     names the offending line."""
-    arr = text.to_arrow()
+    arr = text.to_arrow(compat_level=pl.CompatLevel.newest())  # string_view: no copy of the text
     parsed = parse_iso_column(arr, zoned=zoned)
     if parsed is None:
         try:
-            parsed = pc.cast(arr, pa.timestamp("ns", "UTC" if zoned else None))
+            parsed = pc.cast(arr.cast(pa.large_string()), pa.timestamp("ns", "UTC" if zoned else None))
         except (pa.ArrowInvalid, pa.ArrowNotImplementedError, pa.ArrowTypeError):
             return None
     out = pl.from_arrow(parsed)
