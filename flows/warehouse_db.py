@@ -197,8 +197,12 @@ def connect(warehouse: str | Path, *, read_only: bool = False, wait_s: float = 3
 
 def ensure_ingest_tables(con: duckdb.DuckDBPyConnection) -> None:
     """Create the ingest's tables if they do not exist (and migrate an older warehouse's)."""
+    legacy = {r[0] for r in con.execute(
+        "SELECT table_name FROM duckdb_columns() WHERE database_name = current_database() AND column_name = 'file_sha256'"
+    ).fetchall()}  # fmt: skip
     for name, (fields, key) in INGEST_TABLES.items():
-        migrate_hash_column(con, name)
+        if name in legacy:
+            migrate_hash_column(con, name)
         con.execute(create_table_sql(name, fields, key))
 
 

@@ -46,6 +46,18 @@ def _byte_ptr(typingctx, address):
     return sig, codegen
 
 
+@intrinsic
+def _load8(typingctx, address):
+    """The 8 bytes at ``address`` as one uint64 (unaligned load)."""
+    sig = types.uint64(types.int64)
+
+    def codegen(context, builder, signature, args):
+        ptr = builder.inttoptr(args[0], context.get_value_type(types.CPointer(types.uint64)))
+        return builder.load(ptr, align=1)
+
+    return sig, codegen
+
+
 @numba.njit(cache=True, nogil=True)
 def _digits(data, a: int, k: int) -> int:
     """The number written by ``k`` ASCII digits at ``data[a:]``; -1 if one is no digit."""
@@ -91,13 +103,9 @@ def _parse_column(view_layout: bool, offsets, data_address: int, views, views_ad
         a = 0
         if e < 19:
             return i
-        same = prev >= 0
-        if same:  # consecutive rows often share the second: compare, latest digit first
-            before = _byte_ptr(prev)
-            for j in range(18, -1, -1):
-                if data[j] != before[j]:
-                    same = False
-                    break
+        # consecutive rows often share the second: compare the first 19 bytes, 8 at a time,
+        # the latest digits first
+        same = prev >= 0 and _load8(address + 11) == _load8(prev + 11) and _load8(address + 3) == _load8(prev + 3) and _load8(address) == _load8(prev)
         if not same:
             if data[a + 4] != 45 or data[a + 7] != 45 or data[a + 13] != 58 or data[a + 16] != 58:  # - - : :
                 return i

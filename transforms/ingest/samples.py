@@ -179,7 +179,8 @@ def _tag_enum(col: pl.Series, tags: TagTable) -> pl.Series:
 
 def _accepted(lines: pl.Series, tag: pl.Series, ts: pl.Series, values: pl.Series, tags: TagTable) -> pl.DataFrame:
     tag_id = tag.to_physical().to_numpy()
-    value_si = values.to_numpy() * tags.factors[tag_id] if len(tag_id) else np.zeros(0)
+    value_si = np.take(tags.factors, tag_id) if len(tag_id) else np.zeros(0)
+    np.multiply(values.to_numpy(), value_si, out=value_si)  # one temporary array, not two
     return pl.DataFrame(
         {
             "line": lines.cast(pl.Int64),
