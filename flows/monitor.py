@@ -270,15 +270,17 @@ def lake_chunks(
 
     With ``start``/``end`` the chunks hold the windows that *start* in [start, end), whole: a
     window that began before ``start`` is left out (it belongs to an earlier span), one that
-    starts before ``end`` is read to its end (the lake is read a day beyond both bounds).
+    starts before ``end`` is read to its end. So the lake is read from two gap limits before
+    ``start`` (a window running at ``start`` has a sample in that interval) to the first gap
+    after ``end`` (:func:`_run_end`).
 
     ``columns``: read only these (``timestamp_utc`` always; ``valve_id`` is then filled in
     rather than decoded from the files)."""
     if start is None and end is None:
         yield from _gap_chunks(warehouse, valve_id, gap_s, None, None, days, columns)
         return
-    read_lo = start - timedelta(days=1) if start is not None else None
-    read_hi = end + timedelta(days=1) if end is not None else None
+    read_lo = start - timedelta(seconds=2 * gap_s) if start is not None else None
+    read_hi = _run_end(warehouse, valve_id, gap_s, end) if end is not None else None
     for rows in _gap_chunks(warehouse, valve_id, gap_s, read_lo, read_hi, days, columns):
         new_run = pl.col("timestamp_utc").diff().dt.total_microseconds().fill_null(0) > gap_s * 1e6
         run_start = pl.col("timestamp_utc").first().over(new_run.cum_sum())
@@ -290,6 +292,27 @@ def lake_chunks(
         rows = rows.filter(keep)
         if rows.height:
             yield rows
+
+
+RUN_LOOKAHEAD = timedelta(hours=1)
+"""How far beyond a span's end :func:`_run_end` looks for a gap at a time."""
+
+
+def _run_end(warehouse: Path, valve_id: str, gap_s: float, end: datetime) -> datetime:
+    """A time by which the window running at ``end`` (if any) has ended: the end of the first
+    :data:`RUN_LOOKAHEAD` after ``end`` that holds a gap or the end of the data (only
+    timestamps are read)."""
+    gap = timedelta(seconds=gap_s)
+    lo = end
+    while True:
+        hi = lo + RUN_LOOKAHEAD
+        t = read_lake(warehouse, [valve_id], lo - gap, hi).select("timestamp_utc").collect()["timestamp_utc"]
+        if t.len() == 0:
+            return lo
+        # (read from ``lo − gap``: a gap found here lies after the last sample before ``lo``)
+        if t[-1] < hi - gap or bool((t.diff().dt.total_microseconds() > gap_s * 1e6).any()):
+            return hi
+        lo = hi
 
 
 def _gap_chunks(

@@ -199,3 +199,34 @@ def test_fit_tables_drop_the_unique_indexes_of_earlier_versions(tmp_path):
         fm.ensure_monitor_tables(con)
         names = sorted(r[0] for r in con.sql("SELECT index_name FROM duckdb_indexes()").fetchall())
     assert names == ["baselines_key"]
+
+
+def test_span_bounds_read_whole_windows_and_little_else(tmp_path):
+    # runs of 1 s samples (gap limit 1.5 s) around a span [D1, D2): A straddles D1 (left out),
+    # B lies inside, B2 ends 6 s before D2, C starts 1 s before D2 and runs for three hours
+    # (longer than RUN_LOOKAHEAD: read to its end), D starts after D2 (left out)
+    from flows.lake import SENSOR_POLARS_SCHEMA, partition_path, write_partition
+
+    d1, d2 = DAY0 + timedelta(days=1), DAY0 + timedelta(days=2)
+    runs = {
+        "A": (d1 - timedelta(hours=1), 7200),
+        "B": (d1 + timedelta(hours=2), 600),
+        "B2": (d2 - timedelta(seconds=65), 60),
+        "C": (d2 - timedelta(seconds=1), 3 * 3600),
+        "D": (d2 + timedelta(hours=4), 600),
+    }
+    times = sorted(t0 + timedelta(seconds=i) for t0, n in runs.values() for i in range(n))
+    lake = pl.DataFrame({"timestamp_utc": times}).with_columns(
+        pl.lit("V9").alias("valve_id"), pl.col("timestamp_utc").dt.date().alias("date"),
+        *(pl.lit(0.0).alias(c) for c in ("ps_pa", "pr_pa", "p1_pa", "p2_pa", "x_spool_m", "x_cyl_m", "x_ref_m")),
+    ).select(SENSOR_POLARS_SCHEMA.names()).cast(dict(SENSOR_POLARS_SCHEMA))  # fmt: skip
+    for (day,), part in lake.partition_by("date", as_dict=True).items():
+        write_partition(partition_path(tmp_path, "V9", day), part)
+    got = pl.concat(fm.lake_chunks(tmp_path, "V9", 1.5, d1, d2, days=1, columns=("p1_pa",)))
+    starts = got.filter(pl.col("timestamp_utc").diff().dt.total_seconds().fill_null(99) > 1.5)["timestamp_utc"].to_list()
+    assert starts == [runs["B"][0], runs["B2"][0], runs["C"][0]]
+    assert got["timestamp_utc"].max() == runs["C"][0] + timedelta(seconds=3 * 3600 - 1)
+    assert got.height == 600 + 60 + 3 * 3600
+    # the first gap after D2 is two hours past the lookahead: _run_end looked that far
+    assert fm._run_end(tmp_path, "V9", 1.5, d2) >= runs["C"][0] + timedelta(seconds=3 * 3600)
+    assert fm._run_end(tmp_path, "V9", 1.5, d2 + timedelta(hours=5)) == d2 + timedelta(hours=5)  # no data after
