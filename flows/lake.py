@@ -217,8 +217,13 @@ def read_lake(
         return pl.LazyFrame(schema=SENSOR_POLARS_SCHEMA)
     lf = pl.scan_parquet([str(p) for _, _, p in parts], hive_partitioning=False, schema=SENSOR_POLARS_SCHEMA)
     t0, t1 = utc_instant(start), utc_instant(end)
-    if t0 is not None:
+    # a bound at midnight UTC is a partition boundary: the partitions chosen hold no row beyond it
+    if t0 is not None and not _midnight(t0):
         lf = lf.filter(pl.col("timestamp_utc") >= t0)
-    if t1 is not None:
+    if t1 is not None and not _midnight(t1):
         lf = lf.filter(pl.col("timestamp_utc") < t1)
     return lf
+
+
+def _midnight(t: datetime) -> bool:
+    return t.hour == t.minute == t.second == t.microsecond == 0

@@ -190,3 +190,21 @@ def test_read_lake_filters_valves_and_time(plant, tmp_path):
     assert read_lake(tmp_path / "wh", valve_ids=["V999"]).collect().height == 0
     assert read_lake(tmp_path / "nowhere").collect().schema == base_lake().schema
     assert read_lake(tmp_path / "wh", start=_utc(2025, 3, 1) + timedelta(days=5)).collect().height == 0
+
+
+@pytest.mark.parametrize(
+    "start, end",
+    [("2025-03-02", "2025-03-03"), ("2025-03-01T23:00:00Z", "2025-03-03T00:30:00Z"), (None, "2025-03-02"), ("2025-03-02T12:00:00Z", None)],
+)
+def test_read_lake_bounds_at_and_between_midnights(tmp_path, start, end):
+    # samples every 30 min over three UTC days; a midnight bound selects partitions only, any
+    # other bound filters rows too: either way exactly start <= t < end
+    t = [datetime(2025, 3, 1, tzinfo=timezone.utc) + timedelta(minutes=30 * i) for i in range(3 * 48)]
+    frame = base_lake(1)
+    rows = pl.concat([frame.with_columns(pl.lit(ti).cast(frame.schema["timestamp_utc"]).alias("timestamp_utc"), pl.lit(ti.date()).alias("date")) for ti in t])
+    for (day,), part in rows.partition_by("date", as_dict=True).items():
+        write_partition(partition_path(tmp_path, "V017", day), part.with_columns(pl.lit("V017").alias("valve_id")))
+    got = read_lake(tmp_path, ["V017"], start, end).collect()["timestamp_utc"].to_list()
+    lo = datetime.fromisoformat(start).replace(tzinfo=timezone.utc) if start else t[0]
+    hi = datetime.fromisoformat(end).replace(tzinfo=timezone.utc) if end else t[-1] + timedelta(seconds=1)
+    assert got == [ti for ti in t if lo <= ti < hi]
