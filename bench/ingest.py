@@ -11,7 +11,7 @@ grid, realistic signals: smooth motion + sensor noise + 16-bit quantisation) is 
 long CSV (``timestamp,tag,value,quality``, ISO-8601 with ``Z``) and as a long Parquet file. For
 each, the benchmark times a plain ``polars.read_csv`` / ``polars.read_parquet`` of the file and
 the whole ingest of the file into an empty warehouse (``flows.ingest.ingest_file``: hash, read,
-parse, quarantine check, de-duplicate, grid, validate, merge, atomic zstd Parquet write,
+parse, quarantine check, de-duplicate, grid, validate, merge, atomic Parquet write,
 DuckDB manifest). Everything runs on one core (``POLARS_MAX_THREADS=1``, one Arrow thread), so
 rows/s is per core. The ratio ingest / bare read is the figure (target ≤ 2).
 
@@ -152,7 +152,7 @@ STAGES = [
     ("transforms.ingest.export", "validate_sensor_frame", "pandera: sensor frame"),
     ("flows.ingest", "process_export", "process_export (all of the above but reading)"),
     ("flows.ingest", "read_partition", "read existing partition"),
-    ("flows.ingest", "write_partition", "write partition (zstd, fsync, rename)"),
+    ("flows.ingest", "write_partition", "write partition (fsync, rename)"),
     ("flows.ingest", "record_file", "DuckDB manifest, quarantine, gaps"),
 ]
 
