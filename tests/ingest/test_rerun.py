@@ -273,3 +273,34 @@ def test_a_warehouse_from_before_blake3_still_knows_its_files(plant, tmp_path):
     # --force reads it again and replaces (not doubles) its quarantine and gap rows
     ingest(cfg, [gapped], wh, force=True)
     assert table(wh, "ingest_manifest").height == 2 and table(wh, "ingest_gaps").height == 6 and table(wh, "quarantine").height == 1
+
+
+def test_backfill_recognises_and_rekeys_a_legacy_file(plant, tmp_path):
+    from flows.backfill import ensure_backfill_tables, ingest_export, manifest_hashes
+    from flows.ingest import rekey_file
+    from flows.warehouse_db import connect
+
+    cfg, config = plant()
+    wh = tmp_path / "wh"
+    ingest(cfg, [DATA / "duplicates.csv"], wh)
+    with connect(wh) as con:  # a progress row as an older backfill wrote it
+        ensure_backfill_tables(con)
+        con.execute("INSERT INTO backfill_progress (unit_kind, unit_key, file_hash, run_id, finished_at) VALUES ('ingest', 'k', ?, 'r', now())",
+                    ["blake3:" + blake3((DATA / "duplicates.csv").read_bytes()).hexdigest()])  # fmt: skip
+    _make_legacy(wh)
+    with connect(wh) as con:
+        con.execute("UPDATE backfill_progress SET file_hash = (SELECT file_sha256 FROM ingest_manifest)")
+        con.execute("ALTER TABLE backfill_progress RENAME COLUMN file_hash TO file_sha256")
+    known = manifest_hashes(wh)  # migrates the ingest tables
+    with connect(wh) as con:
+        ensure_backfill_tables(con)  # migrates backfill_progress
+        assert con.execute("SELECT file_hash FROM backfill_progress").fetchone()[0].startswith("sha256:")
+    assert len(known.hashes) == 1 and next(iter(known.hashes)).startswith("sha256:")
+    out = ingest_export(DATA / "duplicates.csv", config, wh, known, "run")
+    new = "blake3:" + blake3((DATA / "duplicates.csv").read_bytes()).hexdigest()
+    assert out.report.skipped and out.records is None and out.rekey == (next(iter(known.hashes)), new)
+    with connect(wh) as con:
+        rekey_file(con, *out.rekey)
+        assert con.execute("SELECT file_hash FROM backfill_progress").fetchone()[0] == new
+    assert manifest_hashes(wh).hashes == frozenset([new])
+    assert ingest_export(DATA / "duplicates.csv", config, wh, manifest_hashes(wh), "run").rekey is None
