@@ -237,20 +237,20 @@ def storage(seconds: int, repeat: int) -> None:
     print("rows per CPU second (one core): polars.read_parquet of timestamp + six channels, of all 10 columns;")
     print("duckdb SELECT sum() of the six channels (1 thread); window = polars scan with a time filter for one 10 s window")
     print(f"{'variant':<36}{'B/row':>7}{'write s':>9}{'6ch M/s':>9}{'all M/s':>9}{'duckdb M/s':>12}{'window ms':>11}")
+    # (name, value dtype, codec, level, byte_stream_split, row groups, delta-encoded time); row
+    # groups: "lake" = flows.lake.row_group_bounds (>= ROW_GROUP_MIN_ROWS, ending at a window
+    # start), "window" = one per 10 s window, "one" = one per file
     variants = [
-        ("float64 zstd-1", pl.Float64, "zstd", 1, False, "window", False),
-        ("float64 zstd-3", pl.Float64, "zstd", 3, False, "window", False),
-        ("float64 zstd-1 byte_stream_split", pl.Float64, "zstd", 1, True, "window", False),
-        ("float64 lz4", pl.Float64, "lz4", None, False, "window", False),
-        ("float64 snappy", pl.Float64, "snappy", None, False, "window", False),
-        ("float64 uncompressed", pl.Float64, "none", None, False, "window", False),
-        ("float32 zstd-1", pl.Float32, "zstd", 1, False, "window", False),
-        ("float32 zstd-1 byte_stream_split", pl.Float32, "zstd", 1, True, "window", False),
-        ("float32 zstd-1, delta time (lake)", pl.Float32, "zstd", 1, False, "window", True),
-        ("float32 lz4", pl.Float32, "lz4", None, False, "window", False),
-        ("float32 uncompressed", pl.Float32, "none", None, False, "window", False),
-        ("float64 zstd-1, 1 row group", pl.Float64, "zstd", 1, False, "one", False),
-        ("float64 zstd-1, 1 window/row group", pl.Float64, "zstd", 1, False, "each", False),
+        ("float64 zstd-1, window groups", pl.Float64, "zstd", 1, False, "window", False),
+        ("float32 zstd-1, window groups", pl.Float32, "zstd", 1, False, "window", False),
+        ("float32 zstd-1 delta, window groups", pl.Float32, "zstd", 1, False, "window", True),
+        ("float32 zstd-1 delta, >=64k groups", pl.Float32, "zstd", 1, False, "lake", True),
+        ("float32 zstd-1 delta bss, >=64k", pl.Float32, "zstd", 1, True, "lake", True),
+        ("float32 lz4 delta, window groups", pl.Float32, "lz4", None, False, "window", True),
+        ("float32 lz4 delta, >=64k (lake)", pl.Float32, "lz4", None, False, "lake", True),
+        ("float32 snappy delta, >=64k", pl.Float32, "snappy", None, False, "lake", True),
+        ("float32 none delta, >=64k", pl.Float32, "none", None, False, "lake", True),
+        ("float32 lz4 delta, 1 row group", pl.Float32, "lz4", None, False, "one", True),
     ]
     w0 = frame["timestamp_utc"][n // 2 - (n // 2) % 10_000]
     w1 = frame["timestamp_utc"][n // 2 - (n // 2) % 10_000 + 9_999]
@@ -259,7 +259,7 @@ def storage(seconds: int, repeat: int) -> None:
             f = frame.with_columns(pl.col(value_cols).cast(dtype))
             table = f.to_arrow()
             path = Path(tmp) / f"{name.replace(' ', '_').replace('/', '_')}.parquet"
-            if groups == "window":
+            if groups == "lake":
                 bounds = row_group_bounds(t_us, 5000)
             elif groups == "one":
                 bounds = [(0, n)]

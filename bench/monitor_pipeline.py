@@ -21,6 +21,9 @@ thread), so that CPU seconds are per-core figures and the peak resident memory i
   (steps 2–4b only);
 * ``baseline``: the same chunks (as pandas frames) through ``monitor_pandas``.
 
+``--from``/``--to`` limit the ``full`` step to a span, as ``valvemon monitor --from --to`` does
+(one day: what a nightly run reads; ``--steps full``).
+
 Each process first warms up on one day of one valve (numba cache loads, imports), not timed.
 Rows/s are lake rows per CPU second of the process (all its threads) and per wall second.
 """
@@ -122,7 +125,7 @@ def _warm_rows(config, warehouse: Path):
     return valve, fm.monitor_params(valve, config.export.sample_rate_hz), rows
 
 
-def step_full(config_path: Path, warehouse: Path, valve_ids) -> dict:
+def step_full(config_path: Path, warehouse: Path, valve_ids, start: str | None = None, end: str | None = None) -> dict:
     import flows.monitor as fm
     from flows.config import load_plant_config
 
@@ -138,7 +141,7 @@ def step_full(config_path: Path, warehouse: Path, valve_ids) -> dict:
     fm._fits_table = clock.wrap("fits → table rows", fm._fits_table)
     fm.store_spans = clock.wrap("store (DuckDB delete + insert)", fm.store_spans)
     c, w = time.process_time(), time.perf_counter()
-    reports = fm.run_monitor(config_path, warehouse, valve_ids)
+    reports = fm.run_monitor(config_path, warehouse, valve_ids, start, end)
     cpu, wall = time.process_time() - c, time.perf_counter() - w
     rows_read = sum(r.rows_read for r in reports)
     return {
@@ -243,6 +246,8 @@ def main(argv=None) -> int:
     ap.add_argument("--baseline-valves", type=int, default=None, help="run the baseline on the first N valves only")
     ap.add_argument("--steps", default="full,transforms,baseline")
     ap.add_argument("--json", type=Path, default=None)
+    ap.add_argument("--from", dest="start", default=None, help="full step only: monitor the windows from this instant (as `valvemon monitor --from`)")
+    ap.add_argument("--to", dest="end", default=None, help="full step only: … up to this instant (a nightly run: one day)")
     ap.add_argument("--step", choices=tuple(STEPS), help=argparse.SUPPRESS)
     ap.add_argument("--valves", default=None, help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
@@ -252,7 +257,8 @@ def main(argv=None) -> int:
     config = load_plant_config(a.config)
     if a.step:  # a child process: one measurement, JSON on stdout
         valve_ids = a.valves.split(",") if a.valves else [v.id for v in config.valves]
-        print(json.dumps(STEPS[a.step](a.config, a.warehouse, valve_ids)))
+        span = {"start": a.start, "end": a.end} if a.step == "full" else {}
+        print(json.dumps(STEPS[a.step](a.config, a.warehouse, valve_ids, **span)))
         return 0
 
     all_ids = [v.id for v in config.valves]
@@ -260,6 +266,7 @@ def main(argv=None) -> int:
     for step in a.steps.split(","):
         ids = all_ids[: a.baseline_valves] if (step == "baseline" and a.baseline_valves) else all_ids
         cmd = [sys.executable, __file__, "--config", str(a.config), "--warehouse", str(a.warehouse), "--step", step, "--valves", ",".join(ids)]
+        cmd += [f"--from={a.start}"] * bool(a.start) + [f"--to={a.end}"] * bool(a.end)
         out = subprocess.run(cmd, check=True, capture_output=True, text=True)
         results[step] = json.loads(out.stdout.strip().splitlines()[-1])
         r = results[step]
