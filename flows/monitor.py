@@ -315,6 +315,22 @@ def _run_end(warehouse: Path, valve_id: str, gap_s: float, end: datetime) -> dat
         lo = hi
 
 
+def _last_gap(t: pl.Series, gap_s: float) -> int:
+    """Index of the first sample after the last gap in ``t`` (0: none), looked for from the end
+    (a tail of 64 k samples, then four times as much, …): a chunk's last run is short."""
+    n = t.len()
+    ts = t.to_physical()
+    k = min(n, 1 << 16)
+    while True:
+        tail = ts.slice(n - k, k).to_numpy()
+        after = np.flatnonzero(np.diff(tail) > gap_s * 1e6)
+        if after.size:
+            return n - k + int(after[-1]) + 1
+        if k == n:
+            return 0
+        k = min(n, 4 * k)
+
+
 def _gap_chunks(
     warehouse: Path, valve_id: str, gap_s: float, start: datetime | None, end: datetime | None, days: int | None,
     columns: tuple[str, ...] | None,
@@ -343,9 +359,7 @@ def _gap_chunks(
         if last:
             yield rows
             return
-        t = rows["timestamp_utc"]
-        step = t.diff().dt.total_microseconds().fill_null(0).to_numpy()
-        cut = int(np.flatnonzero(step > gap_s * 1e6)[-1]) if (step > gap_s * 1e6).any() else 0
+        cut = _last_gap(rows["timestamp_utc"], gap_s)
         if cut == 0:
             carry = rows  # one run spanning the whole chunk: keep collecting
             continue

@@ -8,6 +8,7 @@ import shutil
 from datetime import timedelta
 from pathlib import Path
 
+import numpy as np
 import polars as pl
 import pytest
 import tomli_w
@@ -230,3 +231,14 @@ def test_span_bounds_read_whole_windows_and_little_else(tmp_path):
     # the first gap after D2 is two hours past the lookahead: _run_end looked that far
     assert fm._run_end(tmp_path, "V9", 1.5, d2) >= runs["C"][0] + timedelta(seconds=3 * 3600)
     assert fm._run_end(tmp_path, "V9", 1.5, d2 + timedelta(hours=5)) == d2 + timedelta(hours=5)  # no data after
+
+
+@pytest.mark.parametrize("gaps", [[], [5], [100, 250_000], [299_999], [10, 20, 70_000]])
+def test_last_gap_found_from_the_end(gaps):
+    # 1 ms steps, a 1 s jump before each index in `gaps`; the search looks at 64 k samples first,
+    # then at four times as many: a gap far from the end must still be found
+    steps = np.full(300_000, 1_000, dtype=np.int64)
+    steps[0] = 0
+    steps[gaps] = 1_000_000
+    t = pl.Series(np.cumsum(steps) + 1_700_000_000_000_000).cast(pl.Datetime("us", "UTC"))
+    assert fm._last_gap(t, 0.005) == (max(gaps) if gaps else 0)
