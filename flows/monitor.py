@@ -281,18 +281,23 @@ def lake_chunks(
         return
     read_lo = start - timedelta(seconds=2 * gap_s) if start is not None else None
     read_hi = _run_end(warehouse, valve_id, gap_s, end) if end is not None else None
+    lo_us = None if start is None else int((start - _EPOCH) / timedelta(microseconds=1))
+    hi_us = None if end is None else int((end - _EPOCH) / timedelta(microseconds=1))
     for rows in _gap_chunks(warehouse, valve_id, gap_s, read_lo, read_hi, days, columns):
-        new_run = pl.col("timestamp_utc").diff().dt.total_microseconds().fill_null(0) > gap_s * 1e6
-        run_start = pl.col("timestamp_utc").first().over(new_run.cum_sum())
-        keep = pl.lit(True)
-        if start is not None:
-            keep = keep & (run_start >= start)
-        if end is not None:
-            keep = keep & (run_start < end)
-        rows = rows.filter(keep)
-        if rows.height:
-            yield rows
+        # the runs starting in [start, end) are one contiguous slice of the time-sorted rows
+        if rows.height == 0:
+            continue
+        ts = rows["timestamp_utc"].to_physical().to_numpy()
+        run_starts = np.r_[0, np.flatnonzero(np.diff(ts) > gap_s * 1e6) + 1]
+        first = 0 if lo_us is None else int(np.searchsorted(ts[run_starts], lo_us, side="left"))
+        last = len(run_starts) if hi_us is None else int(np.searchsorted(ts[run_starts], hi_us, side="left"))
+        if first < last:
+            a = int(run_starts[first])
+            b = int(run_starts[last]) if last < len(run_starts) else rows.height
+            yield rows.slice(a, b - a)
 
+
+_EPOCH = datetime(1970, 1, 1, tzinfo=timezone.utc)
 
 RUN_LOOKAHEAD = timedelta(hours=1)
 """How far beyond a span's end :func:`_run_end` looks for a gap at a time."""
