@@ -1,6 +1,6 @@
 """Keep freed heap memory in the process for the next chunk's arrays (glibc only).
 
-Monitoring runs its compiled kernels chunk after chunk (a valve-week, ~1.7 M rows), and each
+Used by monitoring, the ingest and the backfill. Monitoring runs its compiled kernels chunk after chunk (a valve-week, ~1.7 M rows), and each
 chunk allocates the same ~100 bytes per row of temporary arrays again (Savitzky–Golay values,
 selection codes, points). glibc serves allocations above its mmap threshold (at most 32 MB,
 adapted upwards as blocks are freed) with fresh ``mmap`` pages and unmaps them on ``free``, so
