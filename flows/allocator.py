@@ -1,7 +1,7 @@
 """Keep freed heap memory in the process for the next chunk's arrays (glibc only).
 
-Used by monitoring, the ingest and the backfill. Monitoring runs its compiled kernels chunk after chunk (a valve-week, ~1.7 M rows), and each
-chunk allocates the same ~100 bytes per row of temporary arrays again (Savitzky–Golay values,
+Used by monitoring, the ingest and the backfill. Monitoring runs its compiled kernels chunk
+after chunk (a valve-week, ~1.7 M rows), and each chunk allocates the same ~100 bytes per row of temporary arrays again (Savitzky–Golay values,
 selection codes, points). glibc serves allocations above its mmap threshold (at most 32 MB,
 adapted upwards as blocks are freed) with fresh ``mmap`` pages and unmaps them on ``free``, so
 each chunk pays one page fault per 4 KiB it touches: ~22 % of steps 2–4b (BENCHMARKS.md,
