@@ -1,12 +1,13 @@
 """Keep freed heap memory in the process for the next chunk's arrays (glibc only).
 
 Used by monitoring, the ingest and the backfill. Monitoring runs its compiled kernels chunk
-after chunk (a valve-week, ~1.7 M rows), and each chunk allocates the same ~100 bytes per row of temporary arrays again (Savitzky–Golay values,
-selection codes, points). glibc serves allocations above its mmap threshold (at most 32 MB,
-adapted upwards as blocks are freed) with fresh ``mmap`` pages and unmaps them on ``free``, so
-each chunk pays one page fault per 4 KiB it touches: ~22 % of steps 2–4b (BENCHMARKS.md,
-"Monitoring"). :func:`retain_freed_memory` raises the mmap and trim thresholds (``mallopt``),
-so large blocks come from the heap and stay there after ``free``, ready for the next chunk.
+after chunk (a valve-week, ~1.7 M rows), and each chunk allocates the same ~100 bytes per row
+of temporary arrays again (Savitzky–Golay values, selection codes, points). glibc serves
+allocations above its mmap threshold (at most 32 MB, adapted upwards as blocks are freed) with
+fresh ``mmap`` pages and unmaps them on ``free``, so each chunk pays one page fault per 4 KiB it
+touches: ~22 % of steps 2–4b (BENCHMARKS.md, "Monitoring"). :func:`retain_freed_memory` raises
+the mmap and trim thresholds (``mallopt``), so large blocks come from the heap and stay there
+after ``free``, ready for the next chunk.
 
 The price: the process keeps its high-water mark of heap memory until it exits, which a batch
 run (``valvemon monitor``, a backfill worker) reaches anyway. polars allocates with its own
