@@ -114,6 +114,17 @@ checked by a pass of its own: the residual pass at its end confirms it (:func:`_
 # --------------------------------------------------------------------------------------------
 
 
+@numba.njit(cache=True, inline="always")
+def walk_segment(kn, k0, k1, j, t):
+    """The knot segment of t among kn[k0:k1], walked from segment j (neighbouring points in time
+    order, or a shift barely moved: 0–1 steps, branch-predictable)."""
+    while j > k0 and t < kn[j]:
+        j -= 1
+    while j < k1 - 2 and t >= kn[j + 1]:
+        j += 1
+    return j
+
+
 @numba.njit(cache=True)
 def _sums(u, a, jc, s, e, stride, kn, kv, ks, k0, k1, tab, toff, tlo, tinv, tn, x, mode):
     """One pass over points s, s+stride, … < e at shift x:
@@ -131,11 +142,7 @@ def _sums(u, a, jc, s, e, stride, kn, kv, ks, k0, k1, tab, toff, tlo, tinv, tn, 
     for i in range(s, e, stride):
         t = u[i] + x
         if mode == 2:
-            j = jc[i]
-            while j > k0 and t < kn[j]:
-                j -= 1
-            while j < k1 - 2 and t >= kn[j + 1]:
-                j += 1
+            j = walk_segment(kn, k0, k1, jc[i], t)
             jc[i] = j
         else:
             if t <= kn[k0]:
@@ -414,11 +421,7 @@ def _residual_pass(u, a, jc, s, e, kn, kv, ks, k0, k1, x, al):
     sdd = 0.0
     for i in range(s, e):
         t = u[i] + x
-        j = jc[i]
-        while j > k0 and t < kn[j]:
-            j -= 1
-        while j < k1 - 2 and t >= kn[j + 1]:
-            j += 1
+        j = walk_segment(kn, k0, k1, jc[i], t)
         jc[i] = j
         d = ks[j]
         h = kv[j] + d * (t - kn[j])

@@ -34,7 +34,7 @@ from transforms.characteristic import (
     scaled_shifted,
 )
 from transforms.derivatives import add_savgol, savgol_arrays
-from transforms.fit import fit_arrays, fit_groups
+from transforms.fit import fit_arrays, fit_groups, walk_segment
 from transforms.params import EDGES, MonitorParams
 from transforms.points import (
     DEFAULT_SIGNALS,
@@ -481,10 +481,7 @@ def _leak_correct(u, plain, ratio, offsets, scale, shift, kstart, kend, kn, kv, 
         j = k0
         for i in range(s, e):
             t = x - u[i]
-            while j > k0 and t < kn[j]:
-                j -= 1
-            while j < k1 - 2 and t >= kn[j + 1]:
-                j += 1
+            j = walk_segment(kn, k0, k1, j, t)
             out[i] = plain[i] - a * (kv[j] + ks[j] * (t - kn[j])) * ratio[i]
 
 
