@@ -23,8 +23,8 @@ on the profile cost f(x̂) = Σ A_i² − (Σ A_i Â_i)² / Σ Â_i² (variable 
    leaves the bracket). Without knot crossings this is the optimum in one step;
 3. a step shorter than :data:`TRUST_STEP_M` (1 µm) is not checked by a pass of its own: the
    residual pass at its end takes the exact sums there too and confirms it when their step is
-   below 1 nm, as a Newton pass would; else Newton goes on (~5 % of the windows). α̂, e and JᵀJ follow from the sums
-   (Σ r² = Σ A² − α̂ S_a at the optimum).
+   below 1 nm, as a Newton pass would; else Newton goes on (~5 % of the windows). α̂, e and
+   JᵀJ follow from the sums (Σ r² = Σ A² − α̂ S_a at the optimum).
 
 The whole batch (every window and edge of every valve) runs in one compiled (numba) kernel,
 one pass over a population's points per iteration (2–3 full passes in all from a warm start,
@@ -209,9 +209,9 @@ def _newton(u, a, jc, s, e, kn, kv, ks, k0, k1, tab, toff, tlo, tinv, tn, x, lo,
     Returns (x, code, passes, sums, dx): the last point evaluated, the sums
     (S_a, S_b, S_ad, S_bd, S_dd) there and the step still to take. On ``_OK`` |dx| < ``xtol``
     (the optimum is x + dx, its sums those at x moved on by dx with every point on its segment:
-    exact up to the points that cross a knot within 1 nm); on ``_PREDICTED`` |dx| < ``trust``: the optimum is x + dx up to the few points that cross a
-    knot on the way, for the caller to confirm in its residual pass. Otherwise the sums are
-    zeros."""
+    exact up to the points that cross a knot within 1 nm); on ``_PREDICTED`` |dx| < ``trust``:
+    the optimum is x + dx up to the few points that cross a knot on the way, for the caller to
+    confirm in its residual pass. Otherwise the sums are zeros."""
     mode = first_mode
     zero = (0.0, 0.0, 0.0, 0.0, 0.0)
     for it in range(maxiter):
@@ -265,8 +265,7 @@ def _grid_start(u, a, s, e, stride, kn, kv, ks, k0, k1, x_first, step, n_grid):
         sb = 0.0
         for k in range(m):
             t = us[k] + x
-            while j < k1 - 2 and t >= kn[j + 1]:
-                j += 1
+            j = walk_segment(kn, k0, k1, j, t)
             if k == 0:
                 j_first = j
             h = kv[j] + ks[j] * (t - kn[j])

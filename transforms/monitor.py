@@ -243,8 +243,8 @@ def _valve_numba(lake_v, valve_id, p, leakage, with_ratio, want_points):
     stats = stats_frame(valve_id, windows, flagged, removed, selected)
 
     idx, area, offs, ratio, u = points_arrays(
-        arrays, codes, SELECTED_CODE, p, leakage=None if leakage is None else leakage.get(valve_id), with_ratio=with_ratio,
-        n_selected=selected.sum(axis=0),
+        arrays, codes, SELECTED_CODE, selected.sum(axis=0), p, leakage=None if leakage is None else leakage.get(valve_id),
+        with_ratio=with_ratio,
     )
     points = None
     if want_points:

@@ -231,14 +231,8 @@ def _pwl(kn, kv, k0, k1, t):
 
 @numba.njit(cache=True)
 def _points_kernel(codes, selected_code, n_selected, ps, pr, p1, p2, x, xc, dp1, dp2, v, c, lkn, lkv, loff, use_leak, want_ratio):
-    """``n_selected``: the number of selected rows per edge, or an empty array to count them."""
+    """``n_selected``: the number of selected rows per edge (the selection counted them)."""
     sq, beta, a1, a2, v01, v02 = c[0], c[1], c[2], c[3], c[4], c[5]
-    if n_selected.shape[0] == 0:
-        n_selected = np.zeros(4, dtype=np.int64)
-        for i in range(codes.shape[0]):
-            for e in range(4):
-                if codes[i, e] == selected_code:
-                    n_selected[e] += 1
     offsets = np.zeros(5, dtype=np.int64)
     for e in range(4):
         offsets[e + 1] = offsets[e] + n_selected[e]
@@ -282,16 +276,16 @@ def points_arrays(
     arrays: dict[str, np.ndarray],
     codes: np.ndarray,
     selected_code: int,
+    n_selected: np.ndarray,
     params: MonitorParams,
     *,
     leakage: Mapping[str, Characteristic] | None = None,
     with_ratio: bool = False,
-    n_selected: np.ndarray | None = None,
 ):
     """Eq. 7 (and its siblings) for the rows whose ``codes[:, e]`` equal ``selected_code``
     (:func:`transforms.selection.selection_codes`), in one compiled pass per edge.
-    ``n_selected``: how many rows each edge has selected, if known (the selection's counts; saves
-    counting them again).
+    ``n_selected``: how many rows each edge has selected (the per-window ``selected`` counts of
+    :func:`~transforms.selection.selection_codes`, summed over the windows).
 
     Returns ``(idx, area, offsets, ratio, u)``: row indices, α·A and the opening coordinate u of
     edge e in ``offsets[e]:offsets[e + 1]`` (edges in :data:`EDGES` order, rows in input order).
@@ -315,7 +309,7 @@ def points_arrays(
         loff = np.zeros(5, dtype=np.int64)
     return _points_kernel(
         codes, codes.dtype.type(selected_code),
-        np.zeros(0, dtype=np.int64) if n_selected is None else np.ascontiguousarray(n_selected, dtype=np.int64),
+        np.ascontiguousarray(n_selected, dtype=np.int64),
         *(_float_array(arrays[k]) for k in (
             s.ps, s.pr, s.p1, s.p2, s.x_spool, s.x_cyl, s.dp1_dt, s.dp2_dt, s.v_cyl)),
         c, lkn, lkv, loff, leakage is not None, bool(with_ratio),
