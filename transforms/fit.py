@@ -265,7 +265,10 @@ def _grid_start(u, a, s, e, stride, kn, kv, ks, k0, k1, x_first, step, n_grid):
         sb = 0.0
         for k in range(m):
             t = us[k] + x
-            j = walk_segment(kn, k0, k1, j, t)
+            # t only grows (sorted u, increasing x): walk forward only, not walk_segment's both
+            # ways (its extra test made the grid ~10 % slower: the innermost loop of the first fit)
+            while j < k1 - 2 and t >= kn[j + 1]:
+                j += 1
             if k == 0:
                 j_first = j
             h = kv[j] + ks[j] * (t - kn[j])
