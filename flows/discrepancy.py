@@ -37,7 +37,7 @@ from flows.discrepancy_pipeline import ConditionFit, Diagnosis, diagnose, fit_co
 from flows.errors import ValvemonError
 from flows.instants import utc_instant
 from flows.lake import read_lake
-from flows.warehouse_db import connect, create_table_sql, insert_frame
+from flows.warehouse_db import connect, ensure_tables, insert_frame
 from model.params import PlantParams, ValveCondition
 from schemas.fields import (
     DISCREPANCY_CANDIDATE_FIELDS,
@@ -81,8 +81,8 @@ def ensure_discrepancy_tables(con) -> None:
     table an older version created (null for the old runs)."""
     from flows.warehouse_db import duckdb_type
 
+    ensure_tables(con, {name: (fields, None) for name, fields in DISCREPANCY_TABLES.items()})
     for name, fields in DISCREPANCY_TABLES.items():
-        con.execute(create_table_sql(name, fields))
         have = {r[0] for r in con.execute(f"DESCRIBE {name}").fetchall()}
         for f in fields:
             if f.name not in have:

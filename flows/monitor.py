@@ -42,7 +42,7 @@ from flows.batches import WriteBatch
 from flows.errors import ValvemonError
 from flows.instants import utc_instant
 from flows.lake import list_partitions, read_lake
-from flows.warehouse_db import connect, create_table_sql, insert_frame, query_frame
+from flows.warehouse_db import connect, ensure_tables, insert_frame, query_frame
 from model.area import edge_area
 from schemas.fields import BASELINE_FIELDS, EDGE_FIT_FIELDS, EDGES, SELECTION_FIELDS, polars_schema
 from schemas.plant_config import PlantConfig, ValveSpec
@@ -74,16 +74,12 @@ piecewise-linear interpolation error is below 0.01 mm² on the open branch)."""
 def ensure_monitor_tables(con) -> None:
     """Create ``baselines``, ``edge_fits`` and ``selection_stats`` if missing, with a unique index
     on the :data:`INDEXED_TABLES` (one on the others, made by earlier versions, is dropped).
-    One catalog query first, so that a warehouse that has them costs no DDL."""
-    have = con.sql(
-        "SELECT 'table', table_name FROM duckdb_tables() WHERE database_name = current_database() "
-        "UNION ALL SELECT 'index', index_name FROM duckdb_indexes() WHERE database_name = current_database()"
-    ).fetchall()
-    tables = {name for kind, name in have if kind == "table"}
-    indexes = {name for kind, name in have if kind == "index"}
-    for name, (fields, key) in MONITOR_TABLES.items():
-        if name not in tables:
-            con.execute(create_table_sql(name, fields))
+    Catalog queries first, so that a warehouse that has them costs no DDL."""
+    ensure_tables(con, {name: (fields, None) for name, (fields, _) in MONITOR_TABLES.items()})
+    indexes = {r[0] for r in con.execute(
+        "SELECT index_name FROM duckdb_indexes() WHERE database_name = current_database()"
+    ).fetchall()}  # fmt: skip
+    for name, (_, key) in MONITOR_TABLES.items():
         if name in INDEXED_TABLES and f"{name}_key" not in indexes:
             con.execute(f"CREATE UNIQUE INDEX IF NOT EXISTS {name}_key ON {name} ({', '.join(key)})")
         if name not in INDEXED_TABLES and f"{name}_key" in indexes:

@@ -35,7 +35,7 @@ from pathlib import Path
 import duckdb
 
 from flows.errors import ValvemonError
-from flows.warehouse_db import DB_NAME, create_table_sql, db_path
+from flows.warehouse_db import DB_NAME, db_path, ensure_tables
 from schemas.fields import CONDITION_BOUNDS_FIELDS, STANDSTILL_FIELDS
 
 SQL_DIR = Path(__file__).resolve().parents[1] / "sql"
@@ -121,8 +121,7 @@ def ensure_report_tables(con: duckdb.DuckDBPyConnection) -> None:
     from flows.monitor import ensure_monitor_tables
 
     ensure_monitor_tables(con)
-    for name, fields in REPORT_TABLES.items():
-        con.execute(create_table_sql(name, fields))
+    ensure_tables(con, {name: (fields, None) for name, fields in REPORT_TABLES.items()})
     con.execute("CREATE UNIQUE INDEX IF NOT EXISTS standstill_checks_key ON standstill_checks (valve_id, window_start)")
 
 

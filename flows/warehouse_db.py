@@ -24,7 +24,7 @@ import time
 import uuid
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Iterator
+from typing import Iterator, Mapping
 
 import duckdb
 import polars as pl
@@ -195,15 +195,27 @@ def connect(warehouse: str | Path, *, read_only: bool = False, wait_s: float = 3
         _HOST.release(path)
 
 
+def ensure_tables(con: duckdb.DuckDBPyConnection, tables: Mapping[str, tuple[tuple[Field, ...], str | None]]) -> None:
+    """Create those of ``tables`` (name → (fields, primary key or None)) that the connection's
+    database lacks: one catalog query, DDL only for the missing ones (every unit of work calls
+    this; a warehouse that has its tables costs no DDL)."""
+    have = {r[0] for r in con.execute(
+        "SELECT table_name FROM duckdb_tables() WHERE database_name = current_database()"
+    ).fetchall()}  # fmt: skip
+    for name, (fields, key) in tables.items():
+        if name not in have:
+            con.execute(create_table_sql(name, fields, key))
+
+
 def ensure_ingest_tables(con: duckdb.DuckDBPyConnection) -> None:
     """Create the ingest's tables if they do not exist (and migrate an older warehouse's)."""
     legacy = {r[0] for r in con.execute(
         "SELECT table_name FROM duckdb_columns() WHERE database_name = current_database() AND column_name = 'file_sha256'"
     ).fetchall()}  # fmt: skip
-    for name, (fields, key) in INGEST_TABLES.items():
+    for name in INGEST_TABLES:
         if name in legacy:
             migrate_hash_column(con, name)
-        con.execute(create_table_sql(name, fields, key))
+    ensure_tables(con, INGEST_TABLES)
 
 
 def migrate_hash_column(con: duckdb.DuckDBPyConnection, table: str) -> None:
