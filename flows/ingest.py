@@ -28,8 +28,10 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Callable, Iterator
 
+import numpy as np
 import polars as pl
 import pyarrow as pa
+import pyarrow.parquet as pq
 from blake3 import blake3
 from prefect import flow, task
 from prefect.cache_policies import NO_CACHE
@@ -173,9 +175,63 @@ def read_csv_export(data: bytes | Path, export: ExportSpec, tags: TagTable | Non
     return df
 
 
-def read_parquet_export(path: Path) -> pl.DataFrame:
-    """A Parquet export → frame in file order."""
-    return pl.read_parquet(path)
+def _is_text(t: pa.DataType) -> bool:
+    return pa.types.is_string(t) or pa.types.is_large_string(t) or pa.types.is_string_view(t)
+
+
+def enum_column(col: pa.ChunkedArray, categories: tuple[str, ...] | None = None) -> pl.Series | None:
+    """A dictionary-encoded text column → a polars Enum, by its codes: no row's text is decoded.
+
+    ``categories`` are the Enum's (the plant's tags); None: the column's distinct values. Each
+    chunk's codes go through a lookup table of its own dictionary (Parquet has one per row
+    group). Returns None when a value is not one of ``categories`` or a dictionary holds a null,
+    so that the caller decodes the text and can name the value.
+    """
+    dictionaries = [ch.dictionary.to_pylist() for ch in col.chunks]
+    if categories is None:
+        categories = tuple(dict.fromkeys(v for d in dictionaries for v in d))
+    position = {c: i for i, c in enumerate(categories)}
+    if any(v not in position for d in dictionaries for v in d):
+        return None
+    enum = pl.Enum(list(categories))
+    if len(categories) == 1 and not col.null_count:  # one code throughout (quality "Good")
+        return pl.repeat(categories[0], len(col), dtype=enum, eager=True)
+    physical = pl.Series(dtype=enum).to_physical().to_numpy().dtype
+    codes = np.empty(len(col), dtype=physical)
+    a = 0
+    for ch, d in zip(col.chunks, dictionaries):
+        lut = np.array([position[v] for v in d], dtype=physical)
+        b = a + len(ch)
+        np.take(lut, ch.indices.fill_null(0).to_numpy(), out=codes[a:b])
+        a = b
+    series = pl.Series(codes)
+    if col.null_count:
+        series = series.scatter(np.flatnonzero(col.is_null().to_numpy()), None)
+    return series.cat.to(enum)
+
+
+def read_parquet_export(path: Path, export: ExportSpec, tags: TagTable | None = None) -> pl.DataFrame:
+    """A Parquet export → frame in file order.
+
+    The tag and quality columns, when they hold text, are read dictionary-encoded (as Parquet
+    stores such columns) and become Enum columns from their codes, without decoding a string
+    per row: the tag column an Enum of the plant's tags (when every tag of the file is one,
+    else text, so that the error names the tag), the quality column an Enum of its codes.
+    """
+    schema = pq.read_schema(path)
+    wanted = [export.tag_column if export.layout == "long" else None, export.quality_column]
+    coded = [c for c in wanted if c and c in schema.names and _is_text(schema.field(c).type)]
+    if not coded:
+        return pl.read_parquet(path)
+    rest = [c for c in schema.names if c not in coded]
+    df = pl.read_parquet(path, columns=rest) if rest else pl.DataFrame()  # polars decodes these faster than Arrow
+    table = pq.read_table(path, columns=coded, read_dictionary=coded)
+    for name in coded:
+        col = table[name]
+        categories = tags.tags if tags is not None and name == export.tag_column else None
+        enum = enum_column(col, categories)
+        df = df.with_columns((enum if enum is not None else pl.from_arrow(col.cast(col.type.value_type))).alias(name))
+    return df.select(schema.names)
 
 
 @dataclass
@@ -226,7 +282,7 @@ def read_export(path: Path, export: ExportSpec, tags: TagTable | None = None) ->
         raise ValvemonError(f"{path}: cannot read the file ({getattr(exc, 'strerror', None) or exc})") from None
     try:
         if fmt == "parquet":
-            df = read_parquet_export(path)
+            df = read_parquet_export(path, export, tags)
             first_line = 1
         else:
             df = read_csv_export(data, export, tags)

@@ -13,6 +13,7 @@ from polars.testing import assert_frame_equal
 from flows.lake import partition_path, read_lake, row_group_bounds, write_partition
 from tests.ingest.conftest import DATA, base_lake, ingest
 from transforms.ingest import Grid, IngestError, merge_partition, parse_timestamps, prepare_tag, to_grid
+from transforms.ingest.export import split_by_tag
 
 UTC = timezone.utc
 
@@ -127,6 +128,29 @@ def test_prepare_tag_sorts_and_counts_duplicates_and_conflicts():
     v2[5] = 22.0
     assert prepare_tag(t, v2, np.arange(6), "last").values.tolist() == [10.0, 22.0, 30.0]
     assert prepare_tag(t, v2, np.arange(6), "first").values.tolist() == [10.0, 20.0, 30.0]
+
+
+@pytest.mark.parametrize("layout", ["blocks", "interleaved", "interleaved_then_broken", "shuffled"])
+def test_split_by_tag_gives_each_tags_rows_in_file_order(layout):
+    """Every layout (PI blocks, Ignition "tall" interleaving, an interleaving that breaks in its
+    last rows, any order) splits into each tag's times and values in file order."""
+    rng = np.random.default_rng(3)
+    k, m = 5, 40
+    tag_id = {
+        "blocks": np.repeat(np.arange(k), m),
+        "interleaved": np.tile(np.arange(k), m),
+        "interleaved_then_broken": np.r_[np.tile(np.arange(k), m - 1), [0, 2, 1, 3, 4]],
+        "shuffled": rng.permutation(np.tile(np.arange(k), m)),
+    }[layout].astype(np.uint8)
+    t_ns = rng.integers(0, 10**12, len(tag_id))
+    values = rng.standard_normal(len(tag_id))
+    got = {tid: (t, v, sel) for tid, t, v, sel in split_by_tag(tag_id, t_ns, values)}
+    assert sorted(got) == list(range(k))
+    for tid, (t, v, sel) in got.items():
+        rows = np.flatnonzero(tag_id == tid)
+        np.testing.assert_array_equal(t, t_ns[rows])
+        np.testing.assert_array_equal(v, values[rows])
+        np.testing.assert_array_equal(np.arange(len(tag_id))[sel], rows)
 
 
 def test_sample_rate_must_give_a_whole_microsecond_period():

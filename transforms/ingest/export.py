@@ -10,6 +10,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 from datetime import datetime
 
+import numba
 import numpy as np
 import polars as pl
 
@@ -60,12 +61,29 @@ class ExportResult:
     counts: ExportCounts
 
 
+@numba.njit(cache=True, nogil=True)
+def _deinterleave(tag_id: np.ndarray, t_ns: np.ndarray, values: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray, bool]:
+    """Rows in a fixed order of ``k`` tags → each tag's times and values (rows ``j, j+k, …``), in
+    one pass that also checks the order; False (and partly filled arrays) where it breaks."""
+    m = len(tag_id) // k
+    t_cols = np.empty((k, m), dtype=t_ns.dtype)
+    v_cols = np.empty((k, m), dtype=values.dtype)
+    for i in range(m):
+        for j in range(k):
+            r = i * k + j
+            if tag_id[r] != tag_id[j]:
+                return t_cols, v_cols, False
+            t_cols[j, i] = t_ns[r]
+            v_cols[j, i] = values[r]
+    return t_cols, v_cols, True
+
+
 def split_by_tag(tag_id: np.ndarray, t_ns: np.ndarray, values: np.ndarray) -> list[tuple[int, np.ndarray, np.ndarray, slice | np.ndarray]]:
     """Each tag's times and values, in file order: ``(tag id, t_ns, values, row selector)``.
 
     Two common layouts are split without a gather: rows grouped by tag (PI: one block per
     tag, slices) and rows interleaved in a fixed tag order (Ignition "tall", archives: one row
-    per tag and instant, one transposing copy). Anything else is grouped by a stable sort.
+    per tag and instant, one de-interleaving pass). Anything else is grouped by a stable sort.
     """
     n = len(tag_id)
     if n == 0:
@@ -80,10 +98,10 @@ def split_by_tag(tag_id: np.ndarray, t_ns: np.ndarray, values: np.ndarray) -> li
             return [(int(tag_id[a]), t_ns[a:b], values[a:b], slice(int(a), int(b))) for a, b in zip(starts, stops)]
     first_repeat = tag_id[1 : min(n, 65_537)] == tag_id[0]
     k = int(np.argmax(first_repeat)) + 1 if first_repeat.any() else n
-    if n % k == 0 and len(np.unique(tag_id[:k])) == k and np.array_equal(tag_id.reshape(-1, k), np.broadcast_to(tag_id[:k], (n // k, k))):
-        t_cols = t_ns.reshape(-1, k).T.copy()
-        v_cols = values.reshape(-1, k).T.copy()
-        return [(int(tag_id[j]), t_cols[j], v_cols[j], slice(j, n, k)) for j in range(k)]
+    if n % k == 0 and len(np.unique(tag_id[:k])) == k:
+        t_cols, v_cols, interleaved = _deinterleave(tag_id, t_ns, values, k)
+        if interleaved:
+            return [(int(tag_id[j]), t_cols[j], v_cols[j], slice(j, n, k)) for j in range(k)]
     order = np.argsort(tag_id, kind="stable")
     sorted_ids = tag_id[order]
     bounds = np.r_[0, np.flatnonzero(sorted_ids[1:] != sorted_ids[:-1]) + 1, n]

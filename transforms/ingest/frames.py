@@ -42,29 +42,28 @@ def assemble_valve(valve_id: str, signals: dict[str, Gridded]) -> pl.DataFrame:
     """
     req = [signals[s] for s in REQUIRED_SIGNALS]
     t = req[0].t_us
-    if not all(np.array_equal(g.t_us, t) for g in req[1:]):
+    aligned = all(np.array_equal(g.t_us, t) for g in req[1:])  # the usual case: one grid for all
+    if not aligned:
         for g in req[1:]:
             t = np.intersect1d(t, g.t_us, assume_unique=True)
-    data: dict[str, object] = {"timestamp_utc": t}
+    data: dict[str, object] = {
+        "valve_id": pl.repeat(valve_id, len(t), dtype=pl.String, eager=True),
+        "date": pl.Series((t // US_PER_DAY).astype(np.int32)).cast(pl.Date),
+        "timestamp_utc": pl.Series(t).cast(pl.Datetime("us", "UTC")),
+    }
     for s, col in SIGNAL_COLUMN.items():
         g = signals.get(s)
         if g is None:
-            data[col] = pl.repeat(None, len(t), dtype=pl.Float64, eager=True).alias(col)
-            continue
-        if len(g.t_us) == len(t) and np.array_equal(g.t_us, t):
-            data[col] = g.values
-            continue
-        pos = np.searchsorted(g.t_us, t)
-        pos_c = np.minimum(pos, max(len(g.t_us) - 1, 0))
-        found = (pos < len(g.t_us)) & (g.t_us[pos_c] == t) if len(g.t_us) else np.zeros(len(t), dtype=bool)
-        vals = g.values[pos_c] if len(g.t_us) else np.zeros(len(t))
-        data[col] = pl.Series(col, vals, dtype=pl.Float64).scatter(np.flatnonzero(~found), None) if not found.all() else vals
-    frame = pl.DataFrame(data).with_columns(
-        pl.col("timestamp_utc").cast(pl.Datetime("us")).dt.replace_time_zone("UTC"),
-        valve_id=pl.lit(valve_id, dtype=pl.String),
-    )
-    frame = frame.with_columns(date=pl.col("timestamp_utc").dt.date())
-    return frame.select(SENSOR_POLARS_SCHEMA.names()).cast(dict(SENSOR_POLARS_SCHEMA))
+            data[col] = pl.repeat(None, len(t), dtype=pl.Float32, eager=True)
+        elif (aligned and s in REQUIRED_SIGNALS) or np.array_equal(g.t_us, t):
+            data[col] = g.values.astype(np.float32)
+        else:
+            pos = np.searchsorted(g.t_us, t)
+            pos_c = np.minimum(pos, max(len(g.t_us) - 1, 0))
+            found = (pos < len(g.t_us)) & (g.t_us[pos_c] == t) if len(g.t_us) else np.zeros(len(t), dtype=bool)
+            vals = g.values[pos_c].astype(np.float32) if len(g.t_us) else np.zeros(len(t), dtype=np.float32)
+            data[col] = pl.Series(col, vals).scatter(np.flatnonzero(~found), None) if not found.all() else vals
+    return pl.DataFrame(data).select(SENSOR_POLARS_SCHEMA.names()).cast(dict(SENSOR_POLARS_SCHEMA))
 
 
 def split_days(frame: pl.DataFrame) -> list[tuple[date, pl.DataFrame]]:

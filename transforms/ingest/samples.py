@@ -25,6 +25,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 import polars as pl
 
@@ -110,11 +111,17 @@ def _text(col: pl.Series) -> pl.Series:
     return col if col.dtype == pl.String else col.cast(pl.String)
 
 
-def _bad_quality(col: pl.Series, good: tuple[str, ...]) -> pl.Series:
-    """Rows whose quality code is not one of ``export.good_quality`` (a missing code is bad)."""
-    if col.dtype == pl.String and len(good) == 1:
+def _bad_quality(col: pl.Series, good: tuple[str, ...]) -> pl.Series | None:
+    """Rows whose quality code is not one of ``export.good_quality`` (a missing code is bad);
+    None when no row is bad."""
+    if isinstance(col.dtype, pl.Enum):  # judged per code, not per row
+        good_codes = [i for i, c in enumerate(col.dtype.categories.to_list()) if c in good]
+        if len(good_codes) == len(col.dtype.categories) and not col.null_count():
+            return None
+        ok = col.to_physical().is_in(good_codes)
+    elif col.dtype == pl.String and len(good) == 1:
         ok = col == good[0]  # one good code (the usual case): a comparison, no hashing
-    elif isinstance(col.dtype, (pl.Categorical, pl.Enum)) or col.dtype == pl.String:
+    elif isinstance(col.dtype, pl.Categorical) or col.dtype == pl.String:
         ok = col.is_in(list(good))
     else:
         ok = col.cast(pl.String).is_in(list(good))
@@ -177,10 +184,17 @@ def _tag_enum(col: pl.Series, tags: TagTable) -> pl.Series:
     return _text(col).cast(tags.enum, strict=False)
 
 
+@numba.njit(cache=True, nogil=True)
+def _to_si(values: np.ndarray, tag_id: np.ndarray, factors: np.ndarray) -> np.ndarray:
+    """``values * factors[tag_id]`` in one pass (numpy's gather and multiply take ~3× as long)."""
+    out = np.empty(len(values))
+    for i in range(len(values)):
+        out[i] = values[i] * factors[tag_id[i]]
+    return out
+
+
 def _accepted(lines: pl.Series, tag: pl.Series, ts: pl.Series, values: pl.Series, tags: TagTable) -> pl.DataFrame:
-    tag_id = tag.to_physical().to_numpy()
-    value_si = np.take(tags.factors, tag_id) if len(tag_id) else np.zeros(0)
-    np.multiply(values.to_numpy(), value_si, out=value_si)  # one temporary array, not two
+    value_si = _to_si(values.to_numpy(), tag.to_physical().to_numpy(), tags.factors)
     return pl.DataFrame(
         {
             "line": lines.cast(pl.Int64),

@@ -1,0 +1,89 @@
+"""Parquet exports: text tag and quality columns are read by their dictionary codes
+(``flows.ingest.enum_column``), and the result is the same as reading the text."""
+
+from __future__ import annotations
+
+import polars as pl
+import pyarrow as pa
+import pytest
+from polars.testing import assert_frame_equal
+
+from flows.errors import ValvemonError
+from flows.ingest import enum_column
+from tests.ingest.conftest import DATA, ingest, lake, table
+
+
+def _dict_chunks(*chunks: list[str | None]) -> pa.ChunkedArray:
+    return pa.chunked_array([pa.array(c, type=pa.string()).dictionary_encode() for c in chunks])
+
+
+def test_enum_column_maps_each_chunks_own_dictionary():
+    col = _dict_chunks(["b", None, "a", "b"], ["c", "a"])  # two row groups, two dictionaries
+    got = enum_column(col, ("a", "b", "c", "d"))
+    assert got.dtype == pl.Enum(["a", "b", "c", "d"])
+    assert got.to_list() == ["b", None, "a", "b", "c", "a"]
+    own = enum_column(col)
+    assert own.dtype == pl.Enum(["b", "a", "c"]) and own.to_list() == ["b", None, "a", "b", "c", "a"]
+
+
+def test_enum_column_refuses_a_value_outside_the_categories():
+    assert enum_column(_dict_chunks(["a"], ["b", "x"]), ("a", "b")) is None
+
+
+def test_enum_column_of_one_code():
+    assert enum_column(_dict_chunks(["Good"] * 3, ["Good"])).to_list() == ["Good"] * 4
+    assert enum_column(_dict_chunks(["Good", None])).to_list() == ["Good", None]
+
+
+def _as_parquet(csv, path, **read):
+    """The CSV export as a Parquet file of text columns, in row groups of 7 rows (so each row
+    group has a dictionary of its own)."""
+    pl.read_csv(csv, infer_schema=False, **read).write_parquet(path, row_group_size=7)
+    return path
+
+
+def _quarantine(wh, line_offset):
+    q = table(wh, "quarantine").sort("line")
+    return q.select(pl.col("line") - line_offset, "tag", "timestamp_raw", "value_raw", "quality", "reason")
+
+
+@pytest.mark.parametrize(
+    "fixture, export",
+    [
+        ("base_long.csv", {}),
+        ("pi_tag_major.csv", dict(quality_column=None, good_quality=None)),  # digital states, no quality
+        ("out_of_order.csv", {}),
+        ("duplicates.csv", {}),
+    ],
+)
+def test_parquet_export_reads_like_its_csv(plant, tmp_path, fixture, export):
+    cfg, _ = plant(**export)
+    ingest(cfg, DATA / fixture, tmp_path / "csv")
+    ingest(cfg, _as_parquet(DATA / fixture, tmp_path / "x.parquet"), tmp_path / "pq")
+    assert_frame_equal(lake(tmp_path / "pq"), lake(tmp_path / "csv"), check_exact=True)
+    # a CSV line counts the header; a Parquet row does not
+    assert_frame_equal(_quarantine(tmp_path / "pq", 0), _quarantine(tmp_path / "csv", 1))
+
+
+def test_bad_and_missing_quality_codes_in_parquet(plant, tmp_path):
+    cfg, _ = plant()
+    lines = (DATA / "base_long.csv").read_text().splitlines()
+    lines[5] = lines[5].rsplit(",", 1)[0] + ",Bad"  # CSV line 6, Parquet row 5
+    lines[20] = lines[20].rsplit(",", 1)[0] + ","  # no code (CSV line 21, Parquet row 20): bad too
+    csv = tmp_path / "q.csv"
+    csv.write_text("\n".join(lines) + "\n")
+    report = ingest(cfg, _as_parquet(csv, tmp_path / "q.parquet"), tmp_path / "pq")
+    ingest(cfg, csv, tmp_path / "csv")
+    q = _quarantine(tmp_path / "pq", 0)
+    assert q.select("line", "quality", "reason").rows() == [(5, "Bad", "bad_quality"), (20, None, "bad_quality")]
+    assert report.quarantined == 2
+    assert_frame_equal(q, _quarantine(tmp_path / "csv", 1))
+    assert_frame_equal(lake(tmp_path / "pq"), lake(tmp_path / "csv"), check_exact=True)
+
+
+def test_unknown_tag_in_parquet_is_named_with_its_row(plant, tmp_path):
+    cfg, _ = plant()
+    path = _as_parquet(DATA / "unknown_tag.csv", tmp_path / "unknown.parquet")
+    with pytest.raises(ValvemonError) as err:
+        ingest(cfg, path, tmp_path / "wh")
+    assert str(err.value) == f"{path}: line 3: unknown tag 'MILL1.V099.P1': no valve of the plant configuration has it"
