@@ -189,24 +189,38 @@ def parse_iso_column(arr: pa.Array | pa.ChunkedArray, *, zoned: bool) -> pa.Arra
     shape (module doc). Nulls stay null.
 
     ``string_view`` (what polars hands over without a copy: ``to_arrow(compat_level=newest)``),
-    ``large_string`` and ``string`` arrays are read in place.
+    ``large_string`` and ``string`` arrays are read in place, a chunked array chunk by chunk.
     """
-    if isinstance(arr, pa.ChunkedArray):
-        arr = arr.combine_chunks() if arr.num_chunks != 1 else arr.chunk(0)
+    chunks = arr.chunks if isinstance(arr, pa.ChunkedArray) else [arr]
+    n = sum(len(c) for c in chunks)
+    out = np.empty(n, dtype=np.int64)
+    valid = np.ones(n, dtype=np.bool_)
+    a = 0
+    for chunk in chunks:
+        b = a + len(chunk)
+        if not _parse_chunk(chunk, zoned, out[a:b], valid[a:b]):
+            return None
+        a = b
+    return pa.array(out, type=pa.timestamp("ns", "UTC" if zoned else None), mask=None if valid.all() else ~valid)
+
+
+def _parse_chunk(arr: pa.Array, zoned: bool, out: np.ndarray, valid: np.ndarray) -> bool:
+    """One array into ``out`` (its validity into ``valid``); False at the first element it does
+    not accept (or another type of array)."""
     if arr.type == pa.string():
         arr = arr.cast(pa.large_string())
     n = len(arr)
-    out = np.empty(n, dtype=np.int64)
     if n == 0:
-        return pa.array(out, type=pa.timestamp("ns", "UTC" if zoned else None))
-    valid = np.ones(n, dtype=np.bool_) if arr.null_count == 0 else arr.is_valid().to_numpy(zero_copy_only=False)
+        return True
+    if arr.null_count:
+        valid[:] = arr.is_valid().to_numpy(zero_copy_only=False)
     no_offsets = np.zeros(1, dtype=np.int64)
     if arr.type == pa.large_string():
         _, offsets_buf, data_buf = arr.buffers()
         offsets = np.frombuffer(offsets_buf, dtype=np.int64, count=n + 1, offset=arr.offset * 8)
         data_address = data_buf.address if data_buf is not None else 0
         if data_buf is None or offsets[-1] > data_buf.size:
-            return None
+            return False
         status = _parse_column(False, offsets, data_address, np.zeros((1, 4), np.int32), 0, no_offsets, no_offsets, valid, zoned, out)
     elif arr.type == pa.string_view():
         buffers = arr.buffers()
@@ -216,8 +230,5 @@ def parse_iso_column(arr: pa.Array | pa.ChunkedArray, *, zoned: bool) -> pa.Arra
         sizes = np.array([b.size if b is not None else 0 for b in data_bufs] or [0], dtype=np.int64)
         status = _parse_column(True, no_offsets, 0, views, views_buf.address + arr.offset * 16, addresses, sizes, valid, zoned, out)
     else:
-        return None
-    if status != -1:
-        return None
-    mask = None if arr.null_count == 0 else ~valid
-    return pa.array(out, type=pa.timestamp("ns", "UTC" if zoned else None), mask=mask)
+        return False
+    return status == -1

@@ -214,7 +214,8 @@ def _arrow_iso(text: pl.Series, *, zoned: bool) -> pl.Series | None:
     parser; None if any element is not ISO-8601 of that kind (with an offset when ``zoned``,
     without otherwise), so the caller falls back to the format-by-format path, which also
     names the offending line."""
-    arr = text.to_arrow(compat_level=pl.CompatLevel.newest())  # string_view: no copy of the text
+    # string_view chunks: no copy of the text (a whole-column to_arrow would first rechunk it)
+    arr = pa.chunked_array([c.to_arrow(compat_level=pl.CompatLevel.newest()) for c in text.get_chunks()], type=pa.string_view())
     parsed = parse_iso_column(arr, zoned=zoned)
     if parsed is None:
         try:
