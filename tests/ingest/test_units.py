@@ -8,6 +8,8 @@ import numpy as np
 import polars as pl
 import pyarrow.parquet as pq
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from polars.testing import assert_frame_equal
 
 from flows.lake import partition_path, read_lake, row_group_bounds, write_partition
@@ -151,6 +153,30 @@ def test_split_by_tag_gives_each_tags_rows_in_file_order(layout):
         np.testing.assert_array_equal(t, t_ns[rows])
         np.testing.assert_array_equal(v, values[rows])
         np.testing.assert_array_equal(np.arange(len(tag_id))[sel], rows)
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    steps=st.lists(st.sampled_from([1000, 1000, 1000, 999, 1001, 2000, 7000, 9000]), min_size=0, max_size=40),
+    start=st.integers(-5, 5).map(lambda k: 1_740_830_400_000_000_000 + k * 1000 + (k % 3 == 0) * 17),
+)
+def test_grid_scan_agrees_with_its_definition(steps, start):
+    """The one-pass scan of to_grid and prepare_tag against the definitions it replaces: gaps
+    are steps beyond ``max_gap``; "gridded" = every time a grid instant, no instant missing
+    inside a segment; the order state."""
+    from transforms.ingest.grid import _grid_scan, _order_state
+
+    P, max_gap = 1000, 5000
+    t = start + np.r_[0, np.cumsum(steps)].astype(np.int64)
+    t_us, n_breaks, gridded = _grid_scan(t, P, max_gap)
+    d = np.diff(t)
+    np.testing.assert_array_equal(t_us, t // 1000)
+    assert n_breaks == int(np.sum(d > max_gap))
+    assert gridded == bool(np.all(t % P == 0) and np.all((d == P) | (d > max_gap)))
+    assert _order_state(t) == 0
+    if len(t) > 2:
+        assert _order_state(np.r_[t[:2], t[1:]]) == 1
+        assert _order_state(t[::-1].copy()) == 2
 
 
 def test_sample_rate_must_give_a_whole_microsecond_period():

@@ -27,6 +27,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from datetime import datetime, timezone
 
+import numba
 import numpy as np
 
 from transforms.ingest.errors import IngestError
@@ -81,6 +82,43 @@ def _iso(t_ns: int) -> str:
     return datetime.fromtimestamp(t_ns // 1_000_000_000, tz=timezone.utc).strftime("%Y-%m-%dT%H:%M:%S") + f".{t_ns % 1_000_000_000:09d}Z"
 
 
+_INCREASING, _NONDECREASING, _UNSORTED = 0, 1, 2
+
+
+@numba.njit(cache=True, nogil=True)
+def _order_state(t_ns: np.ndarray) -> int:
+    """Whether the times strictly increase, never decrease (some repeat), or are out of order;
+    one pass."""
+    state = _INCREASING
+    for i in range(1, len(t_ns)):
+        if t_ns[i] < t_ns[i - 1]:
+            return _UNSORTED
+        if t_ns[i] == t_ns[i - 1]:
+            state = _NONDECREASING
+    return state
+
+
+@numba.njit(cache=True, nogil=True)
+def _grid_scan(t_ns: np.ndarray, period_ns: int, max_gap_ns: int) -> tuple[np.ndarray, int, bool]:
+    """One pass over sorted, unique times: the times in µs, the number of gaps, and whether every
+    time is a grid instant with no grid instant missing inside a segment."""
+    n = len(t_ns)
+    t_us = np.empty(n, dtype=np.int64)
+    n_breaks = 0
+    gridded = t_ns[0] % period_ns == 0
+    t_us[0] = t_ns[0] // NS_PER_US
+    for i in range(1, n):
+        t_us[i] = t_ns[i] // NS_PER_US
+        d = t_ns[i] - t_ns[i - 1]
+        if d > max_gap_ns:
+            n_breaks += 1
+            if t_ns[i] % period_ns != 0:
+                gridded = False
+        elif d != period_ns:
+            gridded = False
+    return t_us, n_breaks, gridded
+
+
 def prepare_tag(t_ns: np.ndarray, values: np.ndarray, lines, rule: str, tag: str = "") -> TagSeries:
     """Sort one tag's samples by time and resolve samples at the same time (module doc, 1–2).
 
@@ -96,10 +134,11 @@ def prepare_tag(t_ns: np.ndarray, values: np.ndarray, lines, rule: str, tag: str
         The tag's name, for the error message.
     """
     order = None
-    if len(t_ns) > 1 and not np.all(t_ns[1:] >= t_ns[:-1]):
+    state = _order_state(t_ns)
+    if state == _UNSORTED:
         order = np.argsort(t_ns, kind="stable")
         t_ns, values = t_ns[order], values[order]
-    if len(t_ns) < 2:
+    if state == _INCREASING:
         return TagSeries(t_ns, values, 0, 0)
     same = t_ns[1:] == t_ns[:-1]
     if not same.any():
@@ -159,12 +198,11 @@ def to_grid(t_ns: np.ndarray, values: np.ndarray, grid: Grid) -> Gridded:
         e = np.zeros(0, dtype=np.int64)
         return Gridded(e, np.zeros(0), e, e)
     P = grid.period_ns
-    d = np.diff(t_ns)
-    breaks = np.flatnonzero(d > grid.max_gap_ns)
+    t_us, n_breaks, gridded = _grid_scan(t_ns, P, grid.max_gap_ns)
+    breaks = np.flatnonzero(np.diff(t_ns) > grid.max_gap_ns) if n_breaks else np.zeros(0, dtype=np.int64)
     gap_start, gap_end = t_ns[breaks], t_ns[breaks + 1]
-    if t_ns[0] % P == 0 and ((n == 1 or (d.min() == P and d.max() == P)) or (np.all(t_ns % P == 0) and np.all((d == P) | (d > grid.max_gap_ns)))):
-        # exactly gridded and nothing missing inside a segment: the samples are the grid
-        return Gridded(t_ns // NS_PER_US, values, gap_start, gap_end)
+    if gridded:  # exactly gridded and nothing missing inside a segment: the samples are the grid
+        return Gridded(t_us, values, gap_start, gap_end)
     seg_first = np.r_[0, breaks + 1]
     seg_last = np.r_[breaks, n - 1]
     k_lo = -((-t_ns[seg_first]) // P)  # ceil: first grid instant at or after the segment's start
