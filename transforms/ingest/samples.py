@@ -193,6 +193,15 @@ def _to_si(values: np.ndarray, tag_id: np.ndarray, factors: np.ndarray) -> np.nd
     return out
 
 
+@numba.njit(cache=True, nogil=True)
+def _code_counts(codes: np.ndarray, n: int) -> np.ndarray:
+    """How often each of the codes ``0 … n-1`` occurs (``np.bincount`` first widens them to int64)."""
+    counts = np.zeros(n, dtype=np.int64)
+    for c in codes:
+        counts[c] += 1
+    return counts
+
+
 def _accepted(lines: pl.Series, tag: pl.Series, ts: pl.Series, values: pl.Series, tags: TagTable) -> pl.DataFrame:
     value_si = _to_si(values.to_numpy(), tag.to_physical().to_numpy(), tags.factors)
     return pl.DataFrame(
@@ -253,8 +262,7 @@ def long_samples(df: pl.DataFrame, export: ExportSpec, timezone: str, tags: TagT
     bad_quality = _bad_quality(df[export.quality_column], export.good_quality) if export.quality_column else None
     masks = (missing_tag, bad_quality, missing, non_numeric, non_finite)
     rejected = _any(masks)
-    ids = tag_id.drop_nulls().to_numpy()
-    counts = np.bincount(ids, minlength=len(tags.tags)) if len(ids) else np.zeros(len(tags.tags), dtype=np.int64)
+    counts = _code_counts(tag_id.drop_nulls().to_numpy(), len(tags.tags))
     tags_present = frozenset(tags.tags[i] for i in np.flatnonzero(counts))
     if rejected is not None and rejected.any():
         sub = rejected.arg_true()
