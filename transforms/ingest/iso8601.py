@@ -71,6 +71,19 @@ def _digits(data, a: int, k: int) -> int:
 
 
 @numba.njit(cache=True, nogil=True)
+def _same_bytes(a: int, b: int, e: int) -> bool:
+    """Whether the ``e`` (≥ 8) bytes at addresses ``a`` and ``b`` are equal (``b`` < 0: no)."""
+    if b < 0:
+        return False
+    j = 0
+    while j + 8 <= e:
+        if _load8(a + j) != _load8(b + j):
+            return False
+        j += 8
+    return j == e or _load8(a + e - 8) == _load8(b + e - 8)
+
+
+@numba.njit(cache=True, nogil=True)
 def _parse_column(view_layout: bool, offsets, data_address: int, views, views_address: int, buffer_addresses, buffer_sizes, valid, zoned: bool, out) -> int:
     """Parse every valid element into ``out`` (int64 ns); the index of the first element it
     does not accept, or -1 when all were read.
@@ -82,6 +95,9 @@ def _parse_column(view_layout: bool, offsets, data_address: int, views, views_ad
     n = len(out)
     prev = np.int64(-1)  # address of the last element whose date and time (to the second) were read
     base = 0  # those as seconds since the epoch
+    last = np.int64(-1)  # address, length and value of the last element read
+    last_e = np.int64(0)
+    last_value = np.int64(0)
     for i in range(n):
         if not valid[i]:
             out[i] = 0
@@ -103,6 +119,9 @@ def _parse_column(view_layout: bool, offsets, data_address: int, views, views_ad
         a = 0
         if e < 19:
             return i
+        if e == last_e and _same_bytes(address, last, e):  # a long export repeats each time per tag
+            out[i] = last_value
+            continue
         # consecutive rows often share the second: compare the first 19 bytes, 8 at a time,
         # the latest digits first
         same = prev >= 0 and _load8(address + 11) == _load8(prev + 11) and _load8(address + 3) == _load8(prev + 3) and _load8(address) == _load8(prev)
@@ -180,6 +199,7 @@ def _parse_column(view_layout: bool, offsets, data_address: int, views, views_ad
         elif zoned:
             return i
         out[i] = (base - off_s) * _NS_PER_S + frac
+        last, last_e, last_value = address, e, out[i]
     return -1
 
 
