@@ -130,6 +130,18 @@ def test_random_text_reads_as_arrow_reads_it(rows):
         _agree(texts, zoned)
 
 
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.tuples(st.sampled_from(["same", 3, 18, 24, 28]), st.integers(0, 9)), min_size=1, max_size=12))
+def test_equal_and_nearly_equal_neighbours_read_as_arrow_reads_them(edits):
+    """An element equal to the one before takes its value unparsed; one that differs from it in a
+    single digit (of the year, the second, the fraction's middle or its last digit) is parsed."""
+    texts = ["2025-03-01T12:00:00.123456789Z"]
+    for position, digit in edits:
+        t = texts[-1]
+        texts.append(t if position == "same" else t[:position] + str(digit) + t[position + 1 :])
+    assert _agree(texts, zoned=True) is not None
+
+
 def test_parse_timestamps_takes_the_fast_path_with_the_same_result():
     t0 = datetime(2025, 3, 1, 12, tzinfo=timezone.utc)
     texts = [(t0 + timedelta(milliseconds=k // 3)).strftime("%Y-%m-%dT%H:%M:%S.%f")[:-3] + "Z" for k in range(3000)]
