@@ -225,7 +225,7 @@ def storage(seconds: int, repeat: int) -> None:
     import duckdb
     import pyarrow.parquet as pq
 
-    from flows.lake import row_group_bounds
+    from flows.lake import STATISTICS_COLUMNS, row_group_bounds
 
     days = max(seconds // 240, 1)
     frame = lake_day(days)
@@ -269,7 +269,7 @@ def storage(seconds: int, repeat: int) -> None:
             def write() -> None:
                 with pq.ParquetWriter(
                     path, table.schema, compression=codec, compression_level=level, use_dictionary=["valve_id", "date"],
-                    write_statistics=["timestamp_utc", "valve_id", "date"], use_byte_stream_split=value_cols if bss else False,
+                    write_statistics=STATISTICS_COLUMNS, use_byte_stream_split=value_cols if bss else False,
                     column_encoding={"timestamp_utc": "DELTA_BINARY_PACKED"} if delta else None,
                 ) as w:
                     for a, b in bounds:

@@ -191,7 +191,7 @@ def enum_column(col: pa.ChunkedArray, categories: tuple[str, ...] | None = None)
     if categories is None:
         categories = tuple(dict.fromkeys(v for d in dictionaries for v in d))
     position = {c: i for i, c in enumerate(categories)}
-    if any(v not in position for d in dictionaries for v in d):
+    if None in position or any(v not in position for d in dictionaries for v in d):
         return None
     enum = pl.Enum(list(categories))
     if len(categories) == 1 and not col.null_count:  # one code throughout (quality "Good")

@@ -26,8 +26,10 @@ def test_enum_column_maps_each_chunks_own_dictionary():
     assert own.dtype == pl.Enum(["b", "a", "c"]) and own.to_list() == ["b", None, "a", "b", "c", "a"]
 
 
-def test_enum_column_refuses_a_value_outside_the_categories():
+def test_enum_column_refuses_a_value_outside_the_categories_or_a_null_in_a_dictionary():
     assert enum_column(_dict_chunks(["a"], ["b", "x"]), ("a", "b")) is None
+    with_null = pa.chunked_array([pa.DictionaryArray.from_arrays(pa.array([0, 1], pa.int32()), pa.array(["a", None]))])
+    assert enum_column(with_null) is None and enum_column(with_null, ("a",)) is None
 
 
 def test_enum_column_of_one_code():
