@@ -223,14 +223,14 @@ def read_parquet_export(path: Path, export: ExportSpec, tags: TagTable | None = 
     coded = [c for c in wanted if c and c in schema.names and _is_text(schema.field(c).type)]
     if not coded:
         return pl.read_parquet(path)
-    rest = [c for c in schema.names if c not in coded]
-    df = pl.read_parquet(path, columns=rest) if rest else pl.DataFrame()  # polars decodes these faster than Arrow
     table = pq.read_table(path, columns=coded, read_dictionary=coded)
+    columns = []
     for name in coded:
         col = table[name]
-        categories = tags.tags if tags is not None and name == export.tag_column else None
-        enum = enum_column(col, categories)
-        df = df.with_columns((enum if enum is not None else pl.from_arrow(col.cast(col.type.value_type))).alias(name))
+        enum = enum_column(col, tags.tags if tags is not None and name == export.tag_column else None)
+        columns.append((enum if enum is not None else pl.from_arrow(col.cast(col.type.value_type))).alias(name))
+    rest = [c for c in schema.names if c not in coded]  # polars decodes these faster than Arrow
+    df = pl.read_parquet(path, columns=rest).with_columns(columns) if rest else pl.DataFrame(columns)
     return df.select(schema.names)
 
 

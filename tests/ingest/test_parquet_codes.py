@@ -89,3 +89,12 @@ def test_unknown_tag_in_parquet_is_named_with_its_row(plant, tmp_path):
     with pytest.raises(ValvemonError) as err:
         ingest(cfg, path, tmp_path / "wh")
     assert str(err.value) == f"{path}: line 3: unknown tag 'MILL1.V099.P1': no valve of the plant configuration has it"
+
+
+def test_parquet_of_text_columns_only_names_the_missing_column(plant, tmp_path):
+    cfg, _ = plant()
+    path = tmp_path / "no_time.parquet"
+    pl.read_csv(DATA / "base_long.csv", infer_schema=False).select("tag", "quality").write_parquet(path)
+    with pytest.raises(ValvemonError) as err:
+        ingest(cfg, path, tmp_path / "wh")
+    assert str(err.value).startswith(f"{path}: missing column 'timestamp' (export.timestamp_column)")
