@@ -37,7 +37,7 @@ from flows.discrepancy_pipeline import ConditionFit, Diagnosis, diagnose, fit_co
 from flows.errors import ValvemonError
 from flows.instants import utc_instant
 from flows.lake import read_lake
-from flows.warehouse_db import connect, ensure_tables, insert_frame
+from flows.warehouse_db import connect, ensure_tables, insert_frame, transaction
 from model.params import PlantParams, ValveCondition
 from schemas.fields import (
     DISCREPANCY_CANDIDATE_FIELDS,
@@ -242,14 +242,9 @@ def store_run(warehouse: Path, tables: dict[str, pl.DataFrame]) -> None:
     """Append one run's rows to every discrepancy table in one transaction."""
     with connect(warehouse) as con:
         ensure_discrepancy_tables(con)
-        con.execute("BEGIN TRANSACTION")
-        try:
+        with transaction(con):
             for name, frame in tables.items():
                 insert_frame(con, name, frame)
-            con.execute("COMMIT")
-        except BaseException:
-            con.execute("ROLLBACK")
-            raise
 
 
 def discrepancy_valve(config, valve_id: str, warehouse: Path, start: datetime | None, end: datetime | None, settings: DiscrepancySettings | None = None, condition_mode: str = "auto") -> DiscrepancyReport:

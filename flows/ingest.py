@@ -41,7 +41,7 @@ from flows.config import load_plant_config
 from flows.errors import ValvemonError
 from flows.lake import partition_path, read_partition, write_partition
 from flows.locks import file_lock
-from flows.warehouse_db import connect, ensure_ingest_tables, insert_frame, query_frame
+from flows.warehouse_db import connect, ensure_ingest_tables, insert_frame, query_frame, transaction
 from schemas.fields import GAP_FIELDS, GAP_SCHEMA, INGEST_RUN_FIELDS, MANIFEST_FIELDS, QUARANTINE_FIELDS, QUARANTINE_SCHEMA, polars_schema
 from schemas.plant_config import ConfigError, ExportSpec, PlantConfig
 from transforms.ingest import Grid, IngestError, TagTable, merge_partition, process_export, tags_by_column
@@ -361,14 +361,9 @@ def rekey_file(con, old: str, new: str) -> None:
     tables = ["ingest_manifest", "quarantine", "ingest_gaps"]
     if con.execute("SELECT count(*) FROM duckdb_tables() WHERE database_name = current_database() AND table_name = 'backfill_progress'").fetchone()[0]:
         tables.append("backfill_progress")
-    con.execute("BEGIN TRANSACTION")
-    try:
+    with transaction(con):
         for t in tables:
             con.execute(f"UPDATE {t} SET file_hash = ? WHERE file_hash = ?", [new, old])
-        con.execute("COMMIT")
-    except BaseException:
-        con.execute("ROLLBACK")
-        raise
 
 
 def _table(frame: pl.DataFrame, fields) -> pl.DataFrame:
@@ -487,17 +482,12 @@ def record_file(warehouse: Path, manifest: dict, quarantine: pl.DataFrame, gaps:
     key = manifest["file_hash"]
     with connect(warehouse) as con:
         ensure_ingest_tables(con)
-        con.execute("BEGIN TRANSACTION")
-        try:
+        with transaction(con):
             con.execute("DELETE FROM quarantine WHERE file_hash = ?", [key])
             con.execute("DELETE FROM ingest_gaps WHERE file_hash = ?", [key])
             insert_frame(con, "quarantine", quarantine)
             insert_frame(con, "ingest_gaps", gaps)
             insert_frame(con, "ingest_manifest", pl.DataFrame([manifest], schema=polars_schema(MANIFEST_FIELDS)), replace=True)
-            con.execute("COMMIT")
-        except BaseException:
-            con.execute("ROLLBACK")
-            raise
 
 
 # --- a run -----------------------------------------------------------------------------------

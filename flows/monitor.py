@@ -42,7 +42,7 @@ from flows.batches import WriteBatch
 from flows.errors import ValvemonError
 from flows.instants import utc_instant
 from flows.lake import list_partitions, read_lake
-from flows.warehouse_db import connect, ensure_tables, insert_frame, query_frame
+from flows.warehouse_db import connect, ensure_tables, insert_frame, query_frame, transaction
 from model.area import edge_area
 from schemas.fields import BASELINE_FIELDS, EDGE_FIT_FIELDS, EDGES, SELECTION_FIELDS, polars_schema
 from schemas.plant_config import PlantConfig, ValveSpec
@@ -410,8 +410,7 @@ def store_spans(warehouse: Path, spans: list[Span], also: Callable[[duckdb.DuckD
         return
     with connect(warehouse) as con:
         ensure_monitor_tables(con)
-        con.execute("BEGIN TRANSACTION")
-        try:
+        with transaction(con):
             for valve_id, start, end, _, _ in spans:
                 for table in ("edge_fits", "selection_stats"):
                     con.execute(f"DELETE FROM {table} WHERE valve_id = ? AND window_start >= ? AND window_start < ?", [valve_id, start, end])
@@ -419,10 +418,6 @@ def store_spans(warehouse: Path, spans: list[Span], also: Callable[[duckdb.DuckD
             insert_frame(con, "selection_stats", pl.concat([s[4] for s in spans], how="vertical_relaxed"))
             if also is not None:
                 also(con)
-            con.execute("COMMIT")
-        except BaseException:
-            con.execute("ROLLBACK")
-            raise
 
 
 @dataclass

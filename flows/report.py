@@ -39,7 +39,7 @@ from flows.report_figures import characteristics_figure, fleet_figure, trends_fi
 from flows.report_html import render_report
 from flows.standstill import expected_residual, standstill_rows
 from flows.views import connect_snapshot, create_views, ensure_report_tables, publish_snapshot
-from flows.warehouse_db import connect, insert_frame, query_frame
+from flows.warehouse_db import connect, insert_frame, query_frame, transaction
 from model.area import edge_area
 from schemas.fields import CONDITION_BOUNDS_FIELDS, EDGES, polars_schema
 from schemas.plant_config import BOUND_KEYS, PlantConfig
@@ -97,14 +97,9 @@ def update_standstill(config: PlantConfig, warehouse: Path, now: datetime) -> in
             frame = standstill_rows(rows, max_gap_s=config.export.max_gap_s, commissioned=v.commissioned, computed_at=now)
             lo, hi = rows["timestamp_utc"][0], rows["timestamp_utc"][-1]
             with connect(warehouse) as con:
-                con.execute("BEGIN TRANSACTION")
-                try:
+                with transaction(con):
                     con.execute("DELETE FROM standstill_checks WHERE valve_id = ? AND window_start BETWEEN ? AND ?", [v.id, lo, hi])
                     insert_frame(con, "standstill_checks", frame)
-                    con.execute("COMMIT")
-                except BaseException:
-                    con.execute("ROLLBACK")
-                    raise
             added += frame.height
     return added
 
@@ -114,14 +109,9 @@ def refresh(config: PlantConfig, warehouse: Path, now: datetime) -> tuple[list[s
     bounds = bounds_frame(config, now)
     with connect(warehouse) as con:
         ensure_report_tables(con)
-        con.execute("BEGIN TRANSACTION")
-        try:
+        with transaction(con):
             con.execute("DELETE FROM condition_bounds")
             insert_frame(con, "condition_bounds", bounds)
-            con.execute("COMMIT")
-        except BaseException:
-            con.execute("ROLLBACK")
-            raise
         views = create_views(con)
         con.execute("CHECKPOINT")
         snapshot = publish_snapshot(con, warehouse)

@@ -35,7 +35,7 @@ from pathlib import Path
 import duckdb
 
 from flows.errors import ValvemonError
-from flows.warehouse_db import DB_NAME, db_path, ensure_tables
+from flows.warehouse_db import DB_NAME, db_path, ensure_tables, transaction
 from schemas.fields import CONDITION_BOUNDS_FIELDS, STANDSTILL_FIELDS
 
 SQL_DIR = Path(__file__).resolve().parents[1] / "sql"
@@ -132,17 +132,12 @@ def create_views(con: duckdb.DuckDBPyConnection, sql_dir: Path = SQL_DIR) -> lis
     in the order they were created.
     """
     views = ordered_views(discover_views(sql_dir))
-    con.execute("BEGIN TRANSACTION")
-    try:
+    with transaction(con):
         for v in views:
             try:
                 con.execute(f"CREATE OR REPLACE VIEW {v.name} AS\n{v.sql}")
             except duckdb.Error as exc:
                 raise ValvemonError(f"{v.path}: {str(exc).splitlines()[0]}") from None
-        con.execute("COMMIT")
-    except BaseException:
-        con.execute("ROLLBACK")
-        raise
     return [v.name for v in views]
 
 

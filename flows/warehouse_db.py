@@ -195,6 +195,19 @@ def connect(warehouse: str | Path, *, read_only: bool = False, wait_s: float = 3
         _HOST.release(path)
 
 
+@contextmanager
+def transaction(con: duckdb.DuckDBPyConnection) -> Iterator[duckdb.DuckDBPyConnection]:
+    """The statements of the block in one transaction: committed at its end, rolled back if it
+    raises (or is interrupted)."""
+    con.execute("BEGIN TRANSACTION")
+    try:
+        yield con
+        con.execute("COMMIT")
+    except BaseException:
+        con.execute("ROLLBACK")
+        raise
+
+
 def ensure_tables(con: duckdb.DuckDBPyConnection, tables: Mapping[str, tuple[tuple[Field, ...], str | None]]) -> None:
     """Create those of ``tables`` (name → (fields, primary key or None)) that the connection's
     database lacks: one catalog query, DDL only for the missing ones (every unit of work calls
@@ -227,14 +240,9 @@ def migrate_hash_column(con: duckdb.DuckDBPyConnection, table: str) -> None:
     ).fetchall()}  # fmt: skip
     if "file_sha256" not in cols or "file_hash" in cols:
         return
-    con.execute("BEGIN TRANSACTION")
-    try:
+    with transaction(con):
         con.execute(f"ALTER TABLE {table} RENAME COLUMN file_sha256 TO file_hash")
         con.execute(f"UPDATE {table} SET file_hash = 'sha256:' || file_hash WHERE NOT starts_with(file_hash, 'sha256:')")
-        con.execute("COMMIT")
-    except BaseException:
-        con.execute("ROLLBACK")
-        raise
 
 
 def insert_frame(con: duckdb.DuckDBPyConnection, table: str, frame: pl.DataFrame, *, replace: bool = False) -> None:

@@ -88,3 +88,15 @@ def test_a_missing_file_read_only_is_a_clear_error(tmp_path):
     with pytest.raises(ValvemonError, match="cannot open the warehouse database"):
         with connect(tmp_path / "nowhere", read_only=True):
             pass
+
+
+def test_transaction_commits_the_block_or_rolls_it_back(tmp_path):
+    with connect(tmp_path) as con:
+        con.execute("CREATE TABLE t (x INTEGER)")
+        with wdb.transaction(con):
+            con.execute("INSERT INTO t VALUES (1)")
+        with pytest.raises(RuntimeError):
+            with wdb.transaction(con):
+                con.execute("INSERT INTO t VALUES (2)")
+                raise RuntimeError("mid-way")
+        assert con.execute("SELECT list(x) FROM t").fetchone()[0] == [1]
