@@ -23,6 +23,7 @@ import threading
 import time
 import uuid
 from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterator, Mapping
 
@@ -79,6 +80,15 @@ def create_table_sql(name: str, fields: tuple[Field, ...], primary_key: str | No
     return f"CREATE TABLE IF NOT EXISTS {name} ({', '.join(cols)})"
 
 
+@dataclass
+class _Attachment:
+    """A warehouse file attached to the host."""
+
+    alias: str
+    users: int
+    read_only: bool
+
+
 class _Host:
     """One in-memory DuckDB instance per process that attaches warehouse files on demand.
 
@@ -92,8 +102,8 @@ class _Host:
     def __init__(self):
         self.guard = threading.Lock()
         self.instance: duckdb.DuckDBPyConnection | None = None
-        self.attached: dict[str, list] = {}
-        """file → [alias, users, read_only]"""
+        self.attached: dict[str, _Attachment] = {}
+        """file → its attachment"""
 
     def acquire(self, path: Path, read_only: bool) -> str | None:
         """The alias of the attached file (attached now if needed); None while the file is
@@ -102,26 +112,26 @@ class _Host:
         with self.guard:
             entry = self.attached.get(key)
             if entry is not None:
-                if entry[2] and not read_only:
+                if entry.read_only and not read_only:
                     return None
-                entry[1] += 1
-                return entry[0]
+                entry.users += 1
+                return entry.alias
             if self.instance is None:
                 self.instance = duckdb.connect()
             alias = f"warehouse_{uuid.uuid4().hex[:12]}"
             quoted = key.replace("'", "''")
             self.instance.execute(f"ATTACH '{quoted}' AS {alias}" + (" (READ_ONLY)" if read_only else ""))
-            self.attached[key] = [alias, 1, read_only]
+            self.attached[key] = _Attachment(alias, 1, read_only)
             return alias
 
     def release(self, path: Path) -> None:
         key = str(path)
         with self.guard:
             entry = self.attached[key]
-            entry[1] -= 1
-            if entry[1] == 0:
+            entry.users -= 1
+            if entry.users == 0:
                 del self.attached[key]
-                self.instance.execute(f"DETACH {entry[0]}")
+                self.instance.execute(f"DETACH {entry.alias}")
 
     def close(self) -> None:
         """At exit: detach everything (a checkpoint each) and close the instance."""
