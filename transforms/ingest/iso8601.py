@@ -72,15 +72,16 @@ def _digits(data, a: int, k: int) -> int:
 
 @numba.njit(cache=True, nogil=True)
 def _same_bytes(a: int, b: int, e: int) -> bool:
-    """Whether the ``e`` (≥ 8) bytes at addresses ``a`` and ``b`` are equal (``b`` < 0: no)."""
+    """Whether the ``e`` (≥ 8) bytes at addresses ``a`` and ``b`` are equal (``b`` < 0: no),
+    compared 8 at a time from the end: neighbouring timestamps differ in their last digits."""
     if b < 0:
         return False
-    j = 0
-    while j + 8 <= e:
+    j = e - 8
+    while j > 0:
         if _load8(a + j) != _load8(b + j):
             return False
-        j += 8
-    return j == e or _load8(a + e - 8) == _load8(b + e - 8)
+        j -= 8
+    return _load8(a) == _load8(b)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -122,9 +123,7 @@ def _parse_column(view_layout: bool, offsets, data_address: int, views, views_ad
         if e == last_e and _same_bytes(address, last, e):  # a long export repeats each time per tag
             out[i] = last_value
             continue
-        # consecutive rows often share the second: compare the first 19 bytes, 8 at a time,
-        # the latest digits first
-        same = prev >= 0 and _load8(address + 11) == _load8(prev + 11) and _load8(address + 3) == _load8(prev + 3) and _load8(address) == _load8(prev)
+        same = _same_bytes(address, prev, 19)  # consecutive rows often share the second
         if not same:
             if data[a + 4] != 45 or data[a + 7] != 45 or data[a + 13] != 58 or data[a + 16] != 58:  # - - : :
                 return i
