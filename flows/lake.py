@@ -28,6 +28,7 @@ import pyarrow.parquet as pq
 
 from flows.instants import utc_instant
 from schemas.fields import SENSOR_FIELDS, arrow_schema, polars_schema
+from transforms.windows import window_starts
 
 LAKE_DIR = Path("lake") / "sensors"
 PART_NAME = "part-0.parquet"
@@ -77,7 +78,7 @@ def row_group_bounds(t_us: np.ndarray, gap_us: int = ROW_GROUP_GAP_US, min_rows:
     n = len(t_us)
     if n == 0:
         return []
-    starts = np.r_[0, np.flatnonzero(np.diff(t_us) > gap_us) + 1]
+    starts = window_starts(t_us, gap_us)
     bounds = []
     a = 0
     for s in starts[1:]:

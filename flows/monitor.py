@@ -49,6 +49,7 @@ from schemas.plant_config import PlantConfig, ValveSpec
 from transforms.characteristic import Characteristic, scaled_shifted
 from transforms.monitor import LAKE_COLUMNS, MonitorResult, commissioning_baseline, monitor
 from transforms.params import MonitorParams
+from transforms.windows import window_starts
 
 MONITOR_TABLES = {
     "baselines": (BASELINE_FIELDS, ("valve_id", "edge", "version")),
@@ -284,7 +285,7 @@ def lake_chunks(
         if rows.height == 0:
             continue
         ts = rows["timestamp_utc"].to_physical().to_numpy()
-        run_starts = np.r_[0, np.flatnonzero(np.diff(ts) > gap_s * 1e6) + 1]
+        run_starts = window_starts(ts, gap_s * 1e6)
         first = 0 if lo_us is None else int(np.searchsorted(ts[run_starts], lo_us, side="left"))
         last = len(run_starts) if hi_us is None else int(np.searchsorted(ts[run_starts], hi_us, side="left"))
         if first < last:
@@ -323,10 +324,9 @@ def _last_gap(t: pl.Series, gap_s: float) -> int:
     ts = t.to_physical()
     k = min(n, 1 << 16)
     while True:
-        tail = ts.slice(n - k, k).to_numpy()
-        after = np.flatnonzero(np.diff(tail) > gap_s * 1e6)
-        if after.size:
-            return n - k + int(after[-1]) + 1
+        starts = window_starts(ts.slice(n - k, k).to_numpy(), gap_s * 1e6)
+        if starts.size > 1:
+            return n - k + int(starts[-1])
         if k == n:
             return 0
         k = min(n, 4 * k)

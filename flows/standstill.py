@@ -29,6 +29,7 @@ import numpy as np
 import polars as pl
 
 from schemas.fields import STANDSTILL_FIELDS, polars_schema
+from transforms.windows import window_starts
 
 STANDSTILL_VELOCITY_M_S = 1e-3
 """|dX/dt| below this is standstill (the monitor's step-3 rule uses 5 mm/s to drop data; Eq. 9
@@ -61,7 +62,7 @@ def standstill_rows(frame: pl.DataFrame, *, max_gap_s: float, commissioned: date
         return pl.DataFrame(schema=schema)
     valve_id = frame["valve_id"][0]
     t_us = frame["timestamp_utc"].dt.epoch("us").to_numpy()
-    starts = np.r_[0, np.flatnonzero(np.diff(t_us) > max_gap_s * 1e6) + 1, t_us.size]
+    starts = np.r_[window_starts(t_us, max_gap_s * 1e6), t_us.size]
     cols = {c: frame[c].to_numpy() for c in ("ps_pa", "pr_pa", "p1_pa", "p2_pa", "x_spool_m", "x_cyl_m")}
     rows = []
     for a, b in zip(starts[:-1], starts[1:]):

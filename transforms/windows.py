@@ -23,7 +23,7 @@ import numba
 import numpy as np
 import polars as pl
 
-__all__ = ["WINDOW_COLUMNS", "assign_windows", "infer_sample_period_s", "window_arrays", "window_table"]
+__all__ = ["WINDOW_COLUMNS", "assign_windows", "infer_sample_period_s", "window_arrays", "window_starts", "window_table"]
 
 WINDOW_COLUMNS = ("window_id", "window_start", "window_end", "run_start")
 
@@ -44,6 +44,12 @@ def infer_sample_period_s(frame: pl.DataFrame | pl.LazyFrame) -> float:
     if step is None:
         raise ValueError("cannot infer the sample period: fewer than two distinct time stamps")
     return float(step) * 1e-6
+
+
+def window_starts(t_us: np.ndarray, gap_us: float) -> np.ndarray:
+    """Index of the first sample of each window of one valve's sorted time stamps (µs): 0 and
+    every sample after a step longer than ``gap_us`` (the rule of :func:`assign_windows`)."""
+    return np.r_[0, np.flatnonzero(np.diff(t_us) > gap_us) + 1]
 
 
 def assign_windows(

@@ -7,7 +7,7 @@ import polars as pl
 import pytest
 
 from transforms.derivatives import add_savgol, savgol_weights
-from transforms.windows import assign_windows, infer_sample_period_s, window_table
+from transforms.windows import assign_windows, infer_sample_period_s, window_starts, window_table
 
 DT = 1e-3
 T0_US = int(datetime(2025, 3, 1, tzinfo=timezone.utc).timestamp() * 1e6)
@@ -53,6 +53,19 @@ def test_step_of_exactly_the_gap_limit_stays_in_the_window():
     # ... but the irregular step cuts the uniform run
     assert framed["run_start"].to_list()[10] is True
     assert framed["run_start"].sum() == 2
+
+
+@pytest.mark.parametrize("gap_limit_s", [0.003, 0.0035])
+def test_window_starts_follow_the_rule_of_assign_windows(gap_limit_s):
+    """The numpy form the flows use (lake row groups, span slicing, standstill windows) starts a
+    window exactly where assign_windows does, including at a step of exactly the gap limit."""
+    rng = np.random.default_rng(5)
+    steps = rng.choice([DT, DT, DT, 0.003, 0.0035, 0.5], size=300)
+    t = np.r_[0.0, np.cumsum(steps)]
+    framed = assign_windows(_frame(t, {"y": np.zeros_like(t)}), sample_period_s=DT, gap_limit_s=gap_limit_s)
+    expected = np.flatnonzero(np.diff(framed["window_id"].to_numpy(), prepend=-1))
+    t_us = framed["timestamp_utc"].dt.epoch("us").to_numpy()
+    np.testing.assert_array_equal(window_starts(t_us, gap_limit_s * 1e6), expected)
 
 
 def test_infer_sample_period():
