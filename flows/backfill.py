@@ -57,7 +57,6 @@ from datetime import date, datetime, timedelta, timezone
 from pathlib import Path
 from typing import Any, Callable, Iterator
 
-import numpy as np
 import polars as pl
 from prefect import flow, task
 from prefect.cache_policies import NO_CACHE
@@ -68,7 +67,7 @@ from flows.config import load_plant_config
 from flows.errors import ValvemonError
 from flows.instants import utc_instant
 from flows.ingest import LEGACY_HASH_PREFIX, FileReport, discover_files, ingest_lock, legacy_hash, merge_export, read_export, record_file, rekey_file
-from flows.lake import list_partitions, read_lake
+from flows.lake import SENSOR_POLARS_SCHEMA, list_partitions
 from flows.locks import file_lock
 from flows.monitor import (
     Baseline,
@@ -77,6 +76,7 @@ from flows.monitor import (
     _latest_baselines,
     baseline_definition,
     ensure_monitor_tables,
+    lake_chunks,
     monitor_params,
     monitor_rows,
     store_spans,
@@ -85,6 +85,7 @@ from flows.warehouse_db import connect, ensure_ingest_tables, insert_frame, migr
 from schemas.fields import EDGE_FIT_FIELDS, EDGES, SELECTION_FIELDS, polars_schema
 from schemas.plant_config import ConfigError, PlantConfig
 from transforms.ingest import Grid, IngestError, TagTable
+from transforms.monitor import LAKE_COLUMNS
 
 UNIT_DAYS = 7
 """Days of one valve per monitor unit: a week of hourly 10 s windows at 1 kHz is 1.7 M lake rows."""
@@ -291,55 +292,20 @@ class MonitorOutcome:
     rows_read: int
 
 
-def _epoch_us(frame: pl.DataFrame) -> np.ndarray:
-    return frame["timestamp_utc"].dt.epoch("us").to_numpy()
-
-
-def unit_rows(warehouse: Path, valve_id: str, start: datetime, end: datetime, gap_us: float) -> pl.DataFrame:
-    """The lake rows of the windows whose first sample lies in ``[start, end)``, whole.
-
-    A new window starts after a step longer than ``gap_us`` (as in ``transforms.windows``).
-    """
-    pad = timedelta(microseconds=gap_us)
-    rows = read_lake(warehouse, [valve_id], start - pad, end).collect()
-    if rows.height == 0:
-        return rows
-    ts = _epoch_us(rows)
-    lo_us = int((start - datetime(1970, 1, 1, tzinfo=timezone.utc)) / timedelta(microseconds=1))
-    k = int(np.searchsorted(ts, lo_us))
-    if 0 < k < len(ts) and ts[k] - ts[k - 1] <= gap_us:
-        # the first window at/after start began before it: it belongs to the previous unit
-        gaps = np.flatnonzero(np.diff(ts[k:]) > gap_us)
-        k = k + int(gaps[0]) + 1 if len(gaps) else len(ts)
-    rows = rows.slice(k)
-    if rows.height == 0:
-        return rows
-    # the last window may run on past `end`: read on until it ends
-    cursor, last = end, int(_epoch_us(rows.tail(1))[0])
-    end_us = int((end - datetime(1970, 1, 1, tzinfo=timezone.utc)) / timedelta(microseconds=1))
-    if end_us - last > gap_us:
-        return rows
-    tails = []
-    while True:
-        nxt = read_lake(warehouse, [valve_id], cursor, cursor + timedelta(days=1)).collect()
-        if nxt.height == 0:
-            break
-        nts = _epoch_us(nxt)
-        steps = np.diff(np.r_[last, nts]) > gap_us
-        if steps.any():
-            tails.append(nxt.slice(0, int(np.argmax(steps))))
-            break
-        tails.append(nxt)
-        last, cursor = int(nts[-1]), cursor + timedelta(days=1)
-    return pl.concat([rows, *tails]) if tails else rows
+def unit_rows(warehouse: Path, valve_id: str, start: datetime, end: datetime, gap_s: float) -> pl.DataFrame:
+    """The lake columns the monitor reads (``LAKE_COLUMNS``) of the windows whose first sample
+    lies in ``[start, end)``, whole: :func:`flows.monitor.lake_chunks` for the span, in one chunk
+    (a window starts after a step longer than ``gap_s``, ``transforms.windows.window_starts``)."""
+    days = (end - start).days + 2  # every partition the span and its last window can touch
+    chunks = list(lake_chunks(warehouse, valve_id, gap_s, start, end, days, LAKE_COLUMNS))
+    return pl.concat(chunks) if chunks else pl.DataFrame(schema={c: SENSOR_POLARS_SCHEMA[c] for c in LAKE_COLUMNS})
 
 
 def monitor_unit(config: PlantConfig, unit: MonitorUnit, baselines: dict[str, Baseline], warehouse: str | Path) -> MonitorOutcome:
     """Steps 2–4b for one unit (the rows of :func:`unit_rows`) against the given baselines."""
     valve = config.valve(unit.valve_id)
     params = monitor_params(valve, config.export.sample_rate_hz)
-    gap_us = params.gap_limit_periods * params.sample_period_s * 1e6
-    rows = unit_rows(Path(warehouse), unit.valve_id, unit.start, unit.end, gap_us)
+    rows = unit_rows(Path(warehouse), unit.valve_id, unit.start, unit.end, params.gap_limit_periods * params.sample_period_s)
     selection_schema = polars_schema(SELECTION_FIELDS)
     if rows.height == 0:
         return MonitorOutcome(unit, pl.DataFrame(schema=polars_schema(EDGE_FIT_FIELDS)), pl.DataFrame(schema=selection_schema), 0, 0)
