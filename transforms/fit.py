@@ -225,7 +225,13 @@ def _newton(u, a, jc, s, e, kn, kv, ks, k0, k1, tab, toff, tlo, tinv, tn, x, lo,
             lo = x
         else:
             hi = x
-        xn = x + _locked_step(sa, sb, sad, sbd, sdd)
+        step = _locked_step(sa, sb, sad, sbd, sdd)
+        if abs(step) < xtol:
+            # converged. Tested before the bracket: at the optimum f′ and the step are both ~0,
+            # and their signs may disagree in the last bits, which put x + step just outside
+            # [lo, hi] and sent the search into bisection away from the optimum.
+            return x, _OK, it + 1, (sa, sb, sad, sbd, sdd), step
+        xn = x + step
         locked = lo < xn < hi  # False for NaN
         if not locked:
             xn = 0.5 * (lo + hi)
