@@ -6,7 +6,7 @@ import numpy as np
 import polars as pl
 import pytest
 import synth_valve as sv
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from transforms.characteristic import Characteristic, fit_characteristic
@@ -224,6 +224,7 @@ def test_fit_windows_reports_every_window_and_edge():
 
 @settings(max_examples=20, deadline=None)
 @given(offset=st.floats(-20e-6, 20e-6), seed=st.integers(0, 10**6))
+@example(offset=0.0, seed=1419)  # at the optimum f′ and the step disagreed in sign: bisection left it
 def test_warm_start_reaches_the_optimum_of_the_cold_start(offset, seed):
     # the 701-knot nominal: knots 10 µm apart, so a step of a few µm moves many points across
     # knots and the segment-locked prediction must be confirmed (or corrected) by a full pass
