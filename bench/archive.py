@@ -1,6 +1,6 @@
 """Benchmark of ``valvemon simulate``: simulated valve-seconds and export rows per wall second.
 
-Runs the command's own code path (:func:`flows.archive.run_simulate`) on a 50-valve plant with
+Runs the command's own code path (:func:`flows.simulate.archive.run_simulate`) on a 50-valve plant with
 hourly 10 s windows for each writer -- long CSV.gz, wide CSV, Parquet (long) -- and prints a
 Markdown table for BENCHMARKS.md with the equivalent command lines.
 
@@ -14,15 +14,16 @@ import os
 import platform
 import resource
 import shutil
-import tempfile
 import sys
+import tempfile
 import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from flows.archive import SimulateRequest, run_simulate
-from flows.archive_sim import default_workers
+from flows.simulate.archive import SimulateRequest, run_simulate
+from flows.simulate.simulator import default_workers
+
 
 def cpu_seconds() -> float:
     """User + system CPU time of this process and its finished children (the workers). [s]"""

@@ -183,7 +183,7 @@ def run_mode(mode: str, args) -> dict:
 
 
 def db_scaling(src: Path, work: Path, sizes: list[int], valves: int = 500, repeats: int = 20) -> list[dict]:
-    """Cost of the flow's write of monitor units (``flows.backfill.store_units``: delete each
+    """Cost of the flow's write of monitor units (``flows.orchestration.backfill.store_units``: delete each
     unit's span, insert its fits and selection rows and its progress row, a fresh connection and
     one transaction for 1 or 32 units) against ``edge_fits`` already holding N rows (time-major, ``valves`` valves, one
     week of hourly windows per valve and unit, copied from a real unit of ``src``)."""
@@ -191,9 +191,9 @@ def db_scaling(src: Path, work: Path, sizes: list[int], valves: int = 500, repea
 
     import polars as pl
 
-    from flows.backfill import MonitorUnit, _progress_frame, ensure_backfill_tables, store_units
-    from flows.monitor import ensure_monitor_tables
-    from flows.warehouse_db import connect, insert_frame, query_frame
+    from flows.common.warehouse_db import connect, insert_frame, query_frame
+    from flows.monitor.flow import ensure_monitor_tables
+    from flows.orchestration.backfill import MonitorUnit, _progress_frame, ensure_backfill_tables, store_units
 
     with connect(src, read_only=True) as con:
         t0 = query_frame(con, "SELECT min(window_start) AS t FROM edge_fits")["t"][0]
@@ -264,8 +264,8 @@ def task_overhead(n: int, modes: list[str]) -> list[dict]:
     in the flow process and in the Dask workers: the fixed price of a unit."""
     from prefect import flow, task
 
-    from flows.backfill import Window
-    from flows.dask_runner import cluster_threads, local_cluster, shared_api, task_runner
+    from flows.orchestration.backfill import Window
+    from flows.orchestration.dask_runner import cluster_threads, local_cluster, shared_api, task_runner
 
     @task(name="noop", persist_result=False)
     def noop(i: int) -> int:

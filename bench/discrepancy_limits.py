@@ -4,7 +4,7 @@ that is still named first, reliably.
 For every effect and magnitude (a geometric series down from the library's typical magnitude)
 and every seed, a valve with Table 1's nominal condition is simulated in-process with that effect
 hidden (``--windows`` hourly windows of 10 s, recorded through the sensor models, seeds 0 …
-``--seeds``−1), and :func:`flows.discrepancy_pipeline.diagnose` (step 4 off) is run on it. A run
+``--seeds``−1), and :func:`transforms.discrepancy.pipeline.diagnose` (step 4 off) is run on it. A run
 *detects* the effect if the effect is named first; it *recovers* it if, in addition, the fitted
 parameter is within ``--tolerance`` (relative) of the truth. The table gives, per effect, the
 smallest magnitude from which on every seed is detected and recovered at that and every larger
@@ -26,11 +26,11 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from flows.discrepancy_pipeline import diagnose  # noqa: E402
 from model import TABLE1  # noqa: E402
 from model.effects import EFFECT_LIBRARY  # noqa: E402
 from tests.discrepancy.simdata import simulate_lake  # noqa: E402
 from transforms.discrepancy import DiscrepancySettings, split_records  # noqa: E402
+from transforms.discrepancy.pipeline import diagnose  # noqa: E402
 
 FRACTIONS = (1.0, 0.3, 0.1, 0.03, 0.01, 0.003, 0.001)
 """Magnitudes as fractions of the library's typical magnitude (gains: of |gain − 1|)."""

@@ -1,4 +1,4 @@
-"""Speed of the discrepancy workflow's core (:func:`flows.discrepancy_pipeline.diagnose`, steps
+"""Speed of the discrepancy workflow's core (:func:`transforms.discrepancy.pipeline.diagnose`, steps
 1–4) on N records of 10 s (Table 1 valve, an internal leak hidden), one core, after a warm-up run
 that loads the compiled kernels.
 
@@ -15,11 +15,11 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from flows.discrepancy_pipeline import diagnose  # noqa: E402
 from model import TABLE1  # noqa: E402
 from model.effects import Effects  # noqa: E402
 from tests.discrepancy.simdata import simulate_lake  # noqa: E402
 from transforms.discrepancy import DiscrepancySettings, split_records  # noqa: E402
+from transforms.discrepancy.pipeline import diagnose  # noqa: E402
 
 
 def main() -> None:

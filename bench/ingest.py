@@ -10,7 +10,7 @@ Throughput: a synthetic plant export (one valve, six required tags, sampled exac
 grid, realistic signals: smooth motion + sensor noise + 16-bit quantisation) is written as a
 long CSV (``timestamp,tag,value,quality``, ISO-8601 with ``Z``) and as a long Parquet file. For
 each, the benchmark times a plain ``polars.read_csv`` / ``polars.read_parquet`` of the file and
-the whole ingest of the file into an empty warehouse (``flows.ingest.ingest_file``: hash, read,
+the whole ingest of the file into an empty warehouse (``flows.ingest.flow.ingest_file``: hash, read,
 parse, quarantine check, de-duplicate, grid, validate, merge, atomic Parquet write,
 DuckDB manifest). Everything runs on one core (``POLARS_MAX_THREADS=1``, one Arrow thread), so
 rows/s is per core. The ratio ingest / bare read is the figure (target ≤ 2).
@@ -43,8 +43,8 @@ pa.set_io_thread_count(1)
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from flows.config import load_plant_config  # noqa: E402
-from flows.ingest import ingest_file  # noqa: E402
+from flows.common.config import load_plant_config  # noqa: E402
+from flows.ingest.flow import ingest_file  # noqa: E402
 from transforms.ingest import TagTable  # noqa: E402
 
 CONFIG = Path(__file__).resolve().parents[1] / "tests" / "fixtures" / "plant_example.toml"
@@ -142,7 +142,7 @@ def throughput(seconds: int, repeat: int) -> None:
 
 
 STAGES = [
-    ("flows.ingest", "read_export", "read file + BLAKE3 + CSV/Parquet decode"),
+    ("flows.ingest.flow", "read_export", "read file + BLAKE3 + CSV/Parquet decode"),
     ("transforms.ingest.export", "samples_of", "samples: tags, timestamps, values, quarantine"),
     ("transforms.ingest.samples", "parse_timestamps", "  of which: timestamps to UTC"),
     ("transforms.ingest.export", "validate_raw_rows", "pandera: raw rows"),
@@ -150,10 +150,10 @@ STAGES = [
     ("transforms.ingest.export", "to_grid", "grid + gaps per tag"),
     ("transforms.ingest.export", "assemble_valve", "assemble valve frame"),
     ("transforms.ingest.export", "validate_sensor_frame", "pandera: sensor frame"),
-    ("flows.ingest", "process_export", "process_export (all of the above but reading)"),
-    ("flows.ingest", "read_partition", "read existing partition"),
-    ("flows.ingest", "write_partition", "write partition (fsync, rename)"),
-    ("flows.ingest", "record_file", "DuckDB manifest, quarantine, gaps"),
+    ("flows.ingest.flow", "process_export", "process_export (all of the above but reading)"),
+    ("flows.ingest.flow", "read_partition", "read existing partition"),
+    ("flows.ingest.flow", "write_partition", "write partition (fsync, rename)"),
+    ("flows.ingest.flow", "record_file", "DuckDB manifest, quarantine, gaps"),
 ]
 
 
@@ -225,7 +225,7 @@ def storage(seconds: int, repeat: int) -> None:
     import duckdb
     import pyarrow.parquet as pq
 
-    from flows.lake import STATISTICS_COLUMNS, row_group_bounds
+    from flows.common.lake import STATISTICS_COLUMNS, row_group_bounds
 
     days = max(seconds // 240, 1)
     frame = lake_day(days)
@@ -238,7 +238,7 @@ def storage(seconds: int, repeat: int) -> None:
     print("duckdb SELECT sum() of the six channels (1 thread); window = polars scan with a time filter for one 10 s window")
     print(f"{'variant':<36}{'B/row':>7}{'write s':>9}{'6ch M/s':>9}{'all M/s':>9}{'duckdb M/s':>12}{'window ms':>11}")
     # (name, value dtype, codec, level, byte_stream_split, row groups, delta-encoded time); row
-    # groups: "lake" = flows.lake.row_group_bounds (>= ROW_GROUP_MIN_ROWS, ending at a window
+    # groups: "lake" = flows.common.lake.row_group_bounds (>= ROW_GROUP_MIN_ROWS, ending at a window
     # start), "window" = one per 10 s window, "one" = one per file
     variants = [
         ("float64 zstd-1, window groups", pl.Float64, "zstd", 1, False, "window", False),

@@ -1,7 +1,7 @@
 """The monitoring's steps 2–4b written the straightforward way, with pandas and scipy: the
 baseline that ``bench/monitor_pipeline.py`` measures :mod:`transforms.monitor` against.
 
-Same steps and settings as the production path (``flows/monitor.py`` → ``transforms.monitor``):
+Same steps and settings as the production path (``flows/monitor/flow.py`` → ``transforms.monitor``):
 
 1. windows: a time step longer than ``gap_limit_periods`` sample periods starts a new window
    (pandas ``diff``/``cumsum``), then a ``groupby`` over the windows;

@@ -14,10 +14,10 @@ then
 Three measurements, each in a fresh process pinned to one CPU (polars and numba limited to one
 thread), so that CPU seconds are per-core figures and the peak resident memory is the step's own:
 
-* ``full``: ``flows.monitor.run_monitor`` for every valve (the production path: lake reading in
+* ``full``: ``flows.monitor.flow.run_monitor`` for every valve (the production path: lake reading in
   gap-aligned chunks, baselines from the warehouse, steps 2–4b with the leakage refinement,
   edge_fits and selection_stats replaced in DuckDB), with the time split into its stages;
-* ``transforms``: the same chunks already in memory, through ``flows.monitor.monitor_rows``
+* ``transforms``: the same chunks already in memory, through ``flows.monitor.flow.monitor_rows``
   (steps 2–4b only);
 * ``baseline``: the same chunks (as pandas frames) through ``monitor_pandas``.
 
@@ -97,8 +97,8 @@ class _Clock:
 
 
 def _chunks(config, warehouse: Path, valve_ids):
-    """The production chunks (flows.monitor.lake_chunks) of every valve: [(valve, rows)]."""
-    import flows.monitor as fm
+    """The production chunks (flows.monitor.flow.lake_chunks) of every valve: [(valve, rows)]."""
+    import flows.monitor.flow as fm
 
     out = []
     for vid in valve_ids:
@@ -112,8 +112,8 @@ def _chunks(config, warehouse: Path, valve_ids):
 def _warm_rows(config, warehouse: Path):
     from datetime import timedelta
 
-    import flows.monitor as fm
-    from flows.lake import list_partitions, read_lake
+    import flows.monitor.flow as fm
+    from flows.common.lake import list_partitions, read_lake
 
     vid = config.valves[0].id
     _, day, _ = list_partitions(warehouse, [vid])[0]
@@ -126,8 +126,8 @@ def _warm_rows(config, warehouse: Path):
 
 
 def step_full(config_path: Path, warehouse: Path, valve_ids, start: str | None = None, end: str | None = None) -> dict:
-    import flows.monitor as fm
-    from flows.config import load_plant_config
+    import flows.monitor.flow as fm
+    from flows.common.config import load_plant_config
 
     pinned = _pin()
     config = load_plant_config(config_path)
@@ -152,8 +152,8 @@ def step_full(config_path: Path, warehouse: Path, valve_ids, start: str | None =
 
 
 def step_transforms(config_path: Path, warehouse: Path, valve_ids) -> dict:
-    import flows.monitor as fm
-    from flows.config import load_plant_config
+    import flows.monitor.flow as fm
+    from flows.common.config import load_plant_config
 
     pinned = _pin()
     config = load_plant_config(config_path)
@@ -177,9 +177,10 @@ def step_transforms(config_path: Path, warehouse: Path, valve_ids) -> dict:
 
 
 def step_baseline(config_path: Path, warehouse: Path, valve_ids) -> dict:
-    import flows.monitor as fm
-    from flows.config import load_plant_config
     from monitor_baseline import monitor_pandas
+
+    import flows.monitor.flow as fm
+    from flows.common.config import load_plant_config
 
     pinned = _pin()
     config = load_plant_config(config_path)
@@ -220,7 +221,7 @@ def _agreement(warehouse: Path, fits_path: str, valve_ids) -> dict:
     """Baseline vs production fits, per (valve, window, edge) where both are ok."""
     import polars as pl
 
-    from flows.warehouse_db import connect, query_frame
+    from flows.common.warehouse_db import connect, query_frame
 
     with connect(warehouse, read_only=True) as con:
         ours = query_frame(con, "SELECT valve_id, edge, window_start, status, alpha_hat, x_hat_mm FROM edge_fits")
@@ -252,7 +253,7 @@ def main(argv=None) -> int:
     ap.add_argument("--valves", default=None, help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
 
-    from flows.config import load_plant_config
+    from flows.common.config import load_plant_config
 
     config = load_plant_config(a.config)
     if a.step:  # a child process: one measurement, JSON on stdout

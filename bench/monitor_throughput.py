@@ -13,7 +13,7 @@ process is pinned to one CPU where the OS allows it.
     .venv/bin/python bench/monitor_throughput.py [--windows 100] [--duration 10] [--repeats 7]
         [--baseline nominal|commissioning] [--engine numba|polars] [--no-leakage]
 
-By default the closed-edge leakage correction runs as in production (flows/monitor.py): the
+By default the closed-edge leakage correction runs as in production (flows/monitor/flow.py): the
 nominal characteristic as each edge's baseline-state leakage, one refinement pass.
 """
 
@@ -40,7 +40,8 @@ from model import BROKEN_1R, TABLE1, WEAR, condition_at, simulate_windows  # noq
 from model.area import edge_area  # noqa: E402
 from model.params import EDGES  # noqa: E402
 from model.sensors import measure  # noqa: E402
-from transforms.characteristic import Characteristic, fit_characteristic  # noqa: E402
+from transforms.baseline import fit_characteristic  # noqa: E402
+from transforms.characteristic import Characteristic  # noqa: E402
 from transforms.fit import fit_windows  # noqa: E402
 from transforms.monitor import monitor, monitor_points  # noqa: E402
 from transforms.params import MonitorParams  # noqa: E402

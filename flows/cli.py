@@ -12,8 +12,8 @@ from typing import Annotated, Optional
 
 import typer
 
-from flows.config import WAREHOUSE_ENV
-from flows.errors import ValvemonError
+from flows.common.config import WAREHOUSE_ENV
+from flows.common.errors import ValvemonError
 from schemas.plant_config import ConfigError
 
 app = typer.Typer(
@@ -45,8 +45,8 @@ def demo(warehouse: Warehouse = None) -> None:
     from rich.table import Table
 
     import flows.demo as demo_flows
-    from flows.config import warehouse_dir
-    from flows.ingest import quiet_prefect_console
+    from flows.common.config import warehouse_dir
+    from flows.ingest.flow import quiet_prefect_console
 
     quiet_prefect_console()
     wh = warehouse_dir(warehouse)
@@ -87,7 +87,7 @@ def simulate(
     warehouse: Warehouse = None,
 ) -> None:
     """Write a synthetic archive (exports + the truth)."""
-    from flows.archive import SimulateRequest, run_simulate
+    from flows.simulate.archive import SimulateRequest, run_simulate
 
     request = SimulateRequest(
         out=out, config_path=config, n_valves=n_valves, plant=plant, commissioned=commissioned, start=start, end=end,
@@ -110,8 +110,8 @@ def ingest(
     force: Annotated[bool, typer.Option("--force", help="Read files again even if the manifest already holds their content.")] = False,
 ) -> None:
     """Historian exports into the sensor lake."""
-    import flows.ingest as ingest_flows
-    from flows.config import warehouse_dir
+    import flows.ingest.flow as ingest_flows
+    from flows.common.config import warehouse_dir
 
     ingest_flows.preflight(config, paths)  # a bad configuration or path fails before Prefect starts
     ingest_flows.quiet_prefect_console()
@@ -128,9 +128,9 @@ def ingest(
 @app.command()
 def monitor(config: Config, valves: Valves = None, start: From = None, end: To = None, warehouse: Warehouse = None) -> None:
     """Lake to opening-area points and fits."""
-    import flows.monitor as monitor_flows
-    from flows.config import warehouse_dir
-    from flows.ingest import quiet_prefect_console
+    import flows.monitor.flow as monitor_flows
+    from flows.common.config import warehouse_dir
+    from flows.ingest.flow import quiet_prefect_console
 
     quiet_prefect_console()
     reports = monitor_flows.monitor_flow(
@@ -150,9 +150,9 @@ def report(
     valves: Annotated[Optional[list[str]], typer.Option("--valves", help="Show these valves in detail instead (repeat the option).")] = None,
 ) -> None:
     """Refresh the views, write the pictures and the HTML report."""
-    import flows.report as report_flows
-    from flows.config import warehouse_dir
-    from flows.ingest import quiet_prefect_console
+    import flows.report.flow as report_flows
+    from flows.common.config import warehouse_dir
+    from flows.ingest.flow import quiet_prefect_console
 
     quiet_prefect_console()
     result = report_flows.report_flow(config_path=str(config), warehouse=str(warehouse_dir(warehouse)), detail=detail, valve_ids=valves)
@@ -172,8 +172,8 @@ def query(
     warehouse: Warehouse = None,
 ) -> None:
     """An ad-hoc query against the warehouse, printed as a table."""
-    from flows.config import warehouse_dir
-    from flows.query import run_query
+    from flows.common.config import warehouse_dir
+    from flows.report.query import run_query
 
     run_query(sql, warehouse_dir(warehouse), fmt=fmt, out=out, live=live, max_rows=max_rows)
 
@@ -203,10 +203,10 @@ def backfill(
     """Ingest + monitor over a span, resumable: rerun the same command to continue a stopped backfill."""
     from contextlib import ExitStack
 
-    from flows.backfill import CONCURRENCY, BackfillFailed, backfill_flow
-    from flows.config import warehouse_dir
-    from flows.dask_runner import cluster_threads, local_cluster, shared_api, task_runner
-    from flows.ingest import quiet_prefect_console
+    from flows.common.config import warehouse_dir
+    from flows.ingest.flow import quiet_prefect_console
+    from flows.orchestration.backfill import CONCURRENCY, BackfillFailed, backfill_flow
+    from flows.orchestration.dask_runner import cluster_threads, local_cluster, shared_api, task_runner
 
     if dask_address and dask_workers:
         raise ValvemonError("--dask-address and --dask-workers exclude each other")
@@ -249,8 +249,8 @@ def serve(
     warehouse: Warehouse = None,
 ) -> None:
     """The nightly deployment on a Prefect server (PREFECT_API_URL): serves it until stopped."""
-    from flows.config import warehouse_dir
-    from flows.nightly import serve_nightly
+    from flows.common.config import warehouse_dir
+    from flows.orchestration.nightly import serve_nightly
 
     serve_nightly(
         config, exports, warehouse_dir(warehouse), cron=cron, timezone_name=tz, concurrency=concurrency,
@@ -269,9 +269,9 @@ def discrepancy(
     valve_condition: Annotated[str, typer.Option("--valve-condition", help="auto | design | commissioning: the valve's α and underlaps in the model; commissioning fits them on the configured baseline_window, auto does so when there is one.")] = "auto",
 ) -> None:
     """The model-discrepancy workflow: replay, name the missing effect, add it, its effect on monitoring."""
-    import flows.discrepancy as discrepancy_flows
-    from flows.config import warehouse_dir
-    from flows.ingest import quiet_prefect_console
+    import flows.discrepancy.flow as discrepancy_flows
+    from flows.common.config import warehouse_dir
+    from flows.ingest.flow import quiet_prefect_console
 
     discrepancy_flows.check_arguments(config, valve, start, end, valve_condition, max_records)  # fail fast, before Prefect starts
     quiet_prefect_console()

@@ -19,14 +19,13 @@ import dataclasses
 from datetime import datetime, timedelta, timezone
 from pathlib import Path
 
-import polars as pl
 import tomli_w
 from prefect import flow
 
-from flows.archive import SimulateRequest, generate_plant_config, run_simulate
-from flows.ingest import run_ingest
-from flows.monitor import run_monitor
-from flows.report import run_report
+from flows.ingest.flow import run_ingest
+from flows.monitor.flow import run_monitor
+from flows.report.flow import run_report
+from flows.simulate.archive import SimulateRequest, generate_plant_config, run_simulate
 from schemas.plant_config import plant_config_to_dict
 
 DEMO_END = datetime(2026, 10, 1, tzinfo=timezone.utc)

@@ -7,7 +7,8 @@ Monitoring (Steinboeck et al. 2013, steps 2–5a), one module per concern:
 * :mod:`transforms.derivatives` — Savitzky–Golay values and derivatives
 * :mod:`transforms.selection` — step 3: which samples may become points, and counts
 * :mod:`transforms.points` — Eq. 7 and its siblings: opening-area points
-* :mod:`transforms.characteristic` — step 4a (piecewise-linear Â) and step 5a (plausibility)
+* :mod:`transforms.characteristic` — the piecewise-linear Â(u)
+* :mod:`transforms.baseline` — step 4a (fitting Â) and step 5a (plausibility)
 * :mod:`transforms.fit` — step 4b, Eq. 8, batched
 * :mod:`transforms.monitor` — steps 2–4b composed for lake frames
 

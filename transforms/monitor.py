@@ -25,14 +25,8 @@ import numba
 import numpy as np
 import polars as pl
 
-from transforms.characteristic import (
-    Characteristic,
-    Plausibility,
-    carrier_fit,
-    fit_characteristic,
-    plausibility,
-    scaled_shifted,
-)
+from transforms.baseline import Plausibility, carrier_fit, fit_characteristic, plausibility
+from transforms.characteristic import Characteristic, scaled_shifted
 from transforms.derivatives import add_savgol, savgol_arrays
 from transforms.fit import fit_arrays, fit_groups, walk_segment
 from transforms.params import EDGES, MonitorParams
@@ -332,7 +326,7 @@ def monitor_points(
     """Steps 2–3 and Eq. 7 for a lake frame of one or more valves (no fit; ``fits`` is empty).
 
     Use it for the commissioning window, whose points feed step 4a
-    (:func:`transforms.characteristic.fit_characteristic`). ``leakage[valve][edge]``: nominal
+    (:func:`transforms.baseline.fit_characteristic`). ``leakage[valve][edge]``: nominal
     α·A per edge; when given, Eq. 7 subtracts the closed edge's flow
     (:func:`transforms.points.area_expr`) for that valve. ``engine``: ``"numba"`` (default) or
     ``"polars"`` (module docstring).
@@ -571,7 +565,7 @@ def commissioning_baseline(
 ) -> dict[str, BaselineFit]:
     """Steps 2–4a and 5a on one valve's commissioning rows: Â per edge and its plausibility.
 
-    Â is :func:`transforms.characteristic.fit_characteristic` with the nominal characteristic as
+    Â is :func:`transforms.baseline.fit_characteristic` with the nominal characteristic as
     carrier (the points' knots, sampled every ``params.baseline_grid_m``, widened by the fit's
     search bound). With ``leakage`` (the default, and what :func:`monitor` then must use too)
     the points are corrected for the closed edge's flow, first at its nominal state, then

@@ -58,7 +58,7 @@ Spool margin 1 mm above the largest underlap of the opposite side (model.md).
     kept although that rest is now corrected (below): the correction rests on the model's leakage
     branch, and 1 mm keeps what it has to correct at a few per cent.
 
-Closed-edge leakage correction, ``leakage_passes = 1`` (flows/monitor.py turns it on).
+Closed-edge leakage correction, ``leakage_passes = 1`` (flows/monitor/flow.py turns it on).
     The flow through the closed edge o of the same port is subtracted from each point with o's
     α·A of Eq. 3 (its leakage branch), scaled and shifted to o's state in *that window*: first
     o's baseline state (the nominal characteristic, or the commissioning fit's α_b, x_b against
@@ -167,7 +167,7 @@ class MonitorParams:
     min_knot_spacing_m: float = 0.1e-3
     points_per_knot_interval: int = 200
     baseline_grid_m: float = 0.05e-3
-    """Sampling step of a carrier-shaped step-4a characteristic (transforms.characteristic)."""
+    """Sampling step of a carrier-shaped step-4a characteristic (transforms.baseline)."""
     leakage_passes: int = 1
     """Refits with the closed edge's leakage rebuilt from its own estimate (0: its baseline state only)."""
 

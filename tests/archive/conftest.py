@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from flows.archive import DEFAULT_COMMISSIONED, ArchivePlan, generate_plant_config, resolve_scenarios, write_archive
+from flows.simulate.archive import DEFAULT_COMMISSIONED, ArchivePlan, generate_plant_config, resolve_scenarios, write_archive
 
 SEED = 11
 SCENARIOS = {"V001": "wear", "V002": "broken_edge:1r@30"}

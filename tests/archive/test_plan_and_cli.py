@@ -11,8 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from flows.archive import ArchivePlan, SimulateRequest, parse_hours, plan_request
-from flows.errors import ValvemonError
+from flows.common.errors import ValvemonError
+from flows.simulate.archive import ArchivePlan, SimulateRequest, parse_hours, plan_request
 
 UTC = timezone.utc
 VALVEMON = str(Path(sys.executable).parent / "valvemon")

@@ -12,10 +12,9 @@ from datetime import datetime, timezone
 
 import numpy as np
 import polars as pl
-import pytest
 
-from flows.archive import TAG_SUFFIX, plant_params_for_valve, window_rng
-from flows.archive_writers import decimals_for_step
+from flows.simulate.archive import TAG_SUFFIX, plant_params_for_valve, window_rng
+from flows.simulate.writers import decimals_for_step
 from model.params import EDGES, ValveCondition
 from model.sensors import measure
 from model.simulate import simulate_inputs
@@ -112,8 +111,8 @@ def test_configured_units_layout_and_separators(tmp_path):
     import tomllib
     from datetime import timedelta
 
-    from flows.archive import ArchivePlan, resolve_scenarios, write_archive
-    from flows.config import load_plant_config
+    from flows.common.config import load_plant_config
+    from flows.simulate.archive import ArchivePlan, resolve_scenarios, write_archive
     from schemas.plant_config import parse_plant_config
 
     with open("tests/fixtures/plant_example.toml", "rb") as fh:

@@ -9,7 +9,8 @@ import numpy as np
 import polars as pl
 import pytest
 
-from flows.archive import (
+from flows.common.config import load_plant_config
+from flows.simulate.archive import (
     ArchivePlan,
     generate_plant_config,
     parse_scenario,
@@ -18,7 +19,6 @@ from flows.archive import (
     with_scenarios,
     write_archive,
 )
-from flows.config import load_plant_config
 from model import condition as mcond
 from model.params import EDGES
 from schemas.plant_config import ValveDesign

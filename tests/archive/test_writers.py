@@ -10,7 +10,7 @@ import numpy as np
 import polars as pl
 import pytest
 
-from flows.archive_writers import ExportColumns, decimals_for_step, open_day_writer
+from flows.simulate.writers import ExportColumns, decimals_for_step, open_day_writer
 from schemas.plant_config import ExportSpec
 
 T0 = int(datetime(2025, 3, 30, 0, 59, 59, 998000, tzinfo=timezone.utc).timestamp()) * 1_000_000 + 998_000

@@ -10,10 +10,10 @@ import pytest
 from typer.testing import CliRunner
 
 from flows.cli import app
-from flows.discrepancy import DISCREPANCY_TABLES, discrepancy_flow, plant_params_for
-from flows.errors import ValvemonError
-from flows.lake import partition_path, write_partition
-from flows.warehouse_db import db_path
+from flows.common.errors import ValvemonError
+from flows.common.lake import partition_path, write_partition
+from flows.common.warehouse_db import db_path
+from flows.discrepancy.flow import DISCREPANCY_TABLES, discrepancy_flow, plant_params_for
 from model.effects import Effects
 from schemas.fields import DISCREPANCY_FINDING_FIELDS
 from schemas.plant_config import ConfigError
@@ -44,7 +44,7 @@ def _config(tmp_path: Path, baseline_window: bool) -> Path:
 
 
 def test_plant_model_from_the_configuration():
-    from flows.config import load_plant_config
+    from flows.common.config import load_plant_config
     from model import TABLE1
 
     cfg = load_plant_config(FIXTURE)

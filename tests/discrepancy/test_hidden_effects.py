@@ -1,6 +1,6 @@
 """The workflow on data with a hidden effect: every library effect is switched on in the
 simulator (in-process), the valve's windows are recorded through the sensor models and handed
-to :func:`flows.discrepancy_pipeline.diagnose`, which is not told what (if anything) is hidden.
+to :func:`transforms.discrepancy.pipeline.diagnose`, which is not told what (if anything) is hidden.
 
 * clear magnitudes (the library's typical ones; mass and air doubled so the replay gap stands
   well clear of the noise floor): the right effect is named first, its parameter is recovered
@@ -16,11 +16,11 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from flows.discrepancy_pipeline import diagnose, fit_condition, monitoring_bias
 from model import TABLE1
 from model.condition import manufactured
 from model.effects import Effects, library_entry
 from transforms.discrepancy import DiscrepancySettings, prepare_record, split_records
+from transforms.discrepancy.pipeline import diagnose, fit_condition, monitoring_bias
 
 from .simdata import simulate_lake
 

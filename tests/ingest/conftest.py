@@ -16,10 +16,10 @@ import polars as pl
 import pytest
 import tomli_w
 
-from flows.config import load_plant_config
-from flows.ingest import run_ingest
-from flows.lake import read_lake
-from flows.warehouse_db import connect, query_frame
+from flows.common.config import load_plant_config
+from flows.common.lake import read_lake
+from flows.common.warehouse_db import connect, query_frame
+from flows.ingest.flow import run_ingest
 from schemas.fields import SENSOR_FIELDS, polars_schema
 
 DATA = Path(__file__).parent / "data"

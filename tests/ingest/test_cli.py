@@ -11,16 +11,16 @@ import gzip
 import pytest
 from polars.testing import assert_frame_equal
 
-import flows.ingest
+import flows.ingest.flow
 from tests.ingest.conftest import DATA, base_lake, lake, run_cli, table
 
 
 @pytest.fixture
 def no_prefect(monkeypatch):
     def plain(config_path, paths, warehouse, force=False, show_progress=False):
-        return flows.ingest.run_ingest(config_path, paths, warehouse, force=force, show_progress=show_progress).counts()
+        return flows.ingest.flow.run_ingest(config_path, paths, warehouse, force=force, show_progress=show_progress).counts()
 
-    monkeypatch.setattr(flows.ingest, "ingest_flow", plain)
+    monkeypatch.setattr(flows.ingest.flow, "ingest_flow", plain)
 
 
 def test_success_prints_the_counts(plant, tmp_path, monkeypatch, capsys, no_prefect):

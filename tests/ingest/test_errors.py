@@ -6,7 +6,7 @@ import gzip
 
 import pytest
 
-from flows.errors import ValvemonError
+from flows.common.errors import ValvemonError
 from tests.ingest.conftest import DATA, ingest, lake, table
 
 

@@ -1,5 +1,5 @@
 """Parquet exports: text tag and quality columns are read by their dictionary codes
-(``flows.ingest.enum_column``), and the result is the same as reading the text."""
+(``flows.ingest.flow.enum_column``), and the result is the same as reading the text."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ import pyarrow as pa
 import pytest
 from polars.testing import assert_frame_equal
 
-from flows.errors import ValvemonError
-from flows.ingest import enum_column
+from flows.common.errors import ValvemonError
+from flows.ingest.flow import enum_column
 from tests.ingest.conftest import DATA, ingest, lake, table
 
 

@@ -8,9 +8,9 @@ import pytest
 from blake3 import blake3
 from polars.testing import assert_frame_equal
 
-import flows.ingest
-import flows.lake
-from flows.errors import ValvemonError
+import flows.common.lake
+import flows.ingest.flow
+from flows.common.errors import ValvemonError
 from tests.ingest.conftest import BASE, DATA, T0, base_lake, expected_lake, ingest, lake, table
 
 
@@ -123,11 +123,11 @@ def test_crash_after_the_temp_file_keeps_the_old_partition_and_a_rerun_completes
             raise Crash("killed between the temporary file and the rename")
         return real_commit(tmp, path)
 
-    real_commit = flows.lake._commit
-    monkeypatch.setattr(flows.lake, "_commit", crash_on_second)
+    real_commit = flows.common.lake._commit
+    monkeypatch.setattr(flows.common.lake, "_commit", crash_on_second)
     with pytest.raises(Crash):
         ingest(wide, DATA / "midnight.csv", wh)
-    monkeypatch.setattr(flows.lake, "_commit", real_commit)
+    monkeypatch.setattr(flows.common.lake, "_commit", real_commit)
     # first partition new, second absent (it never existed): never a half-written file
     assert [p.parent.name for p in (wh / "lake").rglob("part-0.parquet")] == ["date=2025-03-01"]
     assert table(wh, "ingest_manifest").height == 0
@@ -148,11 +148,11 @@ def test_crash_replacing_an_existing_partition_leaves_the_old_content(plant, tmp
         real_write(tmp, frame, gap_us)
         raise Crash("killed after fsync of the temporary file")
 
-    real_write = flows.lake._write_temp
-    monkeypatch.setattr(flows.lake, "_write_temp", write_then_die)
+    real_write = flows.common.lake._write_temp
+    monkeypatch.setattr(flows.common.lake, "_write_temp", write_then_die)
     with pytest.raises(Crash):
         ingest(cfg, b, wh)
-    monkeypatch.setattr(flows.lake, "_write_temp", real_write)
+    monkeypatch.setattr(flows.common.lake, "_write_temp", real_write)
     assert_frame_equal(lake(wh), old)
     ingest(cfg, b, wh)
     assert_frame_equal(lake(wh), base_lake())
@@ -176,7 +176,7 @@ def test_crash_between_partitions_then_rerun_equals_one_clean_run(wide, tmp_path
     clean = tmp_path / "clean"
     ingest(wide, DATA / "midnight.csv", clean)
     wh = tmp_path / "wh"
-    real = flows.ingest.write_partition
+    real = flows.ingest.flow.write_partition
     n = []
 
     def die_second(path, frame, **kw):
@@ -185,10 +185,10 @@ def test_crash_between_partitions_then_rerun_equals_one_clean_run(wide, tmp_path
             raise Crash("killed between two partitions")
         return real(path, frame, **kw)
 
-    monkeypatch.setattr(flows.ingest, "write_partition", die_second)
+    monkeypatch.setattr(flows.ingest.flow, "write_partition", die_second)
     with pytest.raises(Crash):
         ingest(wide, DATA / "midnight.csv", wh)
-    monkeypatch.setattr(flows.ingest, "write_partition", real)
+    monkeypatch.setattr(flows.ingest.flow, "write_partition", real)
     ingest(wide, DATA / "midnight.csv", wh)
     assert_frame_equal(lake(wh), lake(clean))
     assert _bytes_equal(clean, wh)
@@ -203,15 +203,15 @@ def _bytes_equal(a, b) -> bool:
 def test_crash_before_the_manifest_then_rerun_counts_nothing_twice(plant, tmp_path, monkeypatch):
     cfg, _ = plant("pi.toml", quality_column=None, good_quality=None)
     wh = tmp_path / "wh"
-    real = flows.ingest.record_file
+    real = flows.ingest.flow.record_file
 
     def die(*a, **k):
         raise Crash("killed after the partitions, before the manifest")
 
-    monkeypatch.setattr(flows.ingest, "record_file", die)
+    monkeypatch.setattr(flows.ingest.flow, "record_file", die)
     with pytest.raises(Crash):
         ingest(cfg, DATA / "pi_tag_major.csv", wh)
-    monkeypatch.setattr(flows.ingest, "record_file", real)
+    monkeypatch.setattr(flows.ingest.flow, "record_file", real)
     report = ingest(cfg, DATA / "pi_tag_major.csv", wh)
     assert report.files_ingested == 1 and report.rows_added == 0  # the lake already had the rows
     assert table(wh, "quarantine").height == 3 and table(wh, "ingest_manifest").height == 1
@@ -276,9 +276,9 @@ def test_a_warehouse_from_before_blake3_still_knows_its_files(plant, tmp_path):
 
 
 def test_backfill_recognises_and_rekeys_a_legacy_file(plant, tmp_path):
-    from flows.backfill import ensure_backfill_tables, ingest_export, manifest_hashes
-    from flows.ingest import rekey_file
-    from flows.warehouse_db import connect
+    from flows.common.warehouse_db import connect
+    from flows.ingest.flow import rekey_file
+    from flows.orchestration.backfill import ensure_backfill_tables, ingest_export, manifest_hashes
 
     cfg, config = plant()
     wh = tmp_path / "wh"

@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from polars.testing import assert_frame_equal
 
-from flows.lake import partition_path, read_lake, row_group_bounds, write_partition
+from flows.common.lake import partition_path, read_lake, row_group_bounds, write_partition
 from tests.ingest.conftest import DATA, base_lake, ingest
 from transforms.ingest import Grid, IngestError, merge_partition, parse_timestamps, prepare_tag, to_grid
 from transforms.ingest.export import split_by_tag

@@ -3,8 +3,7 @@
 import numpy as np
 import pytest
 
-from model import (BROKEN_1R, EDGES, HEALTHY, TABLE1, WEAR, Scenario, broken_edge,
-                   condition_arrays, condition_at, healthy, wear)
+from model import BROKEN_1R, EDGES, HEALTHY, TABLE1, WEAR, Scenario, broken_edge, condition_arrays, condition_at, healthy, wear
 
 X_MAX = TABLE1.geometry.x_max_m
 BASE = TABLE1.nominal_condition

@@ -5,9 +5,19 @@ import math
 import numpy as np
 import pytest
 
-from model import (TABLE1, ValveCondition, chamber_volumes, cylinder_acceleration,
-                   friction_force, orifice_flow, port_flows, pressure_derivatives,
-                   resultant_force, spool_acceleration, valve_areas)
+from model import (
+    TABLE1,
+    ValveCondition,
+    chamber_volumes,
+    cylinder_acceleration,
+    friction_force,
+    orifice_flow,
+    port_flows,
+    pressure_derivatives,
+    resultant_force,
+    spool_acceleration,
+    valve_areas,
+)
 
 RHO = TABLE1.fluid.density_kg_m3
 C = TABLE1.cylinder

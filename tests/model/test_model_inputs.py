@@ -3,9 +3,20 @@
 import numpy as np
 import pytest
 
-from model import (TABLE1, SensorChannel, draw_supply, feedforward, feedforward_table,
-                   load_profile, measure, pi_step, reference_trajectory, simulate_windows,
-                   standstill, window_inputs)
+from model import (
+    TABLE1,
+    SensorChannel,
+    draw_supply,
+    feedforward,
+    feedforward_table,
+    load_profile,
+    measure,
+    pi_step,
+    reference_trajectory,
+    simulate_windows,
+    standstill,
+    window_inputs,
+)
 from model.trajectory import cosine_move
 
 FS = 1000.0

@@ -4,9 +4,22 @@ determinism."""
 import numpy as np
 import pytest
 
-from model import (BROKEN_1R, HEALTHY, TABLE1, WEAR, condition_at, cylinder_acceleration,
-                   healthy, port_flows, pressure_derivatives, resultant_force, rhs,
-                   simulate_windows, spool_acceleration, valve_areas)
+from model import (
+    BROKEN_1R,
+    HEALTHY,
+    TABLE1,
+    WEAR,
+    condition_at,
+    cylinder_acceleration,
+    healthy,
+    port_flows,
+    pressure_derivatives,
+    resultant_force,
+    rhs,
+    simulate_windows,
+    spool_acceleration,
+    valve_areas,
+)
 from model.simulate import DEFAULT_REG_BAND_PA
 
 BAR = 1e5
@@ -197,6 +210,7 @@ def test_determinism():
 
 def test_bad_inputs_and_divergence_are_reported():
     import dataclasses
+
     from model import simulate_inputs, window_inputs
     inp = window_inputs(TABLE1, 1.0, np.random.default_rng(0))
     bad = dataclasses.replace(inp, F_l_n=np.full_like(inp.F_l_n, np.nan))

@@ -6,8 +6,18 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from model import (BROKEN_1R, TABLE1, ValveCondition, ValveGeometry, condition_at, eq9_residual,
-                   friction_force, port_flows, resultant_force, standstill, steady_state)
+from model import (
+    BROKEN_1R,
+    TABLE1,
+    ValveGeometry,
+    condition_at,
+    eq9_residual,
+    friction_force,
+    port_flows,
+    resultant_force,
+    standstill,
+    steady_state,
+)
 
 BAR = 1e5
 

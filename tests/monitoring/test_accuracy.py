@@ -22,12 +22,14 @@ from datetime import timedelta
 import numpy as np
 import polars as pl
 import pytest
-from .sim_lake import START, simulated_lake, table1_params
 
 from model import TABLE1, TrajectoryParams, broken_edge, condition_arrays, condition_at, edge_area, healthy, wear
 from model.params import EDGES, SensorChannel, SensorParams
-from transforms.characteristic import Characteristic, fit_characteristic
+from transforms.baseline import fit_characteristic
+from transforms.characteristic import Characteristic
 from transforms.monitor import commissioning_baseline, monitor, monitor_points
+
+from .sim_lake import START, simulated_lake, table1_params
 
 X_MAX = TABLE1.geometry.x_max_m
 ALPHA_TOL = 0.02
@@ -57,7 +59,7 @@ QUIET = SensorParams(
 
 
 def nominal() -> dict[str, Characteristic]:
-    """α_nominal·A(u) of Eq. 3 per edge, as flows.monitor.nominal_characteristic builds it
+    """α_nominal·A(u) of Eq. 3 per edge, as flows.monitor.flow.nominal_characteristic builds it
     (0.05 mm grid over [−x_max, x_max + x̂ bound])."""
     g, c = TABLE1.geometry, TABLE1.nominal_condition
     u = np.arange(-X_MAX, X_MAX + PARAMS.x_hat_bound_m + 0.025e-3, 0.05e-3)
@@ -215,10 +217,10 @@ def test_table2_broken_edge(seed):
 def test_export_formats_give_identical_fits(tmp_path):
     """2 valves × 4 windows (wear, broken 1r), ~11 s: CSV holds each tag at its sensor step's
     decimals, Parquet the same values as doubles, so the lake and the fits agree."""
-    from flows.archive import SimulateRequest, run_simulate
-    from flows.ingest import run_ingest
-    from flows.monitor import run_monitor
-    from flows.warehouse_db import connect, query_frame
+    from flows.common.warehouse_db import connect, query_frame
+    from flows.ingest.flow import run_ingest
+    from flows.monitor.flow import run_monitor
+    from flows.simulate.archive import SimulateRequest, run_simulate
 
     fits = {}
     for fmt in ("long", "wide", "parquet"):

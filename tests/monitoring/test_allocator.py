@@ -1,4 +1,4 @@
-"""flows/allocator.py: freed heap memory is reused without page faults (glibc)."""
+"""flows/common/allocator.py: freed heap memory is reused without page faults (glibc)."""
 
 import subprocess
 import sys
@@ -13,7 +13,7 @@ _PROBE = textwrap.dedent("""
     from numpy._core.multiarray import _set_madvise_hugepage
     _set_madvise_hugepage(False)  # 4 KiB pages: one fault per page touched afresh
     if sys.argv[1] == "retain":
-        from flows.allocator import retain_freed_memory
+        from flows.common.allocator import retain_freed_memory
         assert retain_freed_memory()
     a = np.ones(8 << 20)  # 64 MiB, touched
     del a

@@ -1,4 +1,4 @@
-"""Step 4a with the nominal characteristic as carrier (transforms.characteristic.fit_characteristic):
+"""Step 4a with the nominal characteristic as carrier (transforms.baseline.fit_characteristic):
 the baseline follows Eq. 3's curved shape inside and beyond the commissioning points, where a
 chord does not."""
 
@@ -7,7 +7,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from transforms.characteristic import carrier_fit, fit_characteristic, scaled_shifted
+from transforms.baseline import carrier_fit, fit_characteristic
+from transforms.characteristic import scaled_shifted
 
 from .test_accuracy import NOMINAL
 

@@ -1,4 +1,4 @@
-"""flows/monitor.py through the real flows (run_simulate → run_ingest → run_monitor, the plain
+"""flows/monitor/flow.py through the real flows (run_simulate → run_ingest → run_monitor, the plain
 functions the Prefect flows run): reruns, baseline versions, errors, unusable windows, chunking."""
 
 from __future__ import annotations
@@ -13,13 +13,13 @@ import polars as pl
 import pytest
 import tomli_w
 
-import flows.monitor as fm
-from flows.archive import DEFAULT_COMMISSIONED, SimulateRequest, run_simulate
-from flows.config import load_plant_config
-from flows.errors import ValvemonError
-from flows.ingest import run_ingest
-from flows.monitor import run_monitor
-from flows.warehouse_db import connect, query_frame
+import flows.monitor.flow as fm
+from flows.common.config import load_plant_config
+from flows.common.errors import ValvemonError
+from flows.common.warehouse_db import connect, query_frame
+from flows.ingest.flow import run_ingest
+from flows.monitor.flow import run_monitor
+from flows.simulate.archive import DEFAULT_COMMISSIONED, SimulateRequest, run_simulate
 from schemas.plant_config import plant_config_to_dict
 
 DAY0 = DEFAULT_COMMISSIONED  # 2025-01-01T00:00Z, the generated plant's commissioning instant
@@ -206,7 +206,7 @@ def test_span_bounds_read_whole_windows_and_little_else(tmp_path):
     # runs of 1 s samples (gap limit 1.5 s) around a span [D1, D2): A straddles D1 (left out),
     # B lies inside, B2 ends 6 s before D2, C starts 1 s before D2 and runs for three hours
     # (longer than RUN_LOOKAHEAD: read to its end), D starts after D2 (left out)
-    from flows.lake import SENSOR_POLARS_SCHEMA, partition_path, write_partition
+    from flows.common.lake import SENSOR_POLARS_SCHEMA, partition_path, write_partition
 
     d1, d2 = DAY0 + timedelta(days=1), DAY0 + timedelta(days=2)
     runs = {

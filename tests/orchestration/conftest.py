@@ -15,7 +15,7 @@ import duckdb
 import polars as pl
 import pytest
 
-from flows.archive import SimulateRequest, run_simulate
+from flows.simulate.archive import SimulateRequest, run_simulate
 
 START, END = "2025-01-01", "2025-01-04"
 
@@ -82,8 +82,8 @@ def archive(tmp_path_factory) -> Path:
 @pytest.fixture(scope="session")
 def clean(prefect_server, archive, tmp_path_factory):
     """One clean backfill of the archive (one-day units, two threads); returns (warehouse, summary)."""
-    from flows.backfill import backfill_flow
-    from flows.dask_runner import task_runner
+    from flows.orchestration.backfill import backfill_flow
+    from flows.orchestration.dask_runner import task_runner
 
     wh = tmp_path_factory.mktemp("orch_clean") / "wh"
     summary = backfill_flow.with_options(task_runner=task_runner(2))(

@@ -15,13 +15,13 @@ import duckdb
 import polars as pl
 import pytest
 
-import flows.backfill as bf
-from flows.backfill import BackfillFailed, MonitorUnit, backfill_flow, export_in_span, extra_units, unit_grid
-from flows.dask_runner import task_runner
-from flows.errors import ValvemonError
-from flows.ingest import run_ingest
-from flows.instants import utc_instant
-from flows.monitor import run_monitor
+import flows.orchestration.backfill as bf
+from flows.common.errors import ValvemonError
+from flows.common.instants import utc_instant
+from flows.ingest.flow import run_ingest
+from flows.monitor.flow import run_monitor
+from flows.orchestration.backfill import BackfillFailed, MonitorUnit, backfill_flow, export_in_span, extra_units, unit_grid
+from flows.orchestration.dask_runner import task_runner
 from tests.orchestration.conftest import END, START, assert_same, copy_warehouse, lake_files, snapshot, table
 
 UTC = timezone.utc

@@ -1,6 +1,6 @@
-"""flows/batches.py: what is added is written exactly once, in order, in batches."""
+"""flows/common/batches.py: what is added is written exactly once, in order, in batches."""
 
-from flows.batches import WriteBatch
+from flows.common.batches import WriteBatch
 
 
 def test_batches_by_count_and_on_flush():

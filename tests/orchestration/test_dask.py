@@ -6,7 +6,7 @@ import distributed
 import pytest
 from prefect_dask import DaskTaskRunner
 
-from flows.backfill import backfill_flow
+from flows.orchestration.backfill import backfill_flow
 from tests.orchestration.conftest import END, START, assert_same, snapshot
 
 

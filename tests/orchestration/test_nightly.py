@@ -8,9 +8,9 @@ from datetime import date, datetime, timezone
 import pytest
 from typer.testing import CliRunner
 
-import flows.nightly as nightly
+import flows.orchestration.nightly as nightly
 from flows.cli import app
-from flows.errors import ValvemonError
+from flows.common.errors import ValvemonError
 from tests.orchestration.conftest import table
 
 UTC = timezone.utc

@@ -22,7 +22,7 @@ import duckdb
 import httpx
 import pytest
 
-from flows.archive import SimulateRequest, run_simulate
+from flows.simulate.archive import SimulateRequest, run_simulate
 
 FIRE_WITHIN_S = 150
 

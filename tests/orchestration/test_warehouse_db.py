@@ -1,4 +1,4 @@
-"""flows/warehouse_db.py: the process's DuckDB host attaches the warehouse per unit of work."""
+"""flows/common/warehouse_db.py: the process's DuckDB host attaches the warehouse per unit of work."""
 
 import subprocess
 import sys
@@ -8,9 +8,9 @@ import time
 import duckdb
 import pytest
 
-import flows.warehouse_db as wdb
-from flows.errors import ValvemonError
-from flows.warehouse_db import connect, db_path
+import flows.common.warehouse_db as wdb
+from flows.common.errors import ValvemonError
+from flows.common.warehouse_db import connect, db_path
 
 
 def _other_process_opens(warehouse) -> bool:

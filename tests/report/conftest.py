@@ -11,8 +11,8 @@ import numpy as np
 import polars as pl
 import pytest
 
-from flows.views import REPORT_TABLES, create_views
-from flows.warehouse_db import create_table_sql, insert_frame, query_frame
+from flows.common.warehouse_db import create_table_sql, insert_frame, query_frame
+from flows.report.views import REPORT_TABLES, create_views
 from schemas.fields import CONDITION_BOUNDS_FIELDS, EDGE_FIT_FIELDS, EDGES, STANDSTILL_FIELDS, polars_schema
 from schemas.plant_config import ConditionBounds
 

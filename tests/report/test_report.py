@@ -23,12 +23,12 @@ import polars as pl
 import pytest
 import tomli_w
 
-from flows.config import load_plant_config
-from flows.monitor import ensure_baselines, ensure_monitor_tables, monitor_params
-from flows.report import run_report
-from flows.views import connect_snapshot, publish_snapshot, snapshot_path
-from flows.warehouse_db import connect, insert_frame
-from schemas.fields import DISCREPANCY_FINDING_FIELDS, EDGE_FIT_FIELDS, EDGES, FLEET_RANKING_FIELDS, VALVE_CONDITION_FIELDS, polars_schema
+from flows.common.config import load_plant_config
+from flows.common.warehouse_db import connect, insert_frame
+from flows.monitor.flow import ensure_baselines, ensure_monitor_tables, monitor_params
+from flows.report.flow import run_report
+from flows.report.views import connect_snapshot, publish_snapshot, snapshot_path
+from schemas.fields import DISCREPANCY_FINDING_FIELDS, EDGE_FIT_FIELDS, FLEET_RANKING_FIELDS, VALVE_CONDITION_FIELDS, polars_schema
 
 from .conftest import COMMISSIONED, Warehouse
 
@@ -129,7 +129,7 @@ def _finding(valve_id: str, run_id: str, hour: int, effect: str, gap_before: flo
 
 
 def test_report_shows_the_latest_discrepancy_run_of_each_analysed_valve(built, tmp_path):
-    from flows.discrepancy import store_run
+    from flows.discrepancy.flow import store_run
 
     config_path, built_warehouse, built_result, _ = built
     assert "Model discrepancy" not in built_result.html.read_text()  # the workflow never ran there
@@ -226,7 +226,7 @@ def test_bi_export_reads_the_same_in_duckdb_polars_pandas_pyarrow(built):
 
 
 def test_query_formats(built, tmp_path, capsys):
-    from flows.query import run_query
+    from flows.report.query import run_query
 
     _, warehouse, _, _ = built
     sql = "SELECT valve_id, state, remaining_hours FROM fleet_ranking ORDER BY urgency_rank"
@@ -240,7 +240,7 @@ def test_query_formats(built, tmp_path, capsys):
     run_query(sql, warehouse, fmt="table")
     table = capsys.readouterr().out
     assert "VB" in table and "faulty" in table and "3 row(s)" in table
-    from flows.errors import ValvemonError
+    from flows.common.errors import ValvemonError
 
     with pytest.raises(ValvemonError, match="needs --out"):
         run_query(sql, warehouse, fmt="parquet")
@@ -251,7 +251,7 @@ def test_query_formats(built, tmp_path, capsys):
 _HOLD_WRITER = textwrap.dedent("""
     import sys, time
     from pathlib import Path
-    from flows.warehouse_db import connect
+    from flows.common.warehouse_db import connect
     warehouse, ready, go = sys.argv[1:4]
     with connect(warehouse) as con:              # the nightly writer, mid-transaction
         con.execute("BEGIN TRANSACTION")
@@ -265,7 +265,7 @@ _HOLD_WRITER = textwrap.dedent("""
 _HOLD_READER = textwrap.dedent("""
     import sys, time
     from pathlib import Path
-    from flows.views import connect_snapshot
+    from flows.report.views import connect_snapshot
     warehouse, ready, go = sys.argv[1:4]
     con = connect_snapshot(warehouse)           # a BI user with the snapshot open
     before = con.execute("SELECT count(*) FROM edge_fits").fetchall()[0][0]
@@ -302,7 +302,7 @@ def test_readers_and_the_writer_never_wait_for_each_other(built, tmp_path):
         assert q.returncode == 0, q.stderr
         assert q.stdout.split() == ["n", str(fits.height)]
         # the live file is locked by the writer: --live gives up with a clear message instead of blocking
-        from flows.errors import ValvemonError
+        from flows.common.errors import ValvemonError
 
         with pytest.raises(ValvemonError, match="cannot open the database"):
             connect_snapshot(warehouse, live=True, wait_s=0.2)

@@ -24,8 +24,8 @@ def _cli(*args: str, cwd: Path) -> subprocess.CompletedProcess:
 
 
 def test_simulated_plant_through_report_and_query(tmp_path):
-    from flows.ingest import run_ingest
-    from flows.monitor import run_monitor
+    from flows.ingest.flow import run_ingest
+    from flows.monitor.flow import run_monitor
 
     _cli("simulate", "--out", "sim", "--n-valves", "2", "--days", "1", "--windows-per-day", "12", "--format", "parquet",
          "--scenario", "V001=healthy", "--scenario", "V002=broken_edge", "--quiet", cwd=tmp_path)  # fmt: skip

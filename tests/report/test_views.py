@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from flows.errors import ValvemonError
-from flows.views import SQL_DIR, discover_views, ordered_views
+from flows.common.errors import ValvemonError
+from flows.report.views import SQL_DIR, discover_views, ordered_views
 from schemas.fields import EDGES
 
 HOURS = np.arange(0.0, 200.0, 1.0)  # one window per operating hour

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 import tomli_w
 
-from flows.config import load_plant_config
+from flows.common.config import load_plant_config
 from schemas.plant_config import ConfigError, parse_plant_config, plant_config_to_dict
 
 EXAMPLE = Path(__file__).parents[1] / "fixtures" / "plant_example.toml"

@@ -9,7 +9,8 @@ import synth_valve as sv
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from transforms.characteristic import Characteristic, fit_characteristic
+from transforms.baseline import fit_characteristic
+from transforms.characteristic import Characteristic
 from transforms.fit import FIT_COLUMNS, eq8_cost_gradient, fit_arrays, fit_windows, profile_cost
 
 UG = np.linspace(-3.5e-3, 3.5e-3, 701)

@@ -1,6 +1,6 @@
 """Model discrepancy (issue 7): records, the load estimate, equation residuals, gap measures and
 the sparse selection of the missing effect. Pure numpy/polars; the model's terms are passed in
-as arrays by ``flows.discrepancy_pipeline`` (transforms does not import the model)."""
+as arrays by ``transforms.discrepancy.pipeline`` (transforms does not import the model)."""
 
 from transforms.discrepancy.gaps import GAP_SCALES, GAP_SIGNALS, GapAccumulator, normalised_gap
 from transforms.discrepancy.load import LoadEstimate, estimate_load, segment_levels

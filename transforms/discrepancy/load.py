@@ -21,7 +21,7 @@ instants), so the estimate is made piecewise constant:
    found across a standstill is placed at the first slip fragment of a creeping cylinder in
    between that already shows the new level (pointwise estimate), else at the first valid
    sample after it: the load matters from the breakaway on. (The workflow then moves such a
-   step to where a short replay of the standstill fits best, ``flows.discrepancy_pipeline``.)
+   step to where a short replay of the standstill fits best, ``transforms.discrepancy.pipeline``.)
 2. **levels.** Each segment between steps gets the median of F̂_l over its valid samples
    (those within ``step_guard_samples`` of a step left out); segments without any take the
    level of the next segment (else the previous one).

@@ -17,7 +17,16 @@ import pandera.errors
 import pandera.polars
 import polars as pl
 
-from schemas.fields import RAW_ROW_FIELDS, RAW_ROW_SCHEMA, REQUIRED_SIGNALS, SENSOR_FIELDS, SENSOR_SCHEMA, SIGNAL_COLUMN, pandera_schema, polars_schema
+from schemas.fields import (
+    RAW_ROW_FIELDS,
+    RAW_ROW_SCHEMA,
+    REQUIRED_SIGNALS,
+    SENSOR_FIELDS,
+    SENSOR_SCHEMA,
+    SIGNAL_COLUMN,
+    pandera_schema,
+    polars_schema,
+)
 from transforms.ingest.errors import IngestError
 from transforms.ingest.grid import Gridded
 

@@ -34,11 +34,11 @@ from pathlib import Path
 
 import duckdb
 
-from flows.errors import ValvemonError
-from flows.warehouse_db import DB_NAME, db_path, ensure_tables, transaction
+from flows.common.errors import ValvemonError
+from flows.common.warehouse_db import DB_NAME, db_path, ensure_tables, transaction
 from schemas.fields import CONDITION_BOUNDS_FIELDS, STANDSTILL_FIELDS
 
-SQL_DIR = Path(__file__).resolve().parents[1] / "sql"
+SQL_DIR = Path(__file__).resolve().parents[2] / "sql"
 """The repository's ``sql/`` folder."""
 
 LAYERS: tuple[str, ...] = ("staging", "core", "report")
@@ -118,7 +118,7 @@ def ordered_views(views: dict[str, ViewFile]) -> list[ViewFile]:
 
 def ensure_report_tables(con: duckdb.DuckDBPyConnection) -> None:
     """Create ``condition_bounds`` and ``standstill_checks`` (and the monitor's tables) if missing."""
-    from flows.monitor import ensure_monitor_tables
+    from flows.monitor.flow import ensure_monitor_tables
 
     ensure_monitor_tables(con)
     ensure_tables(con, {name: (fields, None) for name, fields in REPORT_TABLES.items()})

@@ -5,12 +5,12 @@
 1. writes each configured valve's condition bounds (``[valve_types.NAME.bounds]``, with the
    Eq. 9 rest residual of its design) to table ``condition_bounds``;
 2. brings table ``standstill_checks`` up to date from the lake (Eq. 9 per window,
-   :mod:`flows.standstill`; only windows from the latest one already checked onwards are read);
-3. creates or refreshes the ``sql/`` views (:mod:`flows.views`) and publishes the read-only
+   :mod:`flows.report.standstill`; only windows from the latest one already checked onwards are read);
+3. creates or refreshes the ``sql/`` views (:mod:`flows.report.views`) and publishes the read-only
    snapshot ``WAREHOUSE/snapshot/valvemon.duckdb`` that readers query;
-4. reads the views from the snapshot and writes the BI hand-off (:mod:`flows.export`), the PNG
-   pictures (:mod:`flows.report_figures`) and ``WAREHOUSE/reports/report.html``
-   (:mod:`flows.report_html`), which also shows the latest ``valvemon discrepancy`` run of every
+4. reads the views from the snapshot and writes the BI hand-off (:mod:`flows.report.export`), the PNG
+   pictures (:mod:`flows.report.figures`) and ``WAREHOUSE/reports/report.html``
+   (:mod:`flows.report.html`), which also shows the latest ``valvemon discrepancy`` run of every
    valve analysed (:func:`discrepancy_results`; its overlay pictures are the workflow's own).
 
 Every write to ``valvemon.duckdb`` happens in a short-lived connection; the pictures and the
@@ -21,25 +21,24 @@ export are made from the snapshot, without holding the live database.
 
 from __future__ import annotations
 
-import dataclasses
 import os
 import uuid
 from dataclasses import dataclass, field
-from datetime import datetime, timedelta, timezone
+from datetime import datetime, timezone
 from pathlib import Path
 
 import numpy as np
 import polars as pl
 from prefect import flow
 
-from flows.config import load_plant_config
-from flows.errors import ValvemonError
-from flows.export import export_bi
-from flows.report_figures import characteristics_figure, fleet_figure, trends_figure
-from flows.report_html import render_report
-from flows.standstill import expected_residual, standstill_rows
-from flows.views import connect_snapshot, create_views, ensure_report_tables, publish_snapshot
-from flows.warehouse_db import connect, insert_frame, query_frame, transaction
+from flows.common.config import load_plant_config
+from flows.common.errors import ValvemonError
+from flows.common.warehouse_db import connect, insert_frame, query_frame, transaction
+from flows.report.export import export_bi
+from flows.report.figures import characteristics_figure, fleet_figure, trends_figure
+from flows.report.html import render_report
+from flows.report.standstill import expected_residual, standstill_rows
+from flows.report.views import connect_snapshot, create_views, ensure_report_tables, publish_snapshot
 from model.area import edge_area
 from schemas.fields import CONDITION_BOUNDS_FIELDS, EDGES, polars_schema
 from schemas.plant_config import BOUND_KEYS, PlantConfig
@@ -85,7 +84,7 @@ def bounds_frame(config: PlantConfig, now: datetime) -> pl.DataFrame:
 
 def update_standstill(config: PlantConfig, warehouse: Path, now: datetime) -> int:
     """Add Eq. 9 rows for the lake's windows not yet checked (from each valve's latest on)."""
-    from flows.monitor import lake_chunks  # the monitor's gap-aligned chunks of the lake
+    from flows.monitor.flow import lake_chunks  # the monitor's gap-aligned chunks of the lake
 
     with connect(warehouse) as con:
         ensure_report_tables(con)

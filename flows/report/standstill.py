@@ -109,7 +109,7 @@ def expected_residual(valve, export) -> float:
     plant parameters for this valve serve. Falls back to Table 1's −0.17 if the rest state cannot
     be solved.
     """
-    from flows.archive import plant_params_for_valve
+    from flows.simulate.archive import plant_params_for_valve
     from model.standstill import eq9_residual, standstill
 
     try:

@@ -7,7 +7,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Iterator
 
-from flows.errors import ValvemonError
+from flows.common.errors import ValvemonError
 
 
 @contextmanager

@@ -2,7 +2,7 @@
 
 :func:`run_ingest` does the work file by file: read the export (:func:`read_export`), turn it into
 lake partitions (``transforms.ingest.process_export``), merge each with the stored partition and
-replace it atomically (``flows.lake``), then record the file in the manifest together with its
+replace it atomically (``flows.common.lake``), then record the file in the manifest together with its
 quarantined samples and gaps in one DuckDB transaction. A file whose content hash is in the
 manifest is skipped (``force`` re-reads it; the lake then stays the same unless the
 configuration changed). A run that dies part-way can simply be run again: a file is in the
@@ -36,12 +36,12 @@ from blake3 import blake3
 from prefect import flow, task
 from prefect.cache_policies import NO_CACHE
 
-from flows.allocator import retain_freed_memory
-from flows.config import load_plant_config
-from flows.errors import ValvemonError
-from flows.lake import partition_path, read_partition, write_partition
-from flows.locks import file_lock
-from flows.warehouse_db import connect, ensure_ingest_tables, insert_frame, query_frame, transaction
+from flows.common.allocator import retain_freed_memory
+from flows.common.config import load_plant_config
+from flows.common.errors import ValvemonError
+from flows.common.lake import partition_path, read_partition, write_partition
+from flows.common.locks import file_lock
+from flows.common.warehouse_db import connect, ensure_ingest_tables, insert_frame, transaction
 from schemas.fields import GAP_FIELDS, GAP_SCHEMA, INGEST_RUN_FIELDS, MANIFEST_FIELDS, QUARANTINE_FIELDS, QUARANTINE_SCHEMA, polars_schema
 from schemas.plant_config import ConfigError, ExportSpec, PlantConfig
 from transforms.ingest import Grid, IngestError, TagTable, merge_partition, process_export, tags_by_column
@@ -379,7 +379,7 @@ def ingest_file(path: str | Path, config: PlantConfig, warehouse: str | Path, ru
         Naming the file and, where it applies, the line, tag, time and what was expected.
     """
     path, warehouse = Path(path), Path(warehouse)
-    retain_freed_memory()  # the next file's arrays reuse this one's heap: no page faults (flows/allocator.py)
+    retain_freed_memory()  # the next file's arrays reuse this one's heap: no page faults (flows/common/allocator.py)
     tags = tags or TagTable.from_config(config)
     ef = read_export(path, config.export, tags)
     if not force and in_manifest(warehouse, ef):

@@ -2,7 +2,7 @@
 
 Reads the read-only snapshot the last ``valvemon report`` published (``--live``: the live
 database, read-only), so a query never waits for the nightly writer and never holds it up
-(:mod:`flows.views`). Output: a rich table (default), CSV, JSON (an array of objects, times as
+(:mod:`flows.report.views`). Output: a rich table (default), CSV, JSON (an array of objects, times as
 ISO-8601 UTC) or Parquet (``--out`` required).
 """
 
@@ -14,8 +14,8 @@ from pathlib import Path
 import duckdb
 import polars as pl
 
-from flows.errors import ValvemonError
-from flows.views import connect_snapshot
+from flows.common.errors import ValvemonError
+from flows.report.views import connect_snapshot
 
 FORMATS = ("table", "csv", "json", "parquet")
 

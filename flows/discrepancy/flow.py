@@ -5,7 +5,7 @@ effect explains it, what adding it does to the gap and to the monitoring (issue 
 (:func:`transforms.discrepancy.records.split_records`), builds the plant model from the plant
 configuration (:func:`plant_params_for`) with the valve's condition -- fitted on its commissioning
 window (the configuration's ``baseline_window``) when there is one, else its design data
-(:func:`valve_condition`) --, runs :func:`flows.discrepancy_pipeline.diagnose` and stores, in one
+(:func:`valve_condition`) --, runs :func:`transforms.discrepancy.pipeline.diagnose` and stores, in one
 transaction,
 
 * ``discrepancy_findings`` -- one row per named effect (or one ``none`` row), interfaces.md;
@@ -32,12 +32,11 @@ import polars as pl
 from prefect import flow, task
 from prefect.cache_policies import NO_CACHE
 
-from flows.config import load_plant_config
-from flows.discrepancy_pipeline import ConditionFit, Diagnosis, diagnose, fit_condition
-from flows.errors import ValvemonError
-from flows.instants import utc_instant
-from flows.lake import read_lake
-from flows.warehouse_db import connect, ensure_tables, insert_frame, transaction
+from flows.common.config import load_plant_config
+from flows.common.errors import ValvemonError
+from flows.common.instants import utc_instant
+from flows.common.lake import read_lake
+from flows.common.warehouse_db import connect, ensure_tables, insert_frame, transaction
 from model.params import PlantParams, ValveCondition
 from schemas.fields import (
     DISCREPANCY_CANDIDATE_FIELDS,
@@ -49,6 +48,7 @@ from schemas.fields import (
     polars_schema,
 )
 from schemas.plant_config import ValveSpec
+from transforms.discrepancy.pipeline import ConditionFit, Diagnosis, diagnose, fit_condition
 from transforms.discrepancy.records import split_records
 from transforms.discrepancy.settings import DiscrepancySettings
 
@@ -68,10 +68,10 @@ model on Table 1's sensors: 0.04–0.2, docs/discrepancy.md)."""
 
 def plant_params_for(valve: ValveSpec, export) -> PlantParams:
     """The plant model of one configured valve, built as ``valvemon simulate`` builds it
-    (:func:`flows.archive.plant_params_for_valve`): design data, cylinder, volumes and fluid from
+    (:func:`flows.simulate.archive.plant_params_for_valve`): design data, cylinder, volumes and fluid from
     the configuration, the sample rate from ``export``; what the configuration does not hold
     (moving mass, friction, spool dynamics) from :data:`model.params.TABLE1`."""
-    from flows.archive import plant_params_for_valve
+    from flows.simulate.archive import plant_params_for_valve
 
     return plant_params_for_valve(valve, export)
 
@@ -79,7 +79,7 @@ def plant_params_for(valve: ValveSpec, export) -> PlantParams:
 def ensure_discrepancy_tables(con) -> None:
     """Create the discrepancy tables if missing, and add columns a newer registry names to a
     table an older version created (null for the old runs)."""
-    from flows.warehouse_db import duckdb_type
+    from flows.common.warehouse_db import duckdb_type
 
     ensure_tables(con, {name: (fields, None) for name, fields in DISCREPANCY_TABLES.items()})
     for name, fields in DISCREPANCY_TABLES.items():
@@ -126,7 +126,7 @@ class DiscrepancyReport:
 def valve_condition(valve: ValveSpec, plant: PlantParams, warehouse: Path, mode: str, settings: DiscrepancySettings) -> tuple[str, ValveCondition, ConditionFit | None]:
     """The valve condition of the model: ``design`` (the configured design data), or
     ``commissioning`` (α and underlap of every edge fitted on the lake rows of the configured
-    ``baseline_window``, :func:`flows.discrepancy_pipeline.fit_condition`); ``auto`` is
+    ``baseline_window``, :func:`transforms.discrepancy.pipeline.fit_condition`); ``auto`` is
     commissioning when the valve has a baseline_window, else design. Returns (source,
     condition, fit or None)."""
     if mode not in CONDITION_MODES:
@@ -218,8 +218,8 @@ def _tables(valve_id: str, run_id: str, run_at: datetime, d: Diagnosis, plots: l
 
 
 def _plots(valve_id: str, run_id: str, d: Diagnosis, warehouse: Path) -> list[Path | None]:
-    from flows.discrepancy_plots import overlay_figure
-    from flows.report import DISCREPANCY_DIR
+    from flows.discrepancy.plots import overlay_figure
+    from flows.report.flow import DISCREPANCY_DIR
 
     folder = warehouse / DISCREPANCY_DIR
     if not d.traces:

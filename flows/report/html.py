@@ -10,7 +10,7 @@ from pathlib import Path
 
 import polars as pl
 
-from flows.report_figures import STATE_COLOURS
+from flows.report.figures import STATE_COLOURS
 
 CSS = """
 body { font-family: -apple-system, 'Segoe UI', Helvetica, Arial, sans-serif; margin: 24px; color: #212121; background: #fff; }

@@ -28,14 +28,20 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from model.effects import EFFECT_LIBRARY, EffectSpec, Effects, equation_terms, sensor_readings, true_signals
+from model.effects import EFFECT_LIBRARY, Effects, EffectSpec, equation_terms, sensor_readings, true_signals
 from model.params import PlantParams, ValveCondition
 from model.replay import replay
 from model.simulate import DEFAULT_REG_BAND_PA
 from transforms.discrepancy.gaps import GapAccumulator
-from transforms.discrepancy.load import LoadEstimate, estimate_load, replay_load, segment_levels, stuck_spans
+from transforms.discrepancy.load import LoadEstimate, estimate_load, replay_load, stuck_spans
 from transforms.discrepancy.records import REGIONS, Record, operating_regions, prepare_record
-from transforms.discrepancy.residuals import demean_by_group, interval_edges, interval_residuals, pointwise_residuals, triangular_force_balance
+from transforms.discrepancy.residuals import (
+    demean_by_group,
+    interval_edges,
+    interval_residuals,
+    pointwise_residuals,
+    triangular_force_balance,
+)
 from transforms.discrepancy.selection import SelectionResult, block_stats, cv_losses, forward_select
 from transforms.discrepancy.settings import DiscrepancySettings
 
@@ -653,7 +659,7 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
 # --- step 4: what the effect did to monitoring ----------------------------------------------
 
 NOMINAL_GRID_STEP_M = 0.05e-3
-"""Knot spacing of the nominal characteristic (as ``flows.monitor``)."""
+"""Knot spacing of the nominal characteristic (as ``flows.monitor.flow``)."""
 SENSOR_ATTRIBUTES = ("spool_sensor_offset_m", "p1_sensor_offset_pa", "p2_sensor_offset_pa", "p1_sensor_gain", "p2_sensor_gain")
 MOTION_ATTRIBUTES = ("delta_viscous_friction_n_s_m", "delta_mass_kg")
 

@@ -1,7 +1,7 @@
 """The simulation side of ``valvemon simulate``: batches of windows through the model, in this
 process or in worker processes.
 
-Kept apart from :mod:`flows.archive` so a worker process imports only numpy and the model
+Kept apart from :mod:`flows.simulate.archive` so a worker process imports only numpy and the model
 (no polars, no pandera): workers start in about a second.
 
 Every window draws its operating inputs (trajectory, load, supply) and then its sensor noise

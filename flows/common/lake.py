@@ -23,10 +23,9 @@ from pathlib import Path
 
 import numpy as np
 import polars as pl
-import pyarrow as pa
 import pyarrow.parquet as pq
 
-from flows.instants import utc_instant
+from flows.common.instants import utc_instant
 from schemas.fields import SENSOR_FIELDS, arrow_schema, polars_schema
 from transforms.windows import window_starts
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from datetime import date, datetime, timezone
 
-from flows.errors import ValvemonError
+from flows.common.errors import ValvemonError
 
 
 def utc_instant(value: str | date | datetime | None, option: str | None = None) -> datetime | None:

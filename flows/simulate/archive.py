@@ -11,7 +11,7 @@ windows per call) and measured with :mod:`model.sensors`; their condition at eac
 follows the valve's scenario (:mod:`model.condition`: healthy, wear, broken edge, each with
 the valve's own manufacturing scatter) at the window's operating hours. The samples are
 converted from SI to the units of the plant's tags and written the way the plant's historian
-exports them (:mod:`flows.archive_writers`), streamed day by day: only one batch of windows is
+exports them (:mod:`flows.simulate.writers`), streamed day by day: only one batch of windows is
 ever in memory.
 
 Randomness: every window draws its operating inputs (trajectory, load, supply) and its sensor
@@ -40,11 +40,11 @@ import polars as pl
 import pyarrow.parquet as pq
 import tomli_w
 
-from flows.archive_sim import default_workers, run_ordered, simulate_measured, valve_key, window_rng  # noqa: F401 (window_rng: API)
-from flows.archive_writers import ExportColumns, decimals_for_step, export_suffix, open_day_writer
-from flows.config import load_plant_config
-from flows.errors import ValvemonError
-from flows.instants import utc_instant
+from flows.common.config import load_plant_config
+from flows.common.errors import ValvemonError
+from flows.common.instants import utc_instant
+from flows.simulate.simulator import default_workers, run_ordered, simulate_measured, valve_key, window_rng  # noqa: F401 (window_rng: API)
+from flows.simulate.writers import ExportColumns, decimals_for_step, export_suffix, open_day_writer
 from model import condition as mcond
 from model.params import (
     EDGES,
@@ -58,7 +58,6 @@ from model.params import (
 )
 from schemas.fields import SIGNAL_KIND, SIGNALS
 from schemas.plant_config import ConfigError, ExportSpec, PlantConfig, ValveSpec, parse_plant_config, plant_config_to_dict
-from schemas.units import si_factor
 
 SCENARIOS: tuple[str, ...] = ("healthy", "wear", "broken_edge")
 """Scenario names ``--scenario`` accepts (``broken_edge`` also as ``broken_edge:EDGE@HOURS``)."""

@@ -18,7 +18,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from flows.discrepancy_pipeline import ReplayTrace  # noqa: E402
+from transforms.discrepancy.pipeline import ReplayTrace  # noqa: E402
 
 DPI = 100
 

@@ -30,7 +30,7 @@ from typing import Iterator, Mapping
 import duckdb
 import polars as pl
 
-from flows.errors import ValvemonError
+from flows.common.errors import ValvemonError
 from schemas.fields import GAP_FIELDS, INGEST_RUN_FIELDS, MANIFEST_FIELDS, QUARANTINE_FIELDS, Field
 
 DB_NAME = "valvemon.duckdb"
@@ -244,7 +244,7 @@ def ensure_ingest_tables(con: duckdb.DuckDBPyConnection) -> None:
 def migrate_hash_column(con: duckdb.DuckDBPyConnection, table: str) -> None:
     """A table of a warehouse from before the BLAKE3 content hash: its column ``file_sha256``
     becomes ``file_hash`` and its values ``sha256:<hex>`` (the ingest still recognises those
-    files, ``flows.ingest.in_manifest``). Nothing happens to a table that is new or migrated."""
+    files, ``flows.ingest.flow.in_manifest``). Nothing happens to a table that is new or migrated."""
     cols = {r[0] for r in con.execute(
         "SELECT column_name FROM duckdb_columns() WHERE database_name = current_database() AND table_name = ?", [table]
     ).fetchall()}  # fmt: skip

@@ -1,7 +1,7 @@
 """``valvemon backfill``: ingest + monitor over a span of years, in units, resumable (``docs/orchestration.md``).
 
 A backfill is cut into **units** that Prefect runs as tasks, at most ``concurrency`` in flight
-(on threads of this process, or on a Dask cluster: :mod:`flows.dask_runner`):
+(on threads of this process, or on a Dask cluster: :mod:`flows.orchestration.dask_runner`):
 
 1. **ingest** — one unit per export file of ``--exports`` (files whose name carries a date
    outside the span are left out). The task reads and hashes the file; content the manifest
@@ -61,15 +61,26 @@ import polars as pl
 from prefect import flow, task
 from prefect.cache_policies import NO_CACHE
 
-from flows.allocator import retain_freed_memory
-from flows.batches import WriteBatch
-from flows.config import load_plant_config
-from flows.errors import ValvemonError
-from flows.instants import utc_instant
-from flows.ingest import LEGACY_HASH_PREFIX, FileReport, discover_files, ingest_lock, legacy_hash, merge_export, read_export, record_file, rekey_file
-from flows.lake import SENSOR_POLARS_SCHEMA, list_partitions
-from flows.locks import file_lock
-from flows.monitor import (
+from flows.common.allocator import retain_freed_memory
+from flows.common.batches import WriteBatch
+from flows.common.config import load_plant_config
+from flows.common.errors import ValvemonError
+from flows.common.instants import utc_instant
+from flows.common.lake import SENSOR_POLARS_SCHEMA, list_partitions
+from flows.common.locks import file_lock
+from flows.common.warehouse_db import connect, ensure_ingest_tables, insert_frame, migrate_hash_column, query_frame
+from flows.ingest.flow import (
+    LEGACY_HASH_PREFIX,
+    FileReport,
+    discover_files,
+    ingest_lock,
+    legacy_hash,
+    merge_export,
+    read_export,
+    record_file,
+    rekey_file,
+)
+from flows.monitor.flow import (
     Baseline,
     _baseline_rows,
     _fits_table,
@@ -81,7 +92,6 @@ from flows.monitor import (
     monitor_rows,
     store_spans,
 )
-from flows.warehouse_db import connect, ensure_ingest_tables, insert_frame, migrate_hash_column, query_frame
 from schemas.fields import EDGE_FIT_FIELDS, EDGES, SELECTION_FIELDS, polars_schema
 from schemas.plant_config import ConfigError, PlantConfig
 from transforms.ingest import Grid, IngestError, TagTable
@@ -159,7 +169,7 @@ _DATE_IN_NAME = re.compile(r"(?<!\d)(\d{4}-\d{2}-\d{2})(?!\d)")
 
 def ensure_backfill_tables(con) -> None:
     """Create ``backfill_progress`` and ``backfill_runs`` if missing (and migrate an older
-    warehouse's ``file_sha256`` column, ``flows.warehouse_db.migrate_hash_column``)."""
+    warehouse's ``file_sha256`` column, ``flows.common.warehouse_db.migrate_hash_column``)."""
     migrate_hash_column(con, PROGRESS_TABLE)
     con.execute(_PROGRESS_SQL)
     con.execute(_RUNS_SQL)
@@ -259,11 +269,11 @@ class IngestOutcome:
 def ingest_export(path: str | Path, config: PlantConfig, warehouse: str | Path, known: KnownFiles, run_id: str) -> IngestOutcome:
     """Read one export, skip it if its content is ``known``, else merge it into the lake.
 
-    Like :func:`flows.ingest.ingest_file`, but the partitions are locked while merged (other
+    Like :func:`flows.ingest.flow.ingest_file`, but the partitions are locked while merged (other
     files are being ingested at the same time) and the database rows are returned, not written.
     """
     path, warehouse = Path(path), Path(warehouse)
-    retain_freed_memory()  # the next file's arrays reuse this one's heap (flows/allocator.py)
+    retain_freed_memory()  # the next file's arrays reuse this one's heap (flows/common/allocator.py)
     st = path.stat()
     tags = TagTable.from_config(config)
     ef = read_export(path, config.export, tags)
@@ -294,7 +304,7 @@ class MonitorOutcome:
 
 def unit_rows(warehouse: Path, valve_id: str, start: datetime, end: datetime, gap_s: float) -> pl.DataFrame:
     """The lake columns the monitor reads (``LAKE_COLUMNS``) of the windows whose first sample
-    lies in ``[start, end)``, whole: :func:`flows.monitor.lake_chunks` for the span, in one chunk
+    lies in ``[start, end)``, whole: :func:`flows.monitor.flow.lake_chunks` for the span, in one chunk
     (a window starts after a step longer than ``gap_s``, ``transforms.windows.window_starts``)."""
     days = (end - start).days + 2  # every partition the span and its last window can touch
     chunks = list(lake_chunks(warehouse, valve_id, gap_s, start, end, days, LAKE_COLUMNS))
@@ -699,7 +709,7 @@ def _ingest_phase(config, warehouse, files, summary, concurrency, opts, force, f
 @dataclass(frozen=True)
 class KnownFiles:
     """The content hashes of the ingest manifest, and the sizes of its files that it knows only by
-    their legacy SHA-256 (``flows.ingest.in_manifest``)."""
+    their legacy SHA-256 (``flows.ingest.flow.in_manifest``)."""
 
     hashes: frozenset[str]
     legacy_sizes: frozenset[int] = frozenset()
@@ -828,13 +838,13 @@ def _monitor_phase(config, warehouse, valves, summary, concurrency, opts, unit_d
 
 WRITE_BATCH_UNITS = 32
 """Finished units whose rows are written in one transaction at most (or once the oldest has
-waited :data:`flows.batches.WRITE_BATCH_S`): per unit, the transaction would be the serial part
+waited :data:`flows.common.batches.WRITE_BATCH_S`): per unit, the transaction would be the serial part
 of a large backfill."""
 
 
 def store_units(warehouse: Path, units: list[tuple[MonitorUnit, pl.DataFrame, pl.DataFrame]], progress: pl.DataFrame) -> None:
     """For each unit replace the valve's rows with ``window_start`` in ``[start, end)`` by its rows
-    and record the units' progress rows, all in one transaction (:func:`flows.monitor.store_spans`)."""
+    and record the units' progress rows, all in one transaction (:func:`flows.monitor.flow.store_spans`)."""
     store_spans(
         warehouse, [(u.valve_id, u.start, u.end, f, s) for u, f, s in units],
         also=lambda con: insert_frame(con, PROGRESS_TABLE, progress, replace=True),

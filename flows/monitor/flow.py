@@ -36,13 +36,13 @@ import polars as pl
 from prefect import flow, task
 from prefect.cache_policies import NO_CACHE
 
-from flows.allocator import retain_freed_memory
-from flows.config import load_plant_config
-from flows.batches import WriteBatch
-from flows.errors import ValvemonError
-from flows.instants import utc_instant
-from flows.lake import list_partitions, read_lake
-from flows.warehouse_db import connect, ensure_tables, insert_frame, query_frame, transaction
+from flows.common.allocator import retain_freed_memory
+from flows.common.batches import WriteBatch
+from flows.common.config import load_plant_config
+from flows.common.errors import ValvemonError
+from flows.common.instants import utc_instant
+from flows.common.lake import list_partitions, read_lake
+from flows.common.warehouse_db import connect, ensure_tables, insert_frame, query_frame, transaction
 from model.area import edge_area
 from schemas.fields import BASELINE_FIELDS, EDGE_FIT_FIELDS, EDGES, SELECTION_FIELDS, polars_schema
 from schemas.plant_config import PlantConfig, ValveSpec
@@ -247,7 +247,7 @@ def monitor_rows(valve: ValveSpec, params: MonitorParams, baselines: dict[str, B
     """Steps 2–4b on some of the valve's lake rows against its baselines, with the closed-edge
     leakage correction the baselines were built with (what every monitoring path must call).
     The result carries no points frame (the flows store fits and counts only). The process keeps
-    freed memory for the next chunk's arrays (:func:`flows.allocator.retain_freed_memory`)."""
+    freed memory for the next chunk's arrays (:func:`flows.common.allocator.retain_freed_memory`)."""
     retain_freed_memory()
     chars = {valve.id: {e: b.characteristic for e, b in baselines.items()}}
     leaks = {e: b.leakage for e, b in baselines.items()}

@@ -7,8 +7,8 @@
 2. monitors the *previous day* — the calendar day before the run's scheduled time in the
    schedule's time zone (default the plant's) — for all valves, and the days of any newly
    ingested file that arrived late, one unit per valve and day (the backfill's machinery,
-   :mod:`flows.backfill`, so a failed night is simply continued by the next run);
-3. refreshes the report (:func:`flows.report.report_flow`: views, snapshot, pictures, HTML).
+   :mod:`flows.orchestration.backfill`, so a failed night is simply continued by the next run);
+3. refreshes the report (:func:`flows.report.flow.report_flow`: views, snapshot, pictures, HTML).
 
 :func:`serve_nightly` registers it as a deployment with a cron schedule on the Prefect server
 ``PREFECT_API_URL`` names and serves it: this process polls the server and runs each scheduled
@@ -24,10 +24,10 @@ from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
 
 from prefect import flow
 
-from flows.backfill import BackfillFailed, backfill_flow
-from flows.config import load_plant_config
-from flows.dask_runner import task_runner
-from flows.errors import ValvemonError
+from flows.common.config import load_plant_config
+from flows.common.errors import ValvemonError
+from flows.orchestration.backfill import BackfillFailed, backfill_flow
+from flows.orchestration.dask_runner import task_runner
 
 DEFAULT_CRON = "30 2 * * *"
 """02:30 every night, in the schedule's time zone."""
@@ -108,8 +108,8 @@ def nightly_flow(
 
 
 def refresh_report(config_path: str, warehouse: str) -> Path:
-    """The report step of the nightly run: :func:`flows.report.report_flow` (a subflow)."""
-    from flows.report import report_flow
+    """The report step of the nightly run: :func:`flows.report.flow.report_flow` (a subflow)."""
+    from flows.report.flow import report_flow
 
     return report_flow(config_path=config_path, warehouse=warehouse).html
 

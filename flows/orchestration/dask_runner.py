@@ -19,7 +19,7 @@ import os
 from contextlib import contextmanager
 from typing import Iterator
 
-from flows.errors import ValvemonError
+from flows.common.errors import ValvemonError
 
 
 def task_runner(concurrency: int, dask_address: str | None = None):

@@ -1,0 +1,1 @@
+"""``valvemon ingest``: historian exports into the sensor lake."""

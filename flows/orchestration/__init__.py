@@ -1,0 +1,1 @@
+"""Runs over spans and schedules: ``valvemon backfill``, ``valvemon serve`` (nightly), Dask task runners."""

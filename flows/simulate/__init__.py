@@ -1,0 +1,1 @@
+"""``valvemon simulate``: synthetic historian archives from the closed-loop simulator."""
