@@ -310,10 +310,11 @@ def _event_step(s, t0, h, x_ref, F_l, sup, ecs, alpha, P):
 @njit(cache=True)
 def _simulate_kernel(X_ref, v_ref, F_l, supply, ecs_all, alpha_all, state0, integ0,
                      ff_grid, ff_table, ff_weight, kp, ki_t0, aw_t0, x_lim, P, fs, n_sub,
-                     p_limit, out):
+                     p_limit, out, end):
     """Integrate every window; ``out`` (13, W, N) receives x, v, X, vX, p1, p2, ps, pr,
-    x_ref, F_l, dp1, dp2, t. Returns the index of the first window that diverged (a pressure
-    beyond +-p_limit, |v_X| > 1000 m/s, |x| > 1 m or NaN), or -1."""
+    x_ref, F_l, dp1, dp2, t and ``end`` (W, 7) the state and the controller's integrator
+    after the last sample. Returns w * N + k for the first window w that diverged in sample k
+    (a pressure beyond +-p_limit, |v_X| > 1000 m/s, |x| > 1 m or NaN), or -1."""
     n_win, n_samp = X_ref.shape
     P = params_tuple(P)
     T0 = 1.0 / fs
@@ -376,7 +377,10 @@ def _simulate_kernel(X_ref, v_ref, F_l, supply, ecs_all, alpha_all, state0, inte
             # divergence: non-finite or absurd states (RK4 beyond its stability limit)
             if not (abs(s[4]) < p_limit and abs(s[5]) < p_limit and abs(s[3]) < 1.0e3
                     and abs(s[0]) < 1.0):
-                return w
+                return w * n_samp + k
+        for i in range(6):
+            end[w, i] = s[i]
+        end[w, 6] = integ
     return -1
 
 
@@ -405,6 +409,10 @@ class SimulationResult:
     sample_rate_hz : Sample rate. [Hz]
     effects : The library effects simulated (:mod:`model.effects`), None = none. The arrays
         hold the true signals; :func:`model.sensors.measure` applies the sensor effects.
+    end_state : (n_windows, 7): the state (x, v, X, v_X, p1, p2) one sample period after the
+        last sample and the controller's integrator after it; a window continued from it
+        (``simulate_inputs(initial_states=end_state[:, :6],
+        initial_integrators=end_state[:, 6])``) is seamless. None if not recorded.
     """
 
     t_s: np.ndarray
@@ -425,6 +433,7 @@ class SimulationResult:
     conditions: tuple[ValveCondition, ...]
     sample_rate_hz: float
     effects: Effects | None = None
+    end_state: np.ndarray | None = None
 
     @property
     def dp1_dt(self) -> np.ndarray:
@@ -491,6 +500,20 @@ def _rhs_arrays(s, u, ecs, alpha, P):
     return out
 
 
+class SimulationDiverged(FloatingPointError):
+    """The integration left the physical range (module docstring): in window ``window`` of
+    the batch, ``time_s`` after its start."""
+
+    def __init__(self, window: int, time_s: float):
+        super().__init__(window, time_s)
+        self.window = window
+        self.time_s = time_s
+
+    def __str__(self) -> str:
+        return (f"simulation diverged in window {self.window} at t = {self.time_s:.3f} s; "
+                "reduce the step (more substeps) or check the inputs")
+
+
 def window_seed(seed: int, window_index: int) -> np.random.Generator:
     """The random generator of window ``window_index`` of a batch simulated with ``seed``."""
     return np.random.default_rng([int(seed), int(window_index)])
@@ -507,7 +530,8 @@ def simulate_inputs(params: PlantParams, conditions: Sequence[ValveCondition],
                     inputs: Sequence[WindowInputs], *, substeps: int = DEFAULT_SUBSTEPS,
                     reg_band_pa: float = DEFAULT_REG_BAND_PA,
                     initial_states: np.ndarray | None = None,
-                    effects: Effects | None = None) -> SimulationResult:
+                    effects: Effects | None = None,
+                    initial_integrators: np.ndarray | None = None) -> SimulationResult:
     """Simulate windows with given inputs (see :func:`simulate_windows`).
 
     Parameters
@@ -529,6 +553,9 @@ def simulate_inputs(params: PlantParams, conditions: Sequence[ValveCondition],
         Library effects (:mod:`model.effects`) of every window; default none, which is the
         base model exactly. The controller's feed-forward stays that of the nominal plant.
         With leakage or a supply line the rest state is that of the model with the effect.
+    initial_integrators : ndarray (n_windows,), optional
+        Start values of the controller's integrator (with ``initial_states``: a window that
+        continues another from its ``end_state``); default as above. [m]
 
     Returns
     -------
@@ -579,21 +606,24 @@ def simulate_inputs(params: PlantParams, conditions: Sequence[ValveCondition],
         ff0 = ffw * np.interp(v_ref[w, 0], ff_grid, ff_table)
         integ0[w] = (state0[w, 0] + dxs - ff0
                      - params.controller.kp_m_per_m * (X_ref[w, 0] - state0[w, 2]))
+    if initial_integrators is not None:
+        integ0[:] = initial_integrators
     c = params.controller
     out = np.empty((13, n_win, n_samp))
+    end = np.empty((n_win, 7))
     bad = _simulate_kernel(X_ref, v_ref, F_l, supply, ecs, alpha, state0, integ0,
                            ff_grid, ff_table, ffw, c.kp_m_per_m,
                            c.kp_m_per_m * c.sample_time_s / c.ti_s, c.sample_time_s / c.tt_s,
                            params.x_limit_m, P, fs, int(substeps),
-                           P_LIMIT_FACTOR * float(np.max(supply[:, 0])), out)
+                           P_LIMIT_FACTOR * float(np.max(supply[:, 0])), out, end)
     if bad >= 0:
-        raise FloatingPointError(f"simulation diverged in window {bad}; reduce the step "
-                                 "(more substeps) or check the inputs")
+        w, k = divmod(bad, n_samp)
+        raise SimulationDiverged(w, k / fs)
     return SimulationResult(
         t_s=out[12], x_m=out[0], v_m_s=out[1], X_m=out[2], vX_m_s=out[3], p1_pa=out[4],
         p2_pa=out[5], ps_pa=out[6], pr_pa=out[7], x_ref_m=out[8], F_l_n=out[9],
         dp1_dt_pa_s=out[10], dp2_dt_pa_s=out[11], X_ref_m=X_ref, v_ref_m_s=v_ref,
-        conditions=conditions, sample_rate_hz=fs, effects=effects)
+        conditions=conditions, sample_rate_hz=fs, effects=effects, end_state=end)
 
 
 def _rest_with_effects(state, F_l, p_s, p_r, ecs, alpha, P, iterations: int = 30) -> np.ndarray:

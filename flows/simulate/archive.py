@@ -24,6 +24,7 @@ with it or how windows are batched.
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
 import os
 import re
@@ -283,19 +284,41 @@ def _tag_decimals(valve: ValveSpec, signal: str, sensors: SensorParams) -> int |
 
 @dataclass(frozen=True)
 class ArchivePlan:
-    """When the windows are: ``windows_per_day`` slots a UTC day, each ``window_s`` long, the
-    k-th starting at 00:00 + k·24 h / windows_per_day (floored to the sample grid), every slot
-    in [start, end) simulated for every valve."""
+    """When the recordings are.
+
+    Snapshots (the default): ``windows_per_day`` windows a UTC day, each ``window_s`` long, the
+    k-th starting at 00:00 + k·24 h / windows_per_day (floored to the sample grid), every window
+    in [start, end) recorded for every valve. ``continuous``: one recording of every valve over
+    the whole span, back to back (from the first sample instant at or after ``start``).
+
+    A recording longer than ``segment_s`` is simulated as consecutive segments cut at the
+    multiples of ``segment_s`` (UTC, since 1970), each continuing the last (states, reference,
+    load and supply carry over) with its own operating inputs and the condition at its start;
+    a shorter one is one segment. The exports are split into files of ``file_s`` (cut at its
+    multiples since 00:00 UTC, named by their first sample), or one file a UTC day (``None``)."""
 
     start: datetime
     end: datetime
     windows_per_day: int = 24
     window_s: float = 10.0
     sample_rate_hz: float = 1000.0
+    continuous: bool = False
+    segment_s: float = 60.0
+    file_s: float | None = None
 
     def __post_init__(self):
         if self.end <= self.start:
             raise ValvemonError(f"the span is empty: --to {_iso(self.end)} is not after --from {_iso(self.start)}")
+        p = US / self.sample_rate_hz
+        if abs(p - round(p)) > 1e-9:
+            raise ValvemonError(f"export.sample_rate_hz: {self.sample_rate_hz:g} Hz is not a whole number of microseconds per sample")
+        n = self.segment_s * self.sample_rate_hz
+        if not (self.segment_s >= 1 and abs(n - round(n)) < 1e-6 and 86_400 % self.segment_s == 0):
+            raise ValvemonError(f"--segment-s: {self.segment_s:g} s is not a whole number of seconds (>= 1) that divides a day")
+        if self.file_s is not None and not (self.file_s >= 60 and self.file_s % 60 == 0 and 86_400 % self.file_s == 0):
+            raise ValvemonError(f"--file-minutes: {self.file_s / 60:g} is not a whole number of minutes that divides a day (1440)")
+        if self.continuous:
+            return
         if not 1 <= self.windows_per_day <= 86_400:
             raise ValvemonError(f"--windows-per-day: {self.windows_per_day} is not between 1 and 86400")
         if not self.window_s > 0:
@@ -308,9 +331,6 @@ class ArchivePlan:
         n = self.window_s * self.sample_rate_hz
         if abs(n - round(n)) > 1e-6 or round(n) < 2:
             raise ValvemonError(f"--window-s: {self.window_s:g} s is not a whole number (>= 2) of samples at {self.sample_rate_hz:g} Hz")
-        p = US / self.sample_rate_hz
-        if abs(p - round(p)) > 1e-9:
-            raise ValvemonError(f"export.sample_rate_hz: {self.sample_rate_hz:g} Hz is not a whole number of microseconds per sample")
 
     @property
     def n_samples(self) -> int:
@@ -340,8 +360,53 @@ class ArchivePlan:
             day += timedelta(days=1)
 
     def n_slots(self) -> int:
-        """Number of window slots in the span."""
+        """Number of window slots in the span (continuous: 1)."""
+        if self.continuous:
+            return 1
         return sum(s.size for _, s in self.days())
+
+    def recordings(self) -> Iterator[tuple[int, int]]:
+        """Every recording as (first sample [µs UTC], samples), in time order."""
+        if self.continuous:
+            p = self.period_us
+            first = -(-_us(self.start) // p) * p
+            n = -(-(_us(self.end) - first) // p)
+            if n > 0:
+                yield first, n
+            return
+        for _, starts in self.days():
+            for s0 in starts:
+                yield int(s0), self.n_samples
+
+    def segments(self, first_us: int, n: int) -> Iterator[tuple[int, int]]:
+        """The segments of the recording of ``n`` samples from ``first_us``: (first sample
+        [µs UTC], samples) each; one segment if it is no longer than ``segment_s``."""
+        p, seg = self.period_us, round(self.segment_s * US)
+        end = first_us + n * p
+        if n * p <= seg:
+            yield first_us, n
+            return
+        a = first_us
+        while a < end:
+            b = min(end, (a // seg + 1) * seg)
+            m = -(-(b - a) // p)
+            yield a, m
+            a += m * p
+
+    def n_segments(self) -> int:
+        """Number of segments a valve is simulated in."""
+        if not self.continuous and self.n_samples * self.period_us <= round(self.segment_s * US):
+            return self.n_slots()
+        return sum(1 for r in self.recordings() for _ in self.segments(*r))
+
+    def valve_seconds(self) -> float:
+        """Recorded seconds per valve. [s]"""
+        return sum(n for _, n in self.recordings()) / self.sample_rate_hz
+
+    def file_key(self, t_us: np.ndarray) -> np.ndarray:
+        """Which export file each sample instant goes to (the file's first instant [µs UTC])."""
+        size = DAY_US if self.file_s is None else round(self.file_s * US)
+        return t_us - t_us % size
 
 
 def _us(t: datetime) -> int:
@@ -431,8 +496,9 @@ TRUTH_SCHEMA = pl.Schema(
 """``truth.parquet``: one row per valve, edge and window (docs/simulate.md explains each column)."""
 
 
-def truth_frame(runs: Sequence[ValveRun], starts_us: np.ndarray, window_us: int) -> pl.DataFrame:
-    """The truth rows of the windows starting at ``starts_us``, ordered by window, valve, edge."""
+def truth_frame(runs: Sequence[ValveRun], starts_us: np.ndarray, ends_us: np.ndarray) -> pl.DataFrame:
+    """The truth rows of the windows (segments) [``starts_us``, ``ends_us``), ordered by window,
+    valve, edge."""
     n, k = starts_us.size, len(EDGES)
     parts = []
     for vi, r in enumerate(runs):
@@ -452,7 +518,7 @@ def truth_frame(runs: Sequence[ValveRun], starts_us: np.ndarray, window_us: int)
                     "valve_id": [r.spec.id] * (n * k),
                     "edge": list(EDGES) * n,
                     "window_start": np.repeat(starts_us, k),
-                    "window_end": np.repeat(starts_us + window_us, k),
+                    "window_end": np.repeat(ends_us, k),
                     "operating_hours": np.repeat(hours, k),
                     "scenario": [r.scenario_name] * (n * k),
                     "alpha": al.ravel(),
@@ -520,7 +586,7 @@ def check_archive(config: PlantConfig, plan: ArchivePlan, file_format: str) -> N
     if late:
         v = max(late, key=lambda v: v.commissioned)
         raise ValvemonError(f"--from {_iso(plan.start)} is before valve {v.id}'s commissioning ({_iso(v.commissioned)})")
-    if plan.n_slots() == 0:
+    if next(plan.recordings(), None) is None:
         raise ValvemonError(f"no window falls into {_iso(plan.start)} … {_iso(plan.end)} at {plan.windows_per_day} windows per day")
 
 
@@ -547,50 +613,103 @@ def prepare_out_dir(out: Path, overwrite: bool) -> None:
 
 
 @dataclass(frozen=True)
-class _Call:
-    """One simulator call of the pipeline and where its windows go."""
+class _Step:
+    """Segments that start at the same instants for every valve and are simulated together:
+    several single-segment windows, or one segment of a longer recording."""
 
-    day: date
-    day_starts: np.ndarray
-    slot_starts: np.ndarray
+    starts: np.ndarray
+    """First sample of each segment. [µs UTC]"""
+    n_samples: int
+    chain: int | None
+    """The recording a segment of a longer recording belongs to (its index), else None."""
+    first: bool
+    """The recording's first segment."""
+    last: bool
+    """The recording's last segment."""
+
+
+def _steps(plan: ArchivePlan, n_valves: int, batch_samples: int) -> Iterator[_Step]:
+    """The steps of an archive in time order: windows that are one segment in groups (as many
+    as fit ``batch_samples`` with every valve, at least one, within a UTC day), the segments of
+    longer recordings one at a time (each continues the last)."""
+    group: list[int] = []
+    n_group = 0
+
+    def flush():
+        starts = np.array(group, dtype=np.int64)
+        group.clear()
+        return _Step(starts, n_group, None, True, True)
+
+    for r, (first_us, n) in enumerate(plan.recordings()):
+        segments = list(itertools.islice(plan.segments(first_us, n), 2))
+        if len(segments) == 1:
+            if group and (n != n_group or first_us // DAY_US != group[0] // DAY_US or (len(group) + 1) * n * n_valves > batch_samples):
+                yield flush()
+            group.append(first_us)
+            n_group = n
+            continue
+        if group:
+            yield flush()
+        prev = None
+        for seg in plan.segments(first_us, n):
+            if prev is not None:
+                yield _Step(np.array([prev[0]], dtype=np.int64), prev[1], r, prev[0] == first_us, False)
+            prev = seg
+        yield _Step(np.array([prev[0]], dtype=np.int64), prev[1], r, prev[0] == first_us, True)
+    if group:
+        yield flush()
+
+
+@dataclass(frozen=True)
+class _Call:
+    """One simulator call of the pipeline and where its segments go."""
+
+    step: _Step
     items: tuple[tuple[int, int], ...]
-    """(valve run index, slot index within ``slot_starts``) of each window."""
-    first_of_group: bool
-    last_of_group: bool
+    """(valve run index, segment index within ``step.starts``) of each segment."""
+    first_of_step: bool
+    last_of_step: bool
 
 
 def _calls(plan: ArchivePlan, runs: Sequence[ValveRun], batch_samples: int) -> Iterator[tuple[_Call, tuple]]:
-    """The simulator calls of an archive in file order, each with its task (function, arguments).
+    """The simulator calls of an archive in file order, each with its task
+    (:data:`flows.simulate.simulator.Task`).
 
-    Day by day, the day's window slots in groups (as many slots as fit ``batch_samples`` with
-    every valve), within a group the valves that share simulator parameters together, split
-    into calls of at most ``batch_samples`` samples."""
-    n_samp = plan.n_samples
-    slots_per_group = max(1, batch_samples // (n_samp * len(runs)))
-    windows_per_call = max(1, batch_samples // n_samp)
+    Step by step (:func:`_steps`); within a step the valves that share simulator parameters
+    together, split into calls of at most ``batch_samples`` samples (a recording's segments
+    are split the same way throughout, so each call continues the one before it)."""
     groups: dict[PlantParams, list[int]] = {}
     for i, r in enumerate(runs):
         groups.setdefault(r.params, []).append(i)
-    for day, starts in plan.days():
-        cond_cache = {}
-        for b in range(0, starts.size, slots_per_group):
-            slot_starts = starts[b : b + slots_per_group]
-            calls = []
-            for params, members in groups.items():
-                for i in members:
-                    if i not in cond_cache:
-                        cond_cache[i] = runs[i].conditions(starts)
-                items = [(i, k) for i in members for k in range(slot_starts.size)]
-                for c in range(0, len(items), windows_per_call):
-                    chunk = tuple(items[c : c + windows_per_call])
-                    x_l = params.nominal_condition.x_l_fraction
-                    conditions = [
-                        ValveCondition(tuple(cond_cache[i][0][b + k]), tuple(cond_cache[i][1][b + k]), x_l) for i, k in chunk
-                    ]
-                    windows = [(runs[i].spec.id, int(slot_starts[k])) for i, k in chunk]
-                    calls.append((chunk, (simulate_measured, (params, conditions, windows, plan.window_s, runs[chunk[0][0]].seed))))
-            for n, (chunk, task) in enumerate(calls):
-                yield _Call(day, starts, slot_starts, chunk, n == 0, n == len(calls) - 1), task
+    seg_samples = round(plan.segment_s * plan.sample_rate_hz)
+    for step in _steps(plan, len(runs), batch_samples):
+        conds = {i: runs[i].conditions(step.starts) for i in range(len(runs))}
+        calls = []
+        per_call = max(1, batch_samples // (step.n_samples if step.chain is None else seg_samples))
+        for g, (params, members) in enumerate(groups.items()):
+            x_l = params.nominal_condition.x_l_fraction
+            items = [(i, k) for i in members for k in range(step.starts.size)]
+            for c in range(0, len(items), per_call):
+                chunk = tuple(items[c : c + per_call])
+                conditions = [ValveCondition(tuple(conds[i][0][k]), tuple(conds[i][1][k]), x_l) for i, k in chunk]
+                windows = [(runs[i].spec.id, int(step.starts[k])) for i, k in chunk]
+                key = None if step.chain is None else (step.chain, g, c)
+                args = (params, conditions, windows, step.n_samples, runs[chunk[0][0]].seed)
+                calls.append((chunk, (simulate_measured, args, None if step.first else key, None if step.last else key)))
+        for n, (chunk, task) in enumerate(calls):
+            yield _Call(step, chunk, n == 0, n == len(calls) - 1), task
+
+
+def export_name(config: PlantConfig, plan: ArchivePlan, first_us: int, suffix: str) -> str:
+    """An export file's name: ``<PLANT>_<YYYY-MM-DD>`` (a day's file) or, with ``file_s``,
+    ``<PLANT>_<YYYYMMDDTHHMMSS>`` of its first sample (UTC), as a recorder names its files."""
+    t = datetime(1970, 1, 1, tzinfo=timezone.utc) + timedelta(microseconds=int(first_us))
+    stamp = t.date().isoformat() if plan.file_s is None else t.strftime("%Y%m%dT%H%M%S")
+    return f"{config.name}_{stamp}{suffix}"
+
+
+TRUTH_FLUSH_ROWS = 100_000
+"""Truth rows buffered before they are written (a row group), at the latest when a file ends."""
 
 
 def write_archive(
@@ -616,7 +735,7 @@ def write_archive(
     out : Path
         Archive folder (module docstring).
     plan : ArchivePlan
-        The span and the windows.
+        The span, the recordings and the files.
     scenarios : dict
         Valve id → scenario name (:func:`parse_scenario`); recorded in ``plant.toml``.
     seed : int
@@ -634,6 +753,14 @@ def write_archive(
         Called after every simulator call (:data:`ProgressCallback`).
     batch_samples : int
         Samples per simulator call (bounds the memory).
+
+    Raises
+    ------
+    ValvemonError
+        A simulation failed (the valve, the segment and the instant are named). Files are
+        written under a ``.partial`` name and renamed when whole; on any failure, an
+        interrupt included, the file being written and ``truth.parquet`` are removed, the
+        whole export files already written stay.
     """
     t_wall = time.perf_counter()
     check_archive(config, plan, file_format)
@@ -655,15 +782,15 @@ def write_archive(
                 decimals.append(_tag_decimals(r.spec, s, r.params.sensors))
     columns = ExportColumns(tuple(tags), tuple(decimals))
 
-    n_samp, period = plan.n_samples, plan.period_us
-    rel_us = np.arange(n_samp, dtype=np.int64) * period
-    rows_per_chunk = max(1, CHUNK_ROWS // len(tags)) if config.export.layout == "long" else n_samp
+    period = plan.period_us
+    long_layout = config.export.layout == "long"
     summary = ArchiveSummary(out=out)
     suffix = export_suffix(file_format, gzip)
+    truth_partial = truth_path.with_name(truth_path.name + ".partial")
     truth_writer: pq.ParquetWriter | None = None
+    truth_rows: list[pl.DataFrame] = []
     writer = None
-    day: date | None = None
-    partial = path = None
+    file_key = partial = path = None
     values = np.empty(0)
     metas: deque[_Call] = deque()
 
@@ -672,55 +799,84 @@ def write_archive(
             metas.append(meta)
             yield task
 
-    def finish_day():
+    def flush_truth():
+        nonlocal truth_writer
+        if not truth_rows:
+            return
+        table = pl.concat(truth_rows).rechunk().to_arrow()
+        truth_rows.clear()
+        if truth_writer is None:
+            truth_writer = pq.ParquetWriter(truth_partial, table.schema, compression="zstd")
+        truth_writer.write_table(table)
+
+    def finish_file():
+        nonlocal writer
         writer.close()
+        writer = None
         os.replace(partial, path)
         summary.files.append(path)
         summary.bytes += path.stat().st_size
+
+    def emit(t_us: np.ndarray, block: np.ndarray):
+        """Write consecutive samples, opening the next file where a file ends."""
+        nonlocal writer, file_key, partial, path
+        keys = plan.file_key(t_us)
+        cuts = [0, *np.flatnonzero(np.diff(keys)) + 1, t_us.size]
+        for a, b in zip(cuts[:-1], cuts[1:]):
+            if keys[a] != file_key:
+                if writer is not None:
+                    finish_file()
+                file_key = keys[a]
+                path = exports / export_name(config, plan, int(t_us[a]), suffix)
+                partial = path.with_name(path.name + ".partial")
+                writer = open_day_writer(partial, config.export, columns, config.timezone, file_format, gzip)
+            summary.rows += writer.write(t_us[a:b], block[a:b])
+            summary.values += block[a:b].size
 
     try:
         t0 = time.perf_counter()
         for m in run_ordered(tasks(), workers):
             call = metas.popleft()
+            step, n_samp = call.step, call.step.n_samples
             t1 = time.perf_counter()
             summary.simulate_s += t1 - t0
-            if call.day != day:
-                if writer is not None:
-                    finish_day()
-                day = call.day
-                truth = truth_frame(runs, call.day_starts, n_samp * period).to_arrow()
-                if truth_writer is None:
-                    truth_writer = pq.ParquetWriter(truth_path, truth.schema, compression="zstd")
-                truth_writer.write_table(truth)
-                path = exports / f"{config.name}_{day.isoformat()}{suffix}"
-                partial = path.with_name(path.name + ".partial")
-                writer = open_day_writer(partial, config.export, columns, config.timezone, file_format, gzip)
-            if call.first_of_group:
-                values = np.empty((call.slot_starts.size, n_samp, len(tags)))
+            if call.first_of_step:
+                truth = truth_frame(runs, step.starts, step.starts + n_samp * period)
+                if truth_rows and (plan.file_key(step.starts[:1])[0] != file_key or sum(f.height for f in truth_rows) >= TRUTH_FLUSH_ROWS):
+                    flush_truth()
+                truth_rows.append(truth)
+                values = np.empty((step.starts.size, n_samp, len(tags)))
             for w, (i, k) in enumerate(call.items):
                 for j, s, factor in cols_of[i]:
                     np.divide(m[s][w], factor, out=values[k, :, j])
             del m
-            if call.last_of_group:
-                for k, s0 in enumerate(call.slot_starts):
+            if call.last_of_step:
+                rows_per_chunk = max(1, CHUNK_ROWS // len(tags)) if long_layout else n_samp
+                rel_us = np.arange(n_samp, dtype=np.int64) * period
+                for k, s0 in enumerate(step.starts):
                     for a in range(0, n_samp, rows_per_chunk):
-                        chunk = values[k, a : a + rows_per_chunk]
-                        summary.rows += writer.write(s0 + rel_us[a : a + rows_per_chunk], chunk)
-                        summary.values += chunk.size
+                        emit(s0 + rel_us[a : a + rows_per_chunk], values[k, a : a + rows_per_chunk])
             summary.windows += len(call.items)
-            summary.valve_seconds += len(call.items) * plan.window_s
+            summary.valve_seconds += len(call.items) * n_samp / plan.sample_rate_hz
             t0 = time.perf_counter()
             summary.write_s += t0 - t1
             if progress is not None:
-                progress(len(call.items), len(call.items) * plan.window_s)
+                progress(len(call.items), len(call.items) * n_samp / plan.sample_rate_hz)
         if writer is not None:
-            finish_day()
-            writer = None
-    finally:
-        if writer is not None:
-            writer.close()
+            finish_file()
+        flush_truth()
         if truth_writer is not None:
             truth_writer.close()
+            truth_writer = None
+            os.replace(truth_partial, truth_path)
+    except BaseException:
+        if writer is not None:
+            writer.close()
+            partial.unlink(missing_ok=True)
+        if truth_writer is not None:
+            truth_writer.close()
+        truth_partial.unlink(missing_ok=True)
+        raise
     summary.wall_s = time.perf_counter() - t_wall
     return summary
 
