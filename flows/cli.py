@@ -74,8 +74,11 @@ def simulate(
     end: Annotated[Optional[str], typer.Option("--to", help="End, exclusive (ISO-8601).")] = None,
     days: Annotated[Optional[float], typer.Option("--days", help="Length of the span instead of --to. \\[default: 1]")] = None,
     hours: Annotated[Optional[str], typer.Option("--hours", help="Span in operating hours, END or START:END (instead of --from/--to).")] = None,
-    windows_per_day: Annotated[int, typer.Option("--windows-per-day", help="Monitoring windows per UTC day, evenly spaced from 00:00.")] = 24,
-    window_s: Annotated[float, typer.Option("--window-s", help="Window length. \\[s]")] = 10.0,
+    windows_per_day: Annotated[Optional[int], typer.Option("--windows-per-day", help="Snapshot windows per UTC day, evenly spaced from 00:00. \\[default: 24]")] = None,
+    window_s: Annotated[Optional[float], typer.Option("--window-s", help="Window length; a longer one than --segment-s is one back-to-back recording. \\[s] \\[default: 10]")] = None,
+    recording: Annotated[str, typer.Option("--recording", help="snapshot (windows) | continuous (back to back over the whole span).")] = "snapshot",
+    segment_s: Annotated[float, typer.Option("--segment-s", help="Longer recordings are simulated in segments of this length (clock-aligned), each with its own operating inputs and condition. \\[s]")] = 60.0,
+    file_minutes: Annotated[Optional[float], typer.Option("--file-minutes", help="Split the exports into files of N minutes named <PLANT>_<YYYYMMDDTHHMMSS>. \\[default: continuous 60; snapshot one file a UTC day]")] = None,
     scenario: Annotated[Optional[list[str]], typer.Option("--scenario", help="NAME for every valve, or VALVE=NAME (repeat); healthy, wear, broken_edge\\[:EDGE]\\[@HOURS]. \\[default: the valve's scenario key, else healthy]")] = None,
     seed: Annotated[int, typer.Option("--seed", help="Seed of everything random; the same seed gives the same bytes.")] = 0,
     fmt: Annotated[str, typer.Option("--format", help="long | wide (CSV in that layout) | parquet (in the plant's layout).")] = "long",
@@ -91,13 +94,14 @@ def simulate(
 
     request = SimulateRequest(
         out=out, config_path=config, n_valves=n_valves, plant=plant, commissioned=commissioned, start=start, end=end,
-        days=days, hours=hours, windows_per_day=windows_per_day, window_s=window_s, scenarios=tuple(scenario or ()),
+        days=days, hours=hours, windows_per_day=windows_per_day, window_s=window_s, recording=recording, segment_s=segment_s,
+        file_minutes=file_minutes, scenarios=tuple(scenario or ()),
         seed=seed, format=fmt, layout=layout, gzip=gzip, overwrite=overwrite, workers=workers,
     )  # fmt: skip
     summary = run_simulate(request, show_progress=not quiet)
     typer.echo(
         f"wrote {len(summary.files)} export files ({summary.bytes / 1e6:,.1f} MB, {summary.rows:,} rows), "
-        f"{summary.windows:,} valve windows ({summary.valve_seconds:,.0f} valve-s) in {summary.wall_s:,.1f} s "
+        f"{summary.windows:,} valve segments ({summary.valve_seconds:,.0f} valve-s) in {summary.wall_s:,.1f} s "
         f"→ {summary.out}"
     )
 

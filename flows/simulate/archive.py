@@ -884,6 +884,9 @@ def write_archive(
 # --- the command -----------------------------------------------------------------------------
 
 FORMATS: tuple[str, ...] = ("long", "wide", "parquet")
+RECORDINGS: tuple[str, ...] = ("snapshot", "continuous")
+CONTINUOUS_FILE_MINUTES = 60.0
+"""Length of the export files of a continuous recording unless ``--file-minutes`` says."""
 
 
 @dataclass(frozen=True)
@@ -899,8 +902,11 @@ class SimulateRequest:
     end: str | None = None
     days: float | None = None
     hours: str | None = None
-    windows_per_day: int = 24
-    window_s: float = 10.0
+    windows_per_day: int | None = None
+    window_s: float | None = None
+    recording: str = "snapshot"
+    segment_s: float = 60.0
+    file_minutes: float | None = None
     scenarios: tuple[str, ...] = ()
     seed: int = 0
     format: str = "long"
@@ -968,7 +974,24 @@ def plan_request(req: SimulateRequest) -> tuple[PlantConfig, ArchivePlan, dict[s
         if req.days is not None and not (math.isfinite(req.days) and req.days > 0):
             raise ValvemonError(f"--days: {req.days:g} must be > 0")
         end = utc_instant(req.end, "--to") if req.end is not None else start + timedelta(days=req.days if req.days is not None else 1.0)
-    plan = ArchivePlan(start, end, req.windows_per_day, req.window_s, config.export.sample_rate_hz)
+    if req.recording not in RECORDINGS:
+        raise ValvemonError(f"--recording: {req.recording!r} is not one of {', '.join(RECORDINGS)}")
+    continuous = req.recording == "continuous"
+    if continuous:
+        for opt, val in (("--windows-per-day", req.windows_per_day), ("--window-s", req.window_s)):
+            if val is not None:
+                raise ValvemonError(f"{opt}: only for --recording snapshot (a continuous recording has no windows)")
+    file_minutes = req.file_minutes if req.file_minutes is not None else (CONTINUOUS_FILE_MINUTES if continuous else None)
+    plan = ArchivePlan(
+        start,
+        end,
+        req.windows_per_day if req.windows_per_day is not None else 24,
+        req.window_s if req.window_s is not None else 10.0,
+        config.export.sample_rate_hz,
+        continuous=continuous,
+        segment_s=req.segment_s,
+        file_s=None if file_minutes is None else file_minutes * 60.0,
+    )
     return config, plan, scenarios, "parquet" if fmt == "parquet" else "csv"
 
 
@@ -980,15 +1003,15 @@ def run_simulate(req: SimulateRequest, *, show_progress: bool = True) -> Archive
     config, plan, scenarios, file_format = plan_request(req)
     check_archive(config, plan, file_format)
     check_out_dir(req.out, req.overwrite)
-    total = plan.n_slots() * len(config.valves)
+    total = plan.n_segments() * len(config.valves)
     workers = req.workers
     if workers is None:
-        workers = default_workers() if total * plan.window_s >= AUTO_WORKERS_VALVE_SECONDS else 0
+        workers = default_workers() if plan.valve_seconds() * len(config.valves) >= AUTO_WORKERS_VALVE_SECONDS else 0
     progress = Progress(
         TextColumn("[bold]simulate[/] {task.description}"),
         BarColumn(),
         MofNCompleteColumn(),
-        TextColumn("windows · {task.fields[rate]}"),
+        TextColumn("segments · {task.fields[rate]}"),
         TimeElapsedColumn(),
         TextColumn("eta"),
         TimeRemainingColumn(),

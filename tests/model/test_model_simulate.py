@@ -249,3 +249,79 @@ def test_eq7_with_true_derivatives_recovers_alpha_A(healthy_run):
             rel = est[e][w][sel] / (cond.alpha[i] * A[i][sel]) - 1
             assert np.max(np.abs(rel)) < 0.06, (w, e)
             assert abs(np.median(rel)) < 0.03, (w, e)
+
+
+# --- recordings in segments -------------------------------------------------------------------
+
+def _split(inp, n):
+    """The inputs of samples [n, end) of ``inp`` as a window of their own (supply shifted)."""
+    from dataclasses import replace
+
+    from model.trajectory import WindowInputs
+    a = inp.supply.as_array()
+    T = n / TABLE1.sensors.sample_rate_hz
+    supply = replace(inp.supply, p_s0_pa=a[0] + a[1] * T, ripple_phase_rad=a[4] + a[3] * T)
+    return WindowInputs(inp.X_ref_m[n:], inp.v_ref_m_s[n:], inp.F_l_n[n:], supply)
+
+
+@pytest.mark.parametrize("cond", [TABLE1.nominal_condition, condition_at(BROKEN_1R, [0.0])[0]])
+def test_a_window_continued_from_its_end_state_is_seamless(cond):
+    """Simulating 6 s in one go and as 2.5 s + 3.5 s, the second part started from the first
+    part's end_state (state and controller integrator), gives the same signals: the end state
+    is the state one period after the last sample, and nothing else carries over."""
+    from dataclasses import replace
+
+    from model.simulate import simulate_inputs
+    from model.trajectory import WindowInputs, window_inputs
+    inp = window_inputs(TABLE1, 6.0, np.random.default_rng(5))
+    n = 2500
+    whole = simulate_inputs(TABLE1, [cond], [inp])
+    head = simulate_inputs(TABLE1, [cond], [WindowInputs(inp.X_ref_m[:n], inp.v_ref_m_s[:n], inp.F_l_n[:n], inp.supply)])
+    tail = simulate_inputs(TABLE1, [cond], [_split(inp, n)], initial_states=head.end_state[:, :6],
+                           initial_integrators=head.end_state[:, 6])
+    for name in ("x_m", "X_m", "vX_m_s", "p1_pa", "p2_pa", "x_ref_m", "ps_pa"):
+        got = np.concatenate([getattr(head, name), getattr(tail, name)], axis=1)
+        ref = getattr(whole, name)
+        scale = np.max(np.abs(ref))
+        assert np.max(np.abs(got - ref)) <= 1e-6 * scale, name
+    # without the integrator the controller restarts from its rest formula: a step in x_ref
+    cold = simulate_inputs(TABLE1, [cond], [_split(inp, n)], initial_states=head.end_state[:, :6])
+    warm_err = np.max(np.abs(tail.x_ref_m[0, :50] - whole.x_ref_m[0, n:n + 50]))
+    assert np.max(np.abs(cold.x_ref_m[0, :50] - whole.x_ref_m[0, n:n + 50])) > 100 * warm_err
+    assert replace(whole, end_state=None).end_state is None
+
+
+def test_reference_stream_blocks_are_one_trajectory():
+    """A reference drawn in blocks (a move running across the cut) is the one drawn at once."""
+    from model.trajectory import ReferenceStream
+    fs = 1000.0
+    whole = ReferenceStream(np.random.default_rng(9), fs).take(47_000, np.random.default_rng(1))
+    g = np.random.default_rng(1)
+    stream = ReferenceStream(np.random.default_rng(9), fs)
+    parts = [stream.take(n, g) for n in (5_123, 20_000, 877, 21_000)]
+    for i in range(2):
+        got = np.concatenate([p[i] for p in parts])
+        np.testing.assert_allclose(got, whole[i], rtol=0, atol=1e-12)
+    assert np.ptp(whole[0]) > 0.3 and np.max(np.abs(np.diff(whole[0]))) < 0.3e-3  # moves, no jumps
+
+
+def test_segments_continue_the_supply_and_load_and_stay_in_range():
+    """An hour of 60 s segments: the supply level goes on where it stopped (a bounded random
+    walk through p_s_nominal +- spread, not the unbounded drift that made an hour-long window
+    diverge), the load holds its level across a cut, the ripple phase is continuous."""
+    from model.trajectory import segment_inputs
+    sp = TABLE1.supply
+    state = None
+    levels, prev = [], None
+    for k in range(60):
+        inp, end = segment_inputs(TABLE1, 60_000, np.random.default_rng([3, k]), state)
+        ps = inp.supply.p_s(np.array([0.0]))[0] - inp.supply.ripple_amplitude_pa * np.sin(inp.supply.ripple_phase_rad)
+        if prev is not None:
+            assert ps == pytest.approx(prev.p_s_pa, abs=1e-6)
+            assert inp.F_l_n[0] == prev.load_n
+            assert np.sin(inp.supply.ripple_phase_rad) == pytest.approx(np.sin(prev.ripple_phase_rad), abs=1e-9)
+        levels.append(end.p_s_pa)
+        prev, state = end, end
+    levels = np.array(levels)
+    assert np.all(np.abs(levels - sp.p_s_nominal_pa) <= sp.p_s_window_spread_pa + 60 * sp.p_s_drift_max_pa_s + 1e-6)
+    assert np.ptp(levels) > 2 * BAR  # it does vary along the recording
