@@ -5,13 +5,20 @@ warm-up call that loads or compiles the numba kernels, and prints simulated seco
 wall-clock second and per CPU second of this (single-threaded) process, plus the time per
 window. The process is pinned to one CPU where the OS allows it.
 
-    .venv/bin/python bench/simulate.py [--windows 32] [--duration 10] [--substeps 2] [--repeats 5]
+Then a continuous recording of ``--continuous-h`` hours (default 1; 0 skips it) of one worn
+valve, the way ``valvemon simulate --recording continuous`` makes it: back-to-back segments of
+``--segment-s`` seconds, each continuing the last (``flows.simulate.simulator.simulate_measured``:
+inputs, closed loop and sensors), with the simulated seconds per CPU second and the peak RSS
+before and after (it must not grow with the length).
+
+    .venv/bin/python bench/simulate.py [--windows 32] [--duration 10] [--substeps 2] [--repeats 5] [--continuous-h 1]
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import resource
 import statistics
 import sys
 import time
@@ -48,6 +55,8 @@ def main(argv=None) -> int:
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--no-pin", action="store_true", help="do not pin the process to one CPU")
+    ap.add_argument("--continuous-h", type=float, default=1.0, help="hours of continuous recording (0: skip)")
+    ap.add_argument("--segment-s", type=float, default=60.0, help="segment length of the recording [s]")
     a = ap.parse_args(argv)
 
     pinned = "no"
@@ -89,7 +98,42 @@ def main(argv=None) -> int:
     for label, got in (("wall (best)", sim_s / best_wall), ("CPU (median)", sim_s / med_cpu)):
         verdict = "met" if got >= target else f"MISSED by a factor {target / got:.2f}"
         print(f"  target {target:,.0f} simulated s per second on one core, {label}: {verdict}")
+    if a.continuous_h > 0:
+        continuous(a, sim_s / med_cpu, target)
     return 0
+
+
+def _rss_mb() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def continuous(a, batch_rate: float, target: float) -> None:
+    """A continuous recording of one worn valve in back-to-back segments (module docstring)."""
+    from flows.simulate.simulator import simulate_measured
+    from model.condition import condition_at as cond_at
+
+    n_seg = round(a.segment_s * TABLE1.sensors.sample_rate_hz)
+    segments = round(a.continuous_h * 3600.0 / a.segment_s)
+    simulate_measured(TABLE1, [TABLE1.nominal_condition], [("V001", 0)], 1000, a.seed, None)  # warm-up
+    rss0 = _rss_mb()
+    carry, half_rss = None, rss0
+    w0, c0 = time.perf_counter(), time.process_time()
+    for k in range(segments):
+        start_us = k * round(a.segment_s * 1e6)
+        cond = cond_at(WEAR, [5000.0 + start_us / 3.6e9])
+        m, carry = simulate_measured(TABLE1, cond, [("V001", start_us)], n_seg, a.seed, carry)
+        assert np.all(np.isfinite(m["p1"]))
+        if k == segments // 2:
+            half_rss = _rss_mb()
+    wall, cpu = time.perf_counter() - w0, time.process_time() - c0
+    sim_s = segments * a.segment_s
+    print(f"continuous recording: {a.continuous_h:g} h of one worn valve in {segments} segments of {a.segment_s:g} s "
+          f"(inputs, closed loop, sensors)")
+    print(f"  cpu {cpu:.2f} s, wall {wall:.2f} s: {sim_s / cpu:,.0f} simulated s per CPU second, {sim_s / wall:,.0f} per wall second")
+    print(f"  ratio to the window batch above (CPU, same run): {sim_s / cpu / batch_rate:.2f}")
+    print(f"  peak RSS: {rss0:.0f} MB before, {half_rss:.0f} MB halfway, {_rss_mb():.0f} MB at the end")
+    verdict = "met" if sim_s / cpu >= target else f"MISSED by a factor {target / (sim_s / cpu):.2f}"
+    print(f"  target {target:,.0f} simulated s per CPU second on one core: {verdict}")
 
 
 if __name__ == "__main__":
