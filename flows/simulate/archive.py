@@ -5,17 +5,19 @@ An archive is a folder::
     DIR/plant.toml                                  the plant configuration that reads the exports
     DIR/truth.parquet                               the true condition per valve, edge and window
     DIR/exports/<PLANT>_<YYYY-MM-DD>.<csv|csv.gz|parquet>   one file per UTC day, all valves' tags
+    DIR/exports/<PLANT>_<YYYYMMDDTHHMMSS>.<…>              or files of N minutes (``file_s``), named by their first sample
 
-The plant's valves are simulated window by window with :mod:`model.simulate` (a batch of
-windows per call) and measured with :mod:`model.sensors`; their condition at each window
-follows the valve's scenario (:mod:`model.condition`: healthy, wear, broken edge, each with
-the valve's own manufacturing scatter) at the window's operating hours. The samples are
-converted from SI to the units of the plant's tags and written the way the plant's historian
-exports them (:mod:`flows.simulate.writers`), streamed day by day: only one batch of windows is
-ever in memory.
+The plant's valves are recorded in snapshot windows or continuously (:class:`ArchivePlan`),
+simulated segment by segment with :mod:`model.simulate` (a batch of segments per call; a
+recording longer than a segment continues from one segment's end state to the next) and
+measured with :mod:`model.sensors`; their condition in each segment follows the valve's
+scenario (:mod:`model.condition`: healthy, wear, broken edge, each with the valve's own
+manufacturing scatter) at the segment's operating hours. The samples are converted from SI to
+the units of the plant's tags and written the way the plant's historian exports them
+(:mod:`flows.simulate.writers`), streamed: only one batch of segments is ever in memory.
 
-Randomness: every window draws its operating inputs (trajectory, load, supply) and its sensor
-noise from its own generator, seeded with (seed, valve id, window start), and every valve its
+Randomness: every window (segment) draws its operating inputs (trajectory, load, supply) and its sensor
+noise from its own generator, seeded with (seed, valve id, segment start), and every valve its
 manufacturing scatter from (seed, valve id). An archive is therefore the same, byte for byte,
 for the same options, and a valve's data do not depend on which other valves are simulated
 with it or how windows are batched.

@@ -179,3 +179,21 @@ def test_memory_does_not_grow_with_the_length(tmp_path):
         rss[minutes] = int(r.stdout.split()[-1]) / 1024  # MB
     assert len(list((tmp_path / "m20" / "exports").iterdir())) == 2
     assert rss[20] < rss[2] + 40, rss  # 10x the data; one segment's worth of headroom
+
+
+def test_snapshot_windows_split_at_file_boundaries(tmp_path):
+    """15 s windows every 50 s in 1-minute files: the window from 00:00:50 is cut at 00:01:00,
+    every file holds only its own minute, no sample is lost or repeated."""
+    config = generate_plant_config("F1", 1, "wide")
+    plan = ArchivePlan(DEFAULT_COMMISSIONED, DEFAULT_COMMISSIONED + timedelta(minutes=2), windows_per_day=1728, window_s=15, file_s=60.0)
+    summary = write_archive(config, tmp_path, plan, resolve_scenarios(config, None, {}), file_format="parquet")
+    assert [p.name for p in summary.files] == ["F1_20250101T000000.parquet", "F1_20250101T000100.parquet"]
+    t0 = int(DEFAULT_COMMISSIONED.timestamp() * US)
+    seen = []
+    for p in summary.files:
+        t = pl.read_parquet(p)["timestamp"].dt.epoch("us").to_numpy() - t0
+        assert np.unique(t // (60 * US)).size == 1
+        seen.append(t)
+    t = np.concatenate(seen)
+    expected = np.concatenate([s * US + np.arange(15_000) * 1000 for s in (0, 50, 100)])
+    assert np.array_equal(t, expected)
