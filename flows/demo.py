@@ -7,8 +7,13 @@ bound), and one whose edge
 too and named as its ``baseline_window``, so each edge's baseline is the step-4a fit of its own
 commissioning data (checked against the nominal characteristic, step 5a), as at a real plant.
 
-Steps: write ``plant.toml``; simulate the commissioning days and the demo span into historian
-exports (Parquet, long layout); ingest them into the lake; monitor (baselines, fits); refresh the
+The plant delivers both shapes of data: the snapshot valves a 10 s window every 6 hours (one
+historian export a day), the valves of :data:`CONTINUOUS_VALVES` a continuous recording for
+part of every day (:data:`CONTINUOUS_MINUTES` back to back from 00:00 UTC, in recorder-style
+files named by their start).
+
+Steps: write ``plant.toml``; simulate the commissioning days, the snapshot span and the daily
+recordings into exports (Parquet, long layout); ingest them into the lake; monitor (baselines, fits); refresh the
 views and write the report (pictures, HTML, BI export). Everything lives under ``WAREHOUSE/demo/`` and the warehouse itself; a second run
 replaces the archive and leaves the lake and the fits as they were (idempotent).
 """
@@ -36,6 +41,10 @@ WINDOWS_PER_DAY = 4
 """Monitoring windows per day in the demo span (every 6 h)."""
 COMMISSIONING_WINDOWS = 12
 """Windows simulated on each valve's commissioning day (the baseline window)."""
+CONTINUOUS_VALVES: tuple[str, ...] = ("V005",)
+"""Valves recorded continuously for part of each day instead of in snapshots."""
+CONTINUOUS_MINUTES = 5
+"""Length of each day's continuous recording (from 00:00 UTC). [min]"""
 DEMO_SEED = 1
 """One seed for both archives: it also draws each valve's manufacturing scatter, which must be
 the same valve at commissioning and later."""
@@ -82,6 +91,13 @@ def demo_config(out: Path):
     return config, path
 
 
+def _part_config(config, valves, path: Path) -> Path:
+    """A plant.toml of some of ``config``'s valves (the archive of just those)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_bytes(tomli_w.dumps(plant_config_to_dict(dataclasses.replace(config, valves=tuple(valves)))).encode())
+    return path
+
+
 def run_demo(warehouse: Path, *, show_progress: bool = True) -> dict:
     """Simulate, ingest, monitor and report the demo plant into ``warehouse``."""
     out = warehouse / "demo"
@@ -91,9 +107,7 @@ def run_demo(warehouse: Path, *, show_progress: bool = True) -> dict:
     # each valve's commissioning day, simulated for that valve alone
     for v in config.valves:
         day = out / "commissioning" / v.id
-        day.mkdir(parents=True, exist_ok=True)
-        one = day / "plant.toml"
-        one.write_bytes(tomli_w.dumps(plant_config_to_dict(dataclasses.replace(config, valves=(v,)))).encode())
+        one = _part_config(config, [v], day / "plant.toml")
         run_simulate(
             SimulateRequest(
                 out=day / "archive", config_path=one, start=v.commissioned.isoformat(), days=1.0,
@@ -103,14 +117,25 @@ def run_demo(warehouse: Path, *, show_progress: bool = True) -> dict:
         )  # fmt: skip
         archives.append(day / "archive" / "exports")
     span = out / "archive"
+    snapshot = _part_config(config, [v for v in config.valves if v.id not in CONTINUOUS_VALVES], out / "parts" / "snapshots.toml")
     run_simulate(
         SimulateRequest(
-            out=span, config_path=config_path, start=start.isoformat(), days=float(DEMO_DAYS),
+            out=span, config_path=snapshot, start=start.isoformat(), days=float(DEMO_DAYS),
             windows_per_day=WINDOWS_PER_DAY, format="parquet", overwrite=True, seed=DEMO_SEED,
         ),
         show_progress=show_progress,
     )  # fmt: skip
-    ingest = run_ingest(config_path, [*archives, span / "exports"], warehouse, show_progress=show_progress)
+    recorded = out / "recordings"
+    continuous = _part_config(config, [v for v in config.valves if v.id in CONTINUOUS_VALVES], out / "parts" / "recordings.toml")
+    run_simulate(
+        SimulateRequest(
+            out=recorded, config_path=continuous, start=start.isoformat(), days=float(DEMO_DAYS), windows_per_day=1,
+            window_s=CONTINUOUS_MINUTES * 60.0, file_minutes=float(CONTINUOUS_MINUTES), format="parquet", overwrite=True,
+            seed=DEMO_SEED, workers=0,
+        ),
+        show_progress=show_progress,
+    )  # fmt: skip
+    ingest = run_ingest(config_path, [*archives, span / "exports", recorded / "exports"], warehouse, show_progress=show_progress)
     monitored = run_monitor(config_path, warehouse)
     report = run_report(config_path, warehouse)
     return {"config": config_path, "ingest": ingest, "monitor": monitored, "report": report}
