@@ -69,6 +69,13 @@ def test_hours_and_dates(tmp_path):
         ({"config_path": Path("tests/fixtures/plant_example.toml"), "format": "wide"}, "export.layout"),
         ({"start": "yesterday"}, "--from"),
         ({"n_valves": 0}, "--valves"),
+        ({"recording": "always"}, "--recording"),
+        ({"recording": "continuous", "window_s": 5.0}, "--window-s"),
+        ({"recording": "continuous", "windows_per_day": 2}, "--windows-per-day"),
+        ({"segment_s": 7.0}, "--segment-s"),
+        ({"segment_s": 0.5}, "--segment-s"),
+        ({"file_minutes": 7.0}, "--file-minutes"),
+        ({"file_minutes": 0.5}, "--file-minutes"),
     ],
 )
 def test_bad_options(tmp_path, kw, match):
@@ -93,6 +100,27 @@ def test_cli_writes_an_archive(tmp_path):
     assert names == ["SIM1_2025-01-01.csv.gz", "SIM1_2025-01-02.csv.gz"]
     assert (tmp_path / "arch" / "plant.toml").is_file() and (tmp_path / "arch" / "truth.parquet").is_file()
     assert 'scenario = "broken_edge@10"' in (tmp_path / "arch" / "plant.toml").read_text()
+
+
+def test_cli_continuous_recording(tmp_path, monkeypatch, capsys):
+    """``--recording continuous`` through the entry point: 90 s back to back from 00:59:00 in
+    1-minute files named by their first sample, the truth per 60 s segment."""
+    import polars as pl
+
+    from flows.cli import main
+
+    out = tmp_path / "rec"
+    argv = ["valvemon", "simulate", "--out", str(out), "--n-valves", "1", "--recording", "continuous", "--from", "2025-01-01T00:59:00Z",
+            "--to", "2025-01-01T01:00:30Z", "--file-minutes", "1", "--format", "parquet", "--quiet", "--workers", "0"]  # fmt: skip
+    monkeypatch.setattr(sys, "argv", argv)
+    with pytest.raises(SystemExit) as exc:
+        main()
+    assert exc.value.code == 0
+    assert "2 valve segments (90 valve-s)" in capsys.readouterr().out
+    names = sorted(p.name for p in (out / "exports").iterdir())
+    assert names == ["SIM1_20250101T005900.parquet", "SIM1_20250101T010000.parquet"]
+    truth = pl.read_parquet(out / "truth.parquet")
+    assert truth.height == 2 * 4 and sorted(set((truth["window_end"] - truth["window_start"]).dt.total_seconds())) == [30, 60]
 
 
 @pytest.mark.parametrize(
