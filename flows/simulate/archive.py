@@ -34,6 +34,7 @@ import shutil
 import time
 from collections import deque
 from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
 from datetime import date, datetime, timedelta, timezone
 from pathlib import Path
@@ -46,7 +47,7 @@ import tomli_w
 from flows.common.config import load_plant_config
 from flows.common.errors import ValvemonError
 from flows.common.instants import utc_instant
-from flows.simulate.simulator import default_workers, run_ordered, simulate_measured, valve_key, window_rng  # noqa: F401 (window_rng: API)
+from flows.simulate.simulator import iso_us, default_workers, run_ordered, simulate_measured, valve_key, window_rng  # noqa: F401 (window_rng: API)
 from flows.simulate.writers import ExportColumns, decimals_for_step, export_suffix, open_day_writer
 from model import condition as mcond
 from model.params import (
@@ -871,13 +872,17 @@ def write_archive(
             truth_writer.close()
             truth_writer = None
             os.replace(truth_partial, truth_path)
-    except BaseException:
+    except BaseException as exc:
         if writer is not None:
             writer.close()
             partial.unlink(missing_ok=True)
         if truth_writer is not None:
             truth_writer.close()
         truth_partial.unlink(missing_ok=True)
+        if isinstance(exc, BrokenProcessPool):
+            call = metas[0] if metas else None
+            where = "" if call is None else f" simulating {', '.join(dict.fromkeys(runs[i].spec.id for i, _ in call.items))} from {iso_us(int(call.step.starts[0]))}"
+            raise ValvemonError(f"a simulator worker process died{where} (out of memory? try fewer --workers)") from None
         raise
     summary.wall_s = time.perf_counter() - t_wall
     return summary

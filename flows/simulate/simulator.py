@@ -106,14 +106,17 @@ def simulate_measured(
     except SimulationDiverged as exc:
         vid, t0 = windows[exc.window]
         raise ValvemonError(
-            f"simulation of valve {vid} diverged at {_iso_us(t0 + round(exc.time_s * 1e6))} "
-            f"({exc.time_s:.3f} s into the segment starting {_iso_us(t0)}): a pressure or velocity left the physical range"
+            f"simulation of valve {vid} diverged at {iso_us(t0 + round(exc.time_s * 1e6))} "
+            f"({exc.time_s:.3f} s into the segment starting {iso_us(t0)}): a pressure or velocity left the physical range"
         ) from None
+    except (ArithmeticError, ValueError) as exc:
+        valves = ", ".join(dict.fromkeys(vid for vid, _ in windows))
+        raise ValvemonError(f"simulation of valve(s) {valves} failed in the segment starting {iso_us(windows[0][1])}: {exc}") from None
     ends = [Carry(d[1], result.end_state[w].copy()) for w, d in enumerate(drawn)]
     return measure_windows(result, params.sensors, rngs), ends
 
 
-def _iso_us(t_us: int) -> str:
+def iso_us(t_us: int) -> str:
     """µs UTC as ISO-8601 with a Z (whole seconds without a fraction)."""
     t = datetime(1970, 1, 1, tzinfo=timezone.utc) + timedelta(microseconds=int(t_us))
     text = t.isoformat(timespec="microseconds" if t.microsecond else "seconds")

@@ -7,6 +7,7 @@ import dataclasses
 import subprocess
 import sys
 import textwrap
+from concurrent.futures.process import BrokenProcessPool
 from datetime import timedelta
 from pathlib import Path
 
@@ -113,8 +114,15 @@ def test_same_bytes_with_and_without_workers(recording, tmp_path):
     assert (out / "truth.parquet").read_bytes() == (tmp_path / "truth.parquet").read_bytes()
 
 
-@pytest.mark.parametrize("failure", [ValvemonError("simulation of valve V001 diverged"), KeyboardInterrupt()])
-def test_a_failure_leaves_no_partial_file(tmp_path, monkeypatch, failure):
+@pytest.mark.parametrize(
+    "failure, raised, match",
+    [
+        (ValvemonError("simulation of valve V001 diverged"), ValvemonError, "V001 diverged"),
+        (KeyboardInterrupt(), KeyboardInterrupt, None),
+        (BrokenProcessPool("killed"), ValvemonError, "worker process died simulating V001, V002 from 2025-01-01T06:00:00Z"),
+    ],
+)
+def test_a_failure_leaves_no_partial_file(tmp_path, monkeypatch, failure, raised, match):
     real = archive.simulate_measured
     calls = []
 
@@ -125,7 +133,7 @@ def test_a_failure_leaves_no_partial_file(tmp_path, monkeypatch, failure):
         return real(*args)
 
     monkeypatch.setattr(archive, "simulate_measured", failing)
-    with pytest.raises(type(failure)):
+    with pytest.raises(raised, match=match):
         _write(tmp_path)
     assert len(calls) == 2
     assert list((tmp_path / "exports").iterdir()) == []
