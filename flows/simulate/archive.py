@@ -712,7 +712,8 @@ def export_name(config: PlantConfig, plan: ArchivePlan, first_us: int, suffix: s
 
 
 TRUTH_FLUSH_ROWS = 100_000
-"""Truth rows buffered before they are written (a row group), at the latest when a file ends."""
+"""Truth rows buffered before they are written (a row group); they are also written when the
+segments move on to the next export file."""
 
 
 def write_archive(

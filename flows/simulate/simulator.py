@@ -26,9 +26,9 @@ from typing import Any
 
 import numpy as np
 
+from flows.common.errors import ValvemonError
 from model.params import PlantParams, SensorParams, ValveCondition
 from model.sensors import measure
-from flows.common.errors import ValvemonError
 from model.simulate import SimulationDiverged, SimulationResult, simulate_inputs
 from model.trajectory import RecordingState, segment_inputs
 
@@ -89,7 +89,8 @@ def simulate_measured(
     Raises
     ------
     ValvemonError
-        If the simulation diverges: one line naming the valve, the segment and the instant.
+        If the simulation diverges (one line naming the valve, the segment and the instant) or
+        fails otherwise (naming the valves and the segment).
     """
     rngs = [window_rng(seed, vid, start) for vid, start in windows]
     drawn = [segment_inputs(params, n_samples, g, None if carries is None else c.inputs) for g, c in zip(rngs, carries or [None] * len(rngs))]
