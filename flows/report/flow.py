@@ -99,8 +99,19 @@ def update_standstill(config: PlantConfig, warehouse: Path, now: datetime) -> in
                 with transaction(con):
                     con.execute("DELETE FROM standstill_checks WHERE valve_id = ? AND window_start BETWEEN ? AND ?", [v.id, lo, hi])
                     insert_frame(con, "standstill_checks", frame)
+                    mark_standstill_progress(con, v.id, hi, now)
             added += frame.height
     return added
+
+
+def mark_standstill_progress(con, valve_id: str, checked_through: datetime, now: datetime) -> None:
+    """Record that the standstill check has read the valve's lake up to ``checked_through``
+    (table ``standstill_progress``; retention keeps a partition until it has)."""
+    con.execute("DELETE FROM standstill_progress WHERE valve_id = ? AND checked_through <= ?", [valve_id, checked_through])
+    con.execute(
+        "INSERT INTO standstill_progress SELECT ?, ?, ? WHERE NOT EXISTS (SELECT 1 FROM standstill_progress WHERE valve_id = ?)",
+        [valve_id, checked_through, now, valve_id],
+    )
 
 
 def refresh(config: PlantConfig, warehouse: Path, now: datetime) -> tuple[list[str], Path]:
