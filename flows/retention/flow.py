@@ -26,6 +26,7 @@ and changed, so an ingest of late data into the same day waits.
 from __future__ import annotations
 
 import uuid
+from contextlib import nullcontext
 from dataclasses import dataclass, field
 from datetime import date, datetime, timedelta, timezone
 from pathlib import Path
@@ -272,7 +273,8 @@ def run_retention(
     ids = list(valve_ids or known)
     as_of = as_of or datetime.now(timezone.utc).date()
     summary = RetentionSummary(as_of, spec, dry_run)
-    lock = file_lock(warehouse / ".retention.lock", f"{warehouse}: another retention run is working on this warehouse")
+    # a dry run takes no lock either: even a lock file would be a write
+    lock = nullcontext() if dry_run else file_lock(warehouse / ".retention.lock", f"{warehouse}: another retention run is working on this warehouse")
     with lock:
         summary.interrupted = complete_interrupted(warehouse, spec, as_of, ids, dry_run)
         protected = {v.id: protected_days([v.baseline_window] if v.baseline_window else []) for v in config.valves}
@@ -289,7 +291,7 @@ def run_retention(
             spans[vid] = (min(first, day), max(last, day))
         state = read_state(warehouse, spans, [])
         for vid, day, folder in todo:
-            with partition_lock(warehouse, folder / PART_NAME):
+            with nullcontext() if dry_run else partition_lock(warehouse, folder / PART_NAME):
                 summary.outcomes.append(_one_partition(warehouse, vid, day, folder, spec, protected[vid], state, as_of, dry_run))
     summary.outcomes.sort(key=lambda o: (o.valve_id, o.day))
     return summary
