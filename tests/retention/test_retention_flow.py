@@ -3,63 +3,18 @@ the report's standstill pass, the plain functions the flows run), then retention
 
 from __future__ import annotations
 
-import dataclasses
 import hashlib
 import shutil
-from datetime import date, datetime, timedelta, timezone
+from datetime import date, timedelta
 from pathlib import Path
 
 import polars as pl
 import pytest
-import tomli_w
 
 import flows.retention.flow as fr
-from flows.common.config import load_plant_config
 from flows.common.lake import dropped_folders, partition_files, partition_folders, partition_rows, read_lake, write_partition
 from flows.common.warehouse_db import connect, query_frame
-from flows.ingest.flow import run_ingest
-from flows.monitor.flow import run_monitor
-from flows.report.flow import update_standstill
-from flows.simulate.archive import DEFAULT_COMMISSIONED, SimulateRequest, run_simulate
-from schemas.plant_config import RetentionSpec, plant_config_to_dict
-
-DAY0 = DEFAULT_COMMISSIONED  # 2025-01-01T00:00Z
-DAYS = [date(2025, 1, d) for d in (1, 2, 3, 4)]
-AS_OF = date(2025, 1, 7)  # ages 6, 5, 4, 3 days
-COMMISSIONING = (DAY0 + timedelta(hours=1), DAY0 + timedelta(hours=7))  # inside V001's first day
-
-
-def _config(src: Path, out: Path, retention: RetentionSpec | None) -> Path:
-    config = load_plant_config(src)
-    valves = tuple(dataclasses.replace(v, baseline_window=COMMISSIONING) if v.id == "V001" else v for v in config.valves)
-    out.write_bytes(tomli_w.dumps(plant_config_to_dict(dataclasses.replace(config, valves=valves, retention=retention))).encode())
-    return out
-
-
-@pytest.fixture(scope="module")
-def base(tmp_path_factory) -> tuple[Path, Path]:
-    """Two valves, four UTC days, a 10 s window every 4 h, V001 commissioned on its first day's
-    01:00–07:00 windows: ingested, monitored and checked for standstill. (warehouse, archive)."""
-    root = tmp_path_factory.mktemp("retention")
-    archive = root / "sim"
-    run_simulate(SimulateRequest(out=archive, n_valves=2, days=4.0, windows_per_day=6, format="parquet", seed=5, workers=0), show_progress=False)
-    cfg = _config(archive / "plant.toml", root / "plant.toml", None)
-    wh = root / "wh"
-    run_ingest(cfg, [archive / "exports"], wh)
-    run_monitor(cfg, wh)
-    update_standstill(load_plant_config(cfg), wh, datetime.now(timezone.utc))
-    return wh, archive
-
-
-@pytest.fixture
-def wh(base, tmp_path) -> Path:
-    dst = tmp_path / "wh"
-    shutil.copytree(base[0], dst)
-    return dst
-
-
-def _plant(base, tmp_path, **kw) -> "object":
-    return load_plant_config(_config(base[1] / "plant.toml", tmp_path / "plant.toml", RetentionSpec(**kw)))
+from tests.retention.conftest import AS_OF, DAYS, plant_with
 
 
 def _fingerprint(wh: Path) -> dict[str, str]:
@@ -77,7 +32,7 @@ def _decisions(summary) -> dict[tuple[str, date], tuple[str, str]]:
 
 
 def test_drop_only_fitted_old_days_and_dry_run_writes_nothing(base, wh, tmp_path):
-    plant = _plant(base, tmp_path, keep_days=3, mode="drop")
+    plant = plant_with(base, tmp_path, keep_days=3, mode="drop")
     lake_before = read_lake(wh).collect()
     # V002's 2025-01-02 08:00 window was never fitted: its day stays
     with connect(wh) as con:
@@ -125,7 +80,7 @@ def test_drop_only_fitted_old_days_and_dry_run_writes_nothing(base, wh, tmp_path
 
 
 def test_thin_keeps_the_first_seconds_of_every_hour_once(base, wh, tmp_path):
-    plant = _plant(base, tmp_path, keep_days=3, mode="thin", thin_keep_s_per_hour=2.0)
+    plant = plant_with(base, tmp_path, keep_days=3, mode="thin", thin_keep_s_per_hour=2.0)
     lake_before = read_lake(wh).collect()
     summary = fr.run_retention(plant, wh, as_of=AS_OF)
     thinned = {(o.valve_id, o.day) for o in summary.outcomes if o.action == "thin"}
@@ -147,7 +102,7 @@ def test_thin_keeps_the_first_seconds_of_every_hour_once(base, wh, tmp_path):
 
 
 def test_unchecked_days_are_kept(base, wh, tmp_path):
-    plant = _plant(base, tmp_path, keep_days=1, mode="drop")
+    plant = plant_with(base, tmp_path, keep_days=1, mode="drop")
     with connect(wh) as con:
         con.execute("UPDATE standstill_progress SET checked_through = TIMESTAMPTZ '2025-01-02 12:00:00Z' WHERE valve_id = 'V002'")
         con.execute("DELETE FROM standstill_progress WHERE valve_id = 'V001'")
@@ -159,7 +114,7 @@ def test_unchecked_days_are_kept(base, wh, tmp_path):
 def test_no_database_keeps_everything(base, tmp_path):
     wh = tmp_path / "lake_only"
     shutil.copytree(base[0] / "lake", wh / "lake")
-    d = _decisions(fr.run_retention(_plant(base, tmp_path, keep_days=1, mode="drop"), wh, as_of=AS_OF))
+    d = _decisions(fr.run_retention(plant_with(base, tmp_path, keep_days=1, mode="drop"), wh, as_of=AS_OF))
     assert {v[1] for v in d.values()} == {"kept: no fits yet", "kept: commissioning window"}
     assert not (wh / "valvemon.duckdb").exists()
 
@@ -169,7 +124,7 @@ class Killed(BaseException):
 
 
 def test_killed_drop_is_completed_by_the_next_run(base, wh, tmp_path, monkeypatch):
-    plant = _plant(base, tmp_path, keep_days=3, mode="drop")
+    plant = plant_with(base, tmp_path, keep_days=3, mode="drop")
     lake_before = read_lake(wh).collect()
     rows = dict(((v, d), n) for v, d, n in lake_before.group_by("valve_id", "date").len().iter_rows())
 
@@ -210,7 +165,7 @@ def test_killed_drop_is_completed_by_the_next_run(base, wh, tmp_path, monkeypatc
 def test_partition_of_several_files_is_thinned_file_by_file(base, wh, tmp_path, monkeypatch):
     """A day split into files (a layout the lake may take) is one partition; a run killed between
     two files leaves each file whole or thinned, and the next run finishes the same result."""
-    plant = _plant(base, tmp_path, keep_days=3, mode="thin", thin_keep_s_per_hour=2.0)
+    plant = plant_with(base, tmp_path, keep_days=3, mode="thin", thin_keep_s_per_hour=2.0)
     folder = next(f for v, d, f in partition_folders(wh) if (v, d) == ("V002", DAYS[0]))
     (only,) = partition_files(folder)
     day = pl.read_parquet(only)
