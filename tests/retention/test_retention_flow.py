@@ -198,3 +198,16 @@ def test_partition_of_several_files_is_thinned_file_by_file(base, wh, tmp_path, 
 def _files(folder: Path) -> pl.DataFrame:
     """All files of a partition, by time."""
     return pl.concat([pl.read_parquet(f) for f in partition_files(folder)]).sort("timestamp_utc")
+
+
+def test_standstill_progress_is_the_last_sample_the_report_read(base, wh):
+    from datetime import datetime, timezone
+
+    from flows.report.flow import mark_standstill_progress
+
+    last = read_lake(wh).group_by("valve_id").agg(pl.col("timestamp_utc").max()).collect().sort("valve_id")
+    progress = _q(wh, "SELECT valve_id, checked_through AS timestamp_utc FROM standstill_progress ORDER BY valve_id")
+    assert progress.equals(last)
+    with connect(wh) as con:  # it never moves back
+        mark_standstill_progress(con, "V001", datetime(2025, 1, 2, tzinfo=timezone.utc), datetime.now(timezone.utc))
+    assert _q(wh, "SELECT valve_id, checked_through AS timestamp_utc FROM standstill_progress ORDER BY valve_id").equals(last)
