@@ -95,7 +95,11 @@ def hour_firsts(t_us: np.ndarray) -> dict[int, int]:
     t = np.asarray(t_us, dtype=np.int64)
     if t.size == 0:
         return {}
-    hours, inverse = np.unique(t // HOUR_US, return_inverse=True)
+    hours = t // HOUR_US
+    if np.all(t[1:] >= t[:-1]):  # the lake's files are time-sorted: the first of each run of equal hours
+        at = np.r_[0, np.flatnonzero(np.diff(hours)) + 1]
+        return dict(zip(hours[at].tolist(), t[at].tolist()))
+    hours, inverse = np.unique(hours, return_inverse=True)
     firsts = np.full(hours.size, np.iinfo(np.int64).max, dtype=np.int64)
     np.minimum.at(firsts, inverse, t)
     return dict(zip(hours.tolist(), firsts.tolist()))
@@ -127,6 +131,8 @@ class PartitionScan:
     """What a pass over one partition's time stamps found (filled batch by batch with :meth:`add`)."""
 
     cover: tuple[np.ndarray, np.ndarray]
+    hours: bool = True
+    """Track each hour's first sample (thin mode needs it, drop mode does not)."""
     rows: int = 0
     uncovered: int = 0
     last_us: int | None = None
@@ -143,7 +149,8 @@ class PartitionScan:
         self.uncovered += uncovered_samples(t, self.cover)
         top = int(t.max())
         self.last_us = top if self.last_us is None else max(self.last_us, top)
-        self.firsts = merge_hour_firsts(self.firsts, hour_firsts(t))
+        if self.hours:
+            self.firsts = merge_hour_firsts(self.firsts, hour_firsts(t))
 
     def count_kept(self, t_us: np.ndarray, keep_s: float) -> None:
         """Second pass: count the rows of a batch that thinning keeps."""

@@ -186,9 +186,10 @@ def read_state(warehouse: Path, candidates: dict[str, tuple[date, date]], action
     return WarehouseState(covers, checked, frozenset(logged))
 
 
-def scan_partition(folder: Path, cover: tuple[np.ndarray, np.ndarray]) -> PartitionScan:
-    """First pass over a partition's time stamps, file by file, batch by batch."""
-    scan = PartitionScan(cover)
+def scan_partition(folder: Path, cover: tuple[np.ndarray, np.ndarray], hours: bool) -> PartitionScan:
+    """First pass over a partition's time stamps, file by file, batch by batch (``hours``: note
+    each hour's first sample, for thinning)."""
+    scan = PartitionScan(cover, hours)
     for f in partition_files(folder):
         for batch in iter_file_batches(f, [TIME]):
             scan.add(batch[TIME].to_physical().to_numpy())
@@ -303,7 +304,7 @@ def _one_partition(
 ) -> PartitionOutcome:
     """Decide one partition past steps 1–2 and, unless ``dry_run``, apply the decision."""
     bytes_before = partition_bytes(folder)
-    scan = scan_partition(folder, state.covers[vid])
+    scan = scan_partition(folder, state.covers[vid], spec.mode == "thin")
     checked = state.checked_through_us.get(vid)
     per_file: dict[Path, tuple[int, int]] = {}
     if spec.mode == "thin" and decide_fitted(scan, checked) is None:

@@ -185,3 +185,12 @@ def test_continuous_hour_keeps_its_first_seconds():
     kept = t[thin_mask(t, hour_firsts(t), 10.0)]
     assert kept.size == 2 * 1_000
     assert kept.size / t.size == pytest.approx(10 / 3600)
+
+
+@given(st.data())
+@settings(max_examples=100, deadline=None)
+def test_hour_firsts_of_sorted_and_shuffled_time_stamps_agree(data):
+    t = data.draw(runs())
+    shuffled = np.random.default_rng(data.draw(st.integers(0, 2**32 - 1))).permutation(t)
+    expected = {int(h): int(t[t // HOUR_US == h].min()) for h in np.unique(t // HOUR_US)}
+    assert hour_firsts(t) == hour_firsts(shuffled) == expected
