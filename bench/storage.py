@@ -30,6 +30,7 @@ os.environ.setdefault("RAYON_NUM_THREADS", "1")
 
 import argparse  # noqa: E402
 import dataclasses  # noqa: E402
+import shutil  # noqa: E402
 import sys  # noqa: E402
 import tempfile  # noqa: E402
 import time  # noqa: E402
@@ -122,8 +123,13 @@ def main() -> None:
         sel = query_frame(con, "SELECT * FROM selection_stats")
         windows = con.execute("SELECT count(DISTINCT window_start) FROM edge_fits").fetchone()[0]
 
+    plant = load_plant_config(cfg)
+    shutil.copytree(wh, root / "wh_drop")
     t0 = time.process_time()
-    summary = run_retention(load_plant_config(cfg), wh, as_of=date(2026, 1, 1))
+    run_retention(dataclasses.replace(plant, retention=RetentionSpec(1, "drop")), root / "wh_drop", as_of=date(2026, 1, 1))
+    t_drop = time.process_time() - t0
+    t0 = time.process_time()
+    summary = run_retention(plant, wh, as_of=date(2026, 1, 1))
     t_ret = time.process_time() - t0
     rows_t, bytes_t = lake_totals(wh)
     acted = [o for o in summary.outcomes if o.action == "thin"]
@@ -135,8 +141,9 @@ def main() -> None:
     print(f"measured: {args.minutes} min of one valve at 1 kHz, continuous (work folder {root})")
     print(f"  simulate {t_sim:.1f} s CPU, ingest {t_ingest:.1f} s CPU ({rows / t_ingest / 1e6:.2f} M rows/CPU s)")
     print(f"  lake: {rows:,} rows, {nbytes:,} B -> {bpr:.2f} B/row")
-    print(f"  thin ({args.thin_s:g} s/h, {len(acted)} partition): {rows_t:,} rows, {bytes_t:,} B -> {bpr_thin:.2f} B/row; "
-          f"retention {t_ret:.2f} s CPU = {t_ret / rows * 1e9:.0f} ns/lake row (scan, count, thin, write, log)")  # fmt: skip
+    print(f"  thin ({args.thin_s:g} s/h, {len(acted)} partition): {rows_t:,} rows, {bytes_t:,} B -> {bpr_thin:.2f} B/row")
+    print(f"  retention CPU: thin {t_ret:.2f} s = {t_ret / rows * 1e9:.0f} ns/lake row (scan, count, read, write, log); "
+          f"drop {t_drop:.2f} s = {t_drop / rows * 1e9:.0f} ns/lake row (scan, rename, log, delete)")  # fmt: skip
     print(f"  fits: {windows} windows -> {fits.height} edge_fits rows ({fits.height / windows:.0f}/window), "
           f"{sel.height} selection_stats rows ({sel.height / windows:.0f}/window); DuckDB {fit_bpr:.0f} and {sel_bpr:.0f} B/row")  # fmt: skip
 
@@ -153,15 +160,15 @@ def main() -> None:
     print("| quantity | per valve | plant |")
     print("|---|---:|---:|")
     print(f"| lake per day, no retention | {valve_day / 1e9:.2f} GB | {plant_day / 1e12:.2f} TB |")
-    print(f"| lake after a year, no retention | {365 * valve_day / 1e12:.2f} TB | {365 * plant_day / 1e15:.2f} PB |")
-    print(f"| thinned day ({args.thin_s:g} s/h kept) | {thin_day / 1e6:.1f} MB | {args.valves * thin_day / 1e9:.2f} GB |")
-    print(f"| steady state, drop after {k} d | {k * valve_day / 1e12:.2f} TB | {args.valves * k * valve_day / 1e15:.2f} PB |")
-    print(f"| thin after {k} d, first year (all {k} d full + {365 - k} thinned) | {(k * valve_day + (365 - k) * thin_day) / 1e12:.2f} TB | "
-          f"{args.valves * (k * valve_day + (365 - k) * thin_day) / 1e15:.2f} PB |")  # fmt: skip
-    print(f"| thin: growth per year after that | {365 * thin_day / 1e9:.1f} GB | {args.valves * 365 * thin_day / 1e12:.2f} TB |")
+    print(f"| lake after a year, no retention | {365 * valve_day / 1e9:.0f} GB | {365 * plant_day / 1e12:.0f} TB |")
+    print(f"| drop after {k} d: steady state ({k} full days) | {k * valve_day / 1e9:.0f} GB | {args.valves * k * valve_day / 1e12:.0f} TB |")
+    print(f"| thin after {k} d: one thinned day ({args.thin_s:g} s of every hour) | {thin_day / 1e6:.1f} MB | {args.valves * thin_day / 1e9:.2f} GB |")
+    print(f"| thin after {k} d: after a year ({k} full + {365 - k} thinned days) | {(k * valve_day + (365 - k) * thin_day) / 1e9:.0f} GB | "
+          f"{args.valves * (k * valve_day + (365 - k) * thin_day) / 1e12:.0f} TB |")  # fmt: skip
+    print(f"| thin after {k} d: growth per further year | {365 * thin_day / 1e9:.1f} GB | {args.valves * 365 * thin_day / 1e12:.2f} TB |")
     print(f"| fits per year ({args.window_min:g}-min windows: {win_year:,.0f}) | {fits_year / 1e6:.0f} MB | {args.valves * fits_year / 1e9:.1f} GB |")
-    print(f"| retention CPU per night (one day of all valves) | {day_rows * t_ret / rows:.0f} s | {args.valves * day_rows * t_ret / rows / 3600:.1f} h |")
-
+    for name, t in (("thin", t_ret), ("drop", t_drop)):
+        print(f"| retention CPU per night, {name} (one valve-day each) | {day_rows * t / rows:.0f} s | {args.valves * day_rows * t / rows / 3600:.1f} h |")
 
 if __name__ == "__main__":
     main()
