@@ -200,16 +200,9 @@ def list_partitions(warehouse: str | Path, valve_ids: list[str] | None = None, s
 
     ``start`` (inclusive) and ``end`` (exclusive) select the UTC dates that can hold such times.
     """
-    root = lake_root(warehouse)
-    if not root.exists():
-        return []
     t0, t1 = utc_instant(start), utc_instant(end)
-    wanted = set(valve_ids) if valve_ids is not None else None
     out = []
-    for vdir in sorted(root.glob("valve_id=*")):
-        vid = vdir.name.split("=", 1)[1]
-        if wanted is not None and vid not in wanted:
-            continue
+    for vid, vdir in valve_folders(warehouse, valve_ids):
         for ddir in sorted(vdir.glob("date=*")):
             day = date.fromisoformat(ddir.name.split("=", 1)[1])
             if t0 is not None and day < t0.date():
@@ -219,6 +212,17 @@ def list_partitions(warehouse: str | Path, valve_ids: list[str] | None = None, s
             path = ddir / PART_NAME
             if path.exists():
                 out.append((vid, day, path))
+    return out
+
+
+def valve_folders(warehouse: str | Path, valve_ids: list[str] | None = None) -> list[tuple[str, Path]]:
+    """``(valve_id, folder)`` of the lake's ``valve_id=`` folders, optionally only some valves."""
+    wanted = set(valve_ids) if valve_ids is not None else None
+    out = []
+    for vdir in sorted(lake_root(warehouse).glob("valve_id=*")):
+        vid = vdir.name.split("=", 1)[1]
+        if wanted is None or vid in wanted:
+            out.append((vid, vdir))
     return out
 
 
@@ -267,13 +271,8 @@ others (hidden: no ``date=*`` glob matches it), then deleted (:func:`drop_partit
 def partition_folders(warehouse: str | Path, valve_ids: list[str] | None = None) -> list[tuple[str, date, Path]]:
     """``(valve_id, date, folder)`` of every ``date=`` folder of the lake holding a ``*.parquet``
     file: the partition as retention sees it, whatever files the day is split into."""
-    root = lake_root(warehouse)
-    wanted = set(valve_ids) if valve_ids is not None else None
     out = []
-    for vdir in sorted(root.glob("valve_id=*")):
-        vid = vdir.name.split("=", 1)[1]
-        if wanted is not None and vid not in wanted:
-            continue
+    for vid, vdir in valve_folders(warehouse, valve_ids):
         for ddir in sorted(vdir.glob("date=*")):
             if ddir.is_dir() and partition_files(ddir):
                 out.append((vid, date.fromisoformat(ddir.name.split("=", 1)[1]), ddir))
@@ -317,12 +316,8 @@ def drop_partition(folder: Path, action_id: str) -> Path:
 def dropped_folders(warehouse: str | Path, valve_ids: list[str] | None = None) -> list[tuple[str, date, str, Path]]:
     """``(valve_id, date, action_id, folder)`` of partitions renamed by :func:`drop_partition`
     whose deletion has not finished (a killed run)."""
-    root = lake_root(warehouse)
     out = []
-    for vdir in sorted(root.glob("valve_id=*")):
-        vid = vdir.name.split("=", 1)[1]
-        if valve_ids is not None and vid not in valve_ids:
-            continue
+    for vid, vdir in valve_folders(warehouse, valve_ids):
         for hidden in sorted(vdir.glob(f".date=*{DROPPED_SUFFIX}")):
             day, action_id = hidden.name[len(".date="):-len(DROPPED_SUFFIX)].split(".", 1)
             out.append((vid, date.fromisoformat(day), action_id, hidden))

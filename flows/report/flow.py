@@ -5,7 +5,8 @@
 1. writes each configured valve's condition bounds (``[valve_types.NAME.bounds]``, with the
    Eq. 9 rest residual of its design) to table ``condition_bounds``;
 2. brings table ``standstill_checks`` up to date from the lake (Eq. 9 per window,
-   :mod:`flows.report.standstill`; only windows from the latest one already checked onwards are read);
+   :mod:`flows.report.standstill`; only windows from the latest one already checked onwards are read)
+   and records how far it has read in ``standstill_progress`` (retention waits for it);
 3. creates or refreshes the ``sql/`` views (:mod:`flows.report.views`) and publishes the read-only
    snapshot ``WAREHOUSE/snapshot/valvemon.duckdb`` that readers query;
 4. reads the views from the snapshot and writes the BI hand-off (:mod:`flows.report.export`), the PNG
