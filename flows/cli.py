@@ -267,7 +267,7 @@ def retention(
     list_all: Annotated[bool, typer.Option("--list", help="Also print every partition's decision.")] = False,
     warehouse: Warehouse = None,
 ) -> None:
-    """Thin or drop lake partitions older than [retention] keep_days once their fits exist."""
+    """Thin or drop lake partitions older than retention.keep_days (plant TOML) once their fits exist."""
     import flows.retention.flow as retention_flows
     from flows.common.config import warehouse_dir
     from flows.ingest.flow import quiet_prefect_console
