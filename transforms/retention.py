@@ -126,6 +126,21 @@ def thin_mask(t_us: np.ndarray, firsts: dict[int, int], keep_s: float) -> np.nda
     return t - first[j] < round(keep_s * 1e6)
 
 
+def kept_row_groups(spans: list[tuple[int, int, int]], firsts: dict[int, int], keep_s: float) -> list[int]:
+    """Indices of the row groups ``(rows, first µs, last µs)`` that can hold a sample thinning
+    keeps: those whose time range meets some ``[hour's first, + keep_s)``. The others need not be
+    read (a continuous hour spans ~4 row groups; its first seconds lie in one)."""
+    f = np.array(sorted(firsts.values()), dtype=np.int64)
+    keep_us = round(keep_s * 1e6)
+    out = []
+    for i, (_, lo, hi) in enumerate(spans):
+        # the kept intervals are disjoint and sorted: only the last one starting by ``hi`` can reach ``lo``
+        j = int(np.searchsorted(f, hi, side="right")) - 1
+        if j >= 0 and f[j] + keep_us > lo:
+            out.append(i)
+    return out
+
+
 @dataclass
 class PartitionScan:
     """What a pass over one partition's time stamps found (filled batch by batch with :meth:`add`)."""

@@ -294,13 +294,33 @@ def partition_rows(folder: Path) -> int:
     return sum(pq.ParquetFile(p).metadata.num_rows for p in partition_files(folder))
 
 
-def iter_file_batches(path: Path, columns: list[str] | None = None, batch_rows: int = ROW_GROUP_MAX_ROWS) -> Iterator[pl.DataFrame]:
+def iter_file_batches(
+    path: Path, columns: list[str] | None = None, batch_rows: int = ROW_GROUP_MAX_ROWS, row_groups: list[int] | None = None,
+) -> Iterator[pl.DataFrame]:
     """One lake file in batches of at most ``batch_rows`` rows (all columns in the canonical
-    schema, or only ``columns``): memory holds one batch, never the file."""
+    schema, or only ``columns``; all row groups or only ``row_groups``): memory holds one batch,
+    never the file."""
     pf = pq.ParquetFile(path)
     schema = {c: SENSOR_POLARS_SCHEMA[c] for c in (columns or SENSOR_POLARS_SCHEMA.names())}
-    for batch in pf.iter_batches(batch_size=batch_rows, columns=columns):
+    if row_groups is not None and not row_groups:
+        return
+    for batch in pf.iter_batches(batch_size=batch_rows, columns=columns, row_groups=row_groups):
         yield pl.from_arrow(batch).cast(schema)
+
+
+def row_group_spans(path: Path) -> list[tuple[int, int, int]]:
+    """``(rows, first, last)`` of each row group of a lake file: its rows and the range of its
+    ``timestamp_utc`` (µs since the epoch) from the footer's statistics (no data is read); a
+    group without statistics spans all time."""
+    md = pq.ParquetFile(path).metadata
+    col = md.schema.to_arrow_schema().get_field_index("timestamp_utc")
+    out = []
+    for i in range(md.num_row_groups):
+        rg = md.row_group(i)
+        st = rg.column(col).statistics
+        known = st is not None and st.has_min_max
+        out.append((rg.num_rows, int(st.min_raw) if known else -(2**63), int(st.max_raw) if known else 2**63 - 1))
+    return out
 
 
 def drop_partition(folder: Path, action_id: str) -> Path:

@@ -47,6 +47,7 @@ from flows.common.lake import (
     partition_folders,
     partition_rows,
     remove_dropped,
+    row_group_spans,
     remove_partition_file,
     write_partition_pieces,
 )
@@ -55,7 +56,18 @@ from flows.common.warehouse_db import connect, db_path, ensure_tables, insert_fr
 from flows.orchestration.backfill import partition_lock
 from schemas.fields import RETENTION_LOG_FIELDS, polars_schema
 from schemas.plant_config import PlantConfig, RetentionSpec
-from transforms.retention import KEEP, Decision, PartitionScan, decide, decide_fitted, decide_unscanned, fitted_cover, protected_days, thin_mask
+from transforms.retention import (
+    KEEP,
+    Decision,
+    PartitionScan,
+    decide,
+    decide_fitted,
+    decide_unscanned,
+    fitted_cover,
+    kept_row_groups,
+    protected_days,
+    thin_mask,
+)
 
 RETENTION_TABLES = {"retention_log": (RETENTION_LOG_FIELDS, "action_id")}
 """Table → (fields, primary key)."""
@@ -196,32 +208,45 @@ def scan_partition(folder: Path, cover: tuple[np.ndarray, np.ndarray], hours: bo
     return scan
 
 
-def count_kept(folder: Path, scan: PartitionScan, keep_s: float) -> dict[Path, tuple[int, int]]:
-    """Second pass (thin mode): the rows thinning keeps (into ``scan``); per file (rows, kept)."""
+@dataclass(frozen=True)
+class FileThinning:
+    """One file of a partition in thin mode: its rows, the rows kept, the row groups holding them."""
+
+    rows: int
+    kept: int
+    row_groups: list[int]
+
+
+def count_kept(folder: Path, scan: PartitionScan, keep_s: float) -> dict[Path, FileThinning]:
+    """Second pass (thin mode): the rows thinning keeps (into ``scan``), per file; only the row
+    groups whose time range can hold kept samples are read (:func:`kept_row_groups`)."""
     scan.rows_kept = 0
     per_file = {}
     for f in partition_files(folder):
-        rows, kept = 0, scan.rows_kept
-        for batch in iter_file_batches(f, [TIME]):
+        spans = row_group_spans(f)
+        groups = kept_row_groups(spans, scan.firsts, keep_s)
+        before = scan.rows_kept
+        for batch in iter_file_batches(f, [TIME], row_groups=groups):
             scan.count_kept(batch[TIME].to_physical().to_numpy(), keep_s)
-            rows += batch.height
-        per_file[f] = (rows, scan.rows_kept - kept)
+        per_file[f] = FileThinning(sum(n for n, _, _ in spans), scan.rows_kept - before, groups)
     return per_file
 
 
-def thin_partition(scan: PartitionScan, per_file: dict[Path, tuple[int, int]], keep_s: float) -> int:
-    """Replace each file of the partition by its kept rows, streamed batch by batch (memory holds
-    one batch and one row group of kept rows) and atomically per file; a file that keeps all its
-    rows is left alone, one that keeps none is deleted. Returns the rows kept."""
-    for f, (rows, kept) in per_file.items():
-        if kept == rows:
+def thin_partition(scan: PartitionScan, per_file: dict[Path, FileThinning], keep_s: float) -> int:
+    """Replace each file of the partition by its kept rows, streamed batch by batch from the row
+    groups that hold them (memory holds one batch and one row group of kept rows), atomically per
+    file; a file that keeps all its rows is left alone, one that keeps none is deleted. Returns
+    the rows kept."""
+    for f, ft in per_file.items():
+        if ft.kept == ft.rows:
             continue
-        if kept == 0:
+        if ft.kept == 0:
             remove_partition_file(f)
             continue
-        pieces = (b.filter(pl.Series(thin_mask(b[TIME].to_physical().to_numpy(), scan.firsts, keep_s))) for b in iter_file_batches(f))
+        batches = iter_file_batches(f, row_groups=ft.row_groups)
+        pieces = (b.filter(pl.Series(thin_mask(b[TIME].to_physical().to_numpy(), scan.firsts, keep_s))) for b in batches)
         write_partition_pieces(f, (p for p in pieces if p.height))
-    return sum(kept for _, kept in per_file.values())
+    return sum(ft.kept for ft in per_file.values())
 
 
 def _log_row(action_id: str, o: PartitionOutcome, spec: RetentionSpec, as_of: date) -> pl.DataFrame:
@@ -306,7 +331,7 @@ def _one_partition(
     bytes_before = partition_bytes(folder)
     scan = scan_partition(folder, state.covers[vid], spec.mode == "thin")
     checked = state.checked_through_us.get(vid)
-    per_file: dict[Path, tuple[int, int]] = {}
+    per_file: dict[Path, FileThinning] = {}
     if spec.mode == "thin" and decide_fitted(scan, checked) is None:
         per_file = count_kept(folder, scan, spec.thin_keep_s_per_hour)
     d: Decision = decide(day, as_of, spec, protected, scan, checked)

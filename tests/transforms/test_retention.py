@@ -22,6 +22,7 @@ from transforms.retention import (
     decide,
     fitted_cover,
     hour_firsts,
+    kept_row_groups,
     protected_days,
     thin_mask,
     uncovered_samples,
@@ -194,3 +195,20 @@ def test_hour_firsts_of_sorted_and_shuffled_time_stamps_agree(data):
     shuffled = np.random.default_rng(data.draw(st.integers(0, 2**32 - 1))).permutation(t)
     expected = {int(h): int(t[t // HOUR_US == h].min()) for h in np.unique(t // HOUR_US)}
     assert hour_firsts(t) == hour_firsts(shuffled) == expected
+
+
+@given(st.data(), st.sampled_from([0.001, 0.5, 10.0, 600.0]))
+@settings(max_examples=100, deadline=None)
+def test_row_groups_left_unread_hold_no_kept_sample(data, keep_s):
+    t = data.draw(runs())
+    cuts = sorted(set(data.draw(st.lists(st.integers(1, max(t.size - 1, 1)), max_size=6))) - {t.size})
+    groups = np.split(t, cuts)
+    spans = [(g.size, int(g.min()), int(g.max())) for g in groups]
+    firsts = hour_firsts(t)
+    read = set(kept_row_groups(spans, firsts, keep_s))
+    for i, g in enumerate(groups):
+        if i not in read:
+            assert not thin_mask(g, firsts, keep_s).any()
+    assert read <= set(range(len(groups)))
+    # a group without statistics (spanning all time) is always read
+    assert kept_row_groups([(1, -(2**63), 2**63 - 1)], firsts, keep_s) == [0]
