@@ -58,6 +58,7 @@ from schemas.fields import RETENTION_LOG_FIELDS, polars_schema
 from schemas.plant_config import PlantConfig, RetentionSpec
 from transforms.retention import (
     KEEP,
+    REASON_THINNED,
     Decision,
     PartitionScan,
     decide,
@@ -166,6 +167,18 @@ class WarehouseState:
     """valve → ``standstill_progress.checked_through`` (µs since the epoch)."""
     logged: frozenset[str]
     """``action_id`` of the interrupted drops that are already in ``retention_log``."""
+    thinned: dict[tuple[str, date], tuple[int, int, float]] = field(default_factory=dict)
+    """(valve, date) → (size_after_bytes, applied_at µs, thin_keep_s_per_hour) of its latest thinning."""
+
+    def thinned_as_logged(self, valve_id: str, day: date, folder: Path, keep_s: float) -> bool:
+        """Whether the partition is still exactly as its latest thinning with ``keep_s`` left it
+        (same bytes, no file written since): it is then kept without being read again, so the
+        thinned days of past years cost nothing each night."""
+        entry = self.thinned.get((valve_id, day))
+        if entry is None or entry[2] != keep_s:
+            return False
+        files = partition_files(folder)
+        return sum(f.stat().st_size for f in files) == entry[0] and max(f.stat().st_mtime_ns for f in files) // 1000 <= entry[1]
 
 
 def read_state(warehouse: Path, candidates: dict[str, tuple[date, date]], action_ids: list[str]) -> WarehouseState:
@@ -193,9 +206,17 @@ def read_state(warehouse: Path, candidates: dict[str, tuple[date, date]], action
         if "standstill_progress" in have:
             checked = dict(con.execute("SELECT valve_id, epoch_us(checked_through) FROM standstill_progress").fetchall())
         logged: set[str] = set()
+        thinned: dict[tuple[str, date], tuple[int, int, float]] = {}
         if "retention_log" in have and action_ids:
             logged = {r[0] for r in con.execute("SELECT action_id FROM retention_log WHERE list_contains(?, action_id)", [action_ids]).fetchall()}
-    return WarehouseState(covers, checked, frozenset(logged))
+        if "retention_log" in have and candidates:
+            rows = con.execute(
+                "SELECT valve_id, date, size_after_bytes, epoch_us(applied_at), thin_keep_s_per_hour FROM retention_log "
+                "WHERE action = 'thin' AND list_contains(?, valve_id) QUALIFY applied_at = max(applied_at) OVER (PARTITION BY valve_id, date)",
+                [list(candidates)],
+            ).fetchall()
+            thinned = {(v, d): (b, t, k) for v, d, b, t, k in rows}
+    return WarehouseState(covers, checked, frozenset(logged), thinned)
 
 
 def scan_partition(folder: Path, cover: tuple[np.ndarray, np.ndarray], hours: bool) -> PartitionScan:
@@ -317,6 +338,9 @@ def run_retention(
             spans[vid] = (min(first, day), max(last, day))
         state = read_state(warehouse, spans, [])
         for vid, day, folder in todo:
+            if spec.mode == "thin" and state.thinned_as_logged(vid, day, folder, spec.thin_keep_s_per_hour):
+                summary.outcomes.append(PartitionOutcome(vid, day, KEEP, REASON_THINNED, partition_bytes(folder)))
+                continue
             with nullcontext() if dry_run else partition_lock(warehouse, folder / PART_NAME):
                 summary.outcomes.append(_one_partition(warehouse, vid, day, folder, spec, protected[vid], state, as_of, dry_run))
     summary.outcomes.sort(key=lambda o: (o.valve_id, o.day))

@@ -99,6 +99,14 @@ def test_thin_keeps_the_first_seconds_of_every_hour_once(base, wh, tmp_path):
     again = fr.run_retention(plant, wh, as_of=AS_OF)
     assert _fingerprint(wh) == snap
     assert {(o.valve_id, o.day) for o in again.outcomes if o.reason == "kept: already thinned"} == thinned
+    # ... without reading them: each is as its log row left it. A partition written since is read again
+    assert all(o.rows_before is None for o in again.outcomes if o.reason == "kept: already thinned")
+    folder = next(f for v, d, f in partition_folders(wh) if (v, d) == ("V002", DAYS[0]))
+    (only,) = partition_files(folder)
+    write_partition(only, pl.read_parquet(only))
+    third = {(o.valve_id, o.day): o for o in fr.run_retention(plant, wh, as_of=AS_OF).outcomes}
+    assert third[("V002", DAYS[0])].reason == "kept: already thinned" and third[("V002", DAYS[0])].rows_before == 6 * 2000
+    assert third[("V002", DAYS[1])].rows_before is None
 
 
 def test_unchecked_days_are_kept(base, wh, tmp_path):
