@@ -51,9 +51,8 @@ from flows.common.lake import (
     remove_partition_file,
     write_partition_pieces,
 )
-from flows.common.locks import file_lock
+from flows.common.locks import file_lock, partition_lock
 from flows.common.warehouse_db import connect, db_path, ensure_tables, insert_frame, query_frame
-from flows.orchestration.backfill import partition_lock
 from schemas.fields import RETENTION_LOG_FIELDS, polars_schema
 from schemas.plant_config import PlantConfig, RetentionSpec
 from transforms.retention import (
