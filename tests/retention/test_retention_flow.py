@@ -219,3 +219,27 @@ def test_standstill_progress_is_the_last_sample_the_report_read(base, wh):
     with connect(wh) as con:  # it never moves back
         mark_standstill_progress(con, "V001", datetime(2025, 1, 2, tzinfo=timezone.utc), datetime.now(timezone.utc))
     assert _q(wh, "SELECT valve_id, checked_through AS timestamp_utc FROM standstill_progress ORDER BY valve_id").equals(last)
+
+
+def test_stray_samples_get_fit_rows_so_their_day_can_go(base, wh, tmp_path):
+    """A day holding only a 1-sample and a 2-sample window: the monitor gives both fit rows (no
+    estimate), so the day is fitted and, once checked, dropped rather than kept forever."""
+    from datetime import datetime, timezone
+
+    from flows.common.config import load_plant_config
+    from flows.common.lake import partition_path
+    from flows.monitor.flow import run_monitor
+    from flows.report.flow import update_standstill
+
+    plant = plant_with(base, tmp_path, keep_days=1, mode="drop")
+    day = date(2025, 1, 6)
+    sample = read_lake(wh, ["V002"]).head(3).collect().with_columns(pl.lit(day).alias("date"))
+    times = [datetime(2025, 1, 6, 12, tzinfo=timezone.utc), datetime(2025, 1, 6, 13, tzinfo=timezone.utc), datetime(2025, 1, 6, 13, 0, 0, 1000, tzinfo=timezone.utc)]
+    write_partition(partition_path(wh, "V002", day), sample.with_columns(pl.Series("timestamp_utc", times, dtype=pl.Datetime("us", "UTC"))))
+    cfg = tmp_path / "plant.toml"
+    run_monitor(cfg, wh, ["V002"], "2025-01-06", "2025-01-07")
+    fits = _q(wh, "SELECT window_start, status FROM edge_fits WHERE window_start >= '2025-01-06'")
+    assert fits.height == 2 * 4 and fits["window_start"].n_unique() == 2 and "ok" not in set(fits["status"])
+    update_standstill(load_plant_config(cfg), wh, datetime.now(timezone.utc))
+    d = _decisions(fr.run_retention(plant, wh, valve_ids=["V002"], as_of=date(2025, 1, 8), dry_run=True))
+    assert d[("V002", day)][0] == "drop"
