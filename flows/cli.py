@@ -263,6 +263,35 @@ def serve(
 
 
 @app.command()
+def retention(
+    config: Config,
+    dry_run: Annotated[bool, typer.Option("--dry-run", help="Only print what would be dropped or thinned; write nothing.")] = False,
+    valves: Valves = None,
+    as_of: Annotated[Optional[str], typer.Option("--as-of", help="Reference date (ISO): partitions older than keep_days before it are eligible. \\[default: today, UTC]")] = None,
+    list_all: Annotated[bool, typer.Option("--list", help="Also print every partition's decision.")] = False,
+    warehouse: Warehouse = None,
+) -> None:
+    """Thin or drop lake partitions older than retention.keep_days (plant TOML) once their fits exist."""
+    import flows.retention.flow as retention_flows
+    from flows.common.config import warehouse_dir
+    from flows.ingest.flow import quiet_prefect_console
+
+    quiet_prefect_console()
+    summary = retention_flows.retention_flow(
+        config_path=str(config), warehouse=str(warehouse_dir(warehouse)), valve_ids=valves, as_of=as_of, dry_run=dry_run
+    )
+    if summary is None:
+        typer.echo(f"{config}: no [retention] table: retention is off, nothing is deleted (docs/warehouse.md, Retention)")
+        return
+    if list_all:
+        for o in summary.outcomes:
+            rows = "" if o.rows_before is None else f"  rows {o.rows_before:,} -> {o.rows_after if o.rows_after is not None else o.rows_before:,}"
+            typer.echo(f"{o.valve_id} {o.day}  {o.action:4}  {o.reason}{rows}")
+    for line in summary.lines():
+        typer.echo(line)
+
+
+@app.command()
 def discrepancy(
     config: Config,
     valve: Annotated[str, typer.Option("--valve", help="Valve id.")],

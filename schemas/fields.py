@@ -514,3 +514,31 @@ DISCREPANCY_CONDITION_FIELDS: tuple[Field, ...] = _RUN_FIELDS + (
     Field("gap_fitted", pl.Float64, "", "The same with the fitted condition.", nullable=True),
 )
 """The valve condition (α, underlap per edge) the discrepancy model used (table ``discrepancy_condition``)."""
+
+# --- raw-data retention (``valvemon retention``) ---------------------------------------------
+
+RETENTION_ACTIONS: tuple[str, ...] = ("drop", "thin")
+
+STANDSTILL_PROGRESS_FIELDS: tuple[Field, ...] = (
+    Field("valve_id", pl.Utf8, "", "Valve identifier; the table's key."),
+    Field("checked_through", UTC_US, "", "Last lake sample the report's standstill check (Eq. 9) has read (UTC)."),
+    Field("updated_at", UTC_US, "", "When the report last moved it."),
+)
+"""How far the report's standstill check has read each valve's lake (table ``standstill_progress``):
+retention keeps a partition until the check has read past it."""
+
+RETENTION_LOG_FIELDS: tuple[Field, ...] = (
+    Field("action_id", pl.Utf8, "", "Identifier of the action; the table's key (also in the name of a dropped partition's hidden folder)."),
+    _VALVE_ID,
+    Field("date", pl.Date, "", "UTC date of the lake partition."),
+    Field("action", pl.Utf8, "", "drop: the partition was deleted; thin: only the first thin_keep_s_per_hour of every hour was kept.", isin=RETENTION_ACTIONS),
+    Field("rows_before", pl.Int64, "", "Lake rows of the partition before the action.", ge=0),
+    Field("rows_after", pl.Int64, "", "Lake rows after it (0 for drop).", ge=0),
+    Field("size_before_bytes", pl.Int64, "B", "Bytes of the partition's Parquet files before the action.", ge=0),
+    Field("size_after_bytes", pl.Int64, "B", "Bytes after it (0 for drop).", ge=0),
+    Field("keep_days", pl.Int32, "d", "retention.keep_days in force.", ge=1),
+    Field("thin_keep_s_per_hour", pl.Float64, "s", "retention.thin_keep_s_per_hour in force (null for drop).", nullable=True, ge=0.0),
+    Field("as_of", pl.Date, "", "The run's reference date: partitions older than keep_days before it were eligible."),
+    Field("applied_at", UTC_US, "", "When the action was completed."),
+)
+"""Every applied retention action, one row per partition and action (table ``retention_log``)."""

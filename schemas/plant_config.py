@@ -17,6 +17,10 @@ Keys the project adds to the specification (all optional, documented in the READ
 - ``[valve_types.NAME.bounds]``: the condition bounds of step 5b (:class:`ConditionBounds`,
   every key optional with a documented default); a valve may override single keys in its own
   ``[valves.bounds]`` table.
+- ``[retention]`` (optional; absent = nothing is ever deleted): ``keep_days``, ``mode``
+  (``"drop"`` or ``"thin"``) and ``thin_keep_s_per_hour`` (:class:`RetentionSpec`), what
+  ``valvemon retention`` and the nightly run do with old lake partitions (``docs/warehouse.md``,
+  "Retention").
 """
 
 from __future__ import annotations
@@ -181,6 +185,24 @@ class ValveSpec:
 
 
 @dataclass(frozen=True)
+class RetentionSpec:
+    """What becomes of lake partitions older than ``keep_days`` once their fits exist
+    (``valvemon retention``; ``docs/warehouse.md``, "Retention")."""
+
+    keep_days: int = 90
+    """Days (UTC dates before the run's date) whose lake partitions stay whole. [d]"""
+    mode: str = "thin"
+    """``"thin"``: keep the first ``thin_keep_s_per_hour`` of every hour with data; ``"drop"``:
+    delete the whole partition."""
+    thin_keep_s_per_hour: float = 10.0
+    """Seconds kept from the first sample of each UTC hour that has data (thin mode); 10 s is
+    one periodic snapshot, ~0.3 % of a continuous hour. [s]"""
+
+
+RETENTION_MODES: tuple[str, ...] = ("thin", "drop")
+
+
+@dataclass(frozen=True)
 class PlantConfig:
     """A whole plant: export layout, valve types and monitored valves."""
 
@@ -189,6 +211,8 @@ class PlantConfig:
     export: ExportSpec
     valve_types: dict[str, ValveDesign]
     valves: tuple[ValveSpec, ...]
+    retention: RetentionSpec | None = None
+    """None: no retention configured, the lake is never thinned or dropped."""
 
     def valve(self, valve_id: str) -> ValveSpec:
         """The valve with this id (``KeyError`` naming it if absent)."""
@@ -293,6 +317,23 @@ def _parse_export(raw: Any) -> ExportSpec:
         raise ConfigError("export.max_gap_s: must be at least one sample period")
     kw["duplicate_rule"] = _str(t.get("duplicate_rule", "last"), "export.duplicate_rule", ("last", "first", "error"))
     return ExportSpec(**kw)
+
+
+def _parse_retention(raw: Any) -> RetentionSpec:
+    t = _table(raw, "retention")
+    _no_unknown(t, {"keep_days", "mode", "thin_keep_s_per_hour"}, "retention")
+    days = _required(t, "keep_days", "retention")
+    if isinstance(days, bool) or not isinstance(days, int) or days < 1:
+        raise ConfigError(f"retention.keep_days: expected a whole number of days >= 1, got {days!r}")
+    mode = _str(t.get("mode", RetentionSpec.mode), "retention.mode", RETENTION_MODES)
+    keep_s = RetentionSpec.thin_keep_s_per_hour
+    if "thin_keep_s_per_hour" in t:
+        if mode != "thin":
+            raise ConfigError(f"retention.thin_keep_s_per_hour: only used with mode = 'thin' (mode is {mode!r})")
+        keep_s = _number(t["thin_keep_s_per_hour"], "retention.thin_keep_s_per_hour", 0, 3600, open_lo=True)
+        if keep_s >= 3600:
+            raise ConfigError(f"retention.thin_keep_s_per_hour: {keep_s:g} must be < 3600 (a whole hour thins nothing)")
+    return RetentionSpec(days, mode, keep_s)
 
 
 _DESIGN_KEYS = {
@@ -482,7 +523,7 @@ def parse_plant_config(data: dict) -> PlantConfig:
         For unknown keys, missing required keys, impossible values, unknown units, duplicate
         valve ids or a historian tag used twice; the message starts with the key's path.
     """
-    _no_unknown(_table(data, "top level"), {"plant", "export", "valve_types", "valves"}, "")
+    _no_unknown(_table(data, "top level"), {"plant", "export", "valve_types", "valves", "retention"}, "")
     plant = _table(_required(data, "plant", ""), "plant")
     _no_unknown(plant, {"name", "timezone"}, "plant")
     name = _str(_required(plant, "name", "plant"), "plant.name")
@@ -519,7 +560,8 @@ def parse_plant_config(data: dict) -> PlantConfig:
         clash = reserved & set(seen_tags)
         if clash:
             raise ConfigError(f"export.timestamp_column: {clash.pop()!r} is also a tag name")
-    return PlantConfig(name, tz_name, export, types, valves)
+    retention = _parse_retention(data["retention"]) if "retention" in data else None
+    return PlantConfig(name, tz_name, export, types, valves, retention)
 
 
 # --- writing back ----------------------------------------------------------------------------
@@ -591,9 +633,13 @@ def plant_config_to_dict(config: PlantConfig) -> dict:
             d["scenario"] = v.scenario
         d["tags"] = {s: {"tag": t.tag, "unit": t.unit} for s, t in v.tags.items()}
         valves.append(d)
-    return {
+    out = {
         "plant": {"name": config.name, "timezone": config.timezone},
         "export": export,
         "valve_types": {n: _design_dict(t, _DESIGN_KEYS) for n, t in config.valve_types.items()},
         "valves": valves,
     }
+    r = config.retention
+    if r is not None:
+        out["retention"] = {"keep_days": r.keep_days, "mode": r.mode} | ({"thin_keep_s_per_hour": r.thin_keep_s_per_hour} if r.mode == "thin" else {})
+    return out

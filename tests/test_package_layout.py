@@ -87,7 +87,7 @@ def test_circle_detector_finds_the_old_circle():
 
 
 def test_flows_is_laid_out_by_stage():
-    stages = {"common", "simulate", "ingest", "monitor", "report", "discrepancy", "orchestration"}
+    stages = {"common", "simulate", "ingest", "monitor", "report", "discrepancy", "orchestration", "retention"}
     folders = {p.name for p in (ROOT / "flows").iterdir() if p.is_dir() and (p / "__init__.py").exists()}
     assert stages <= folders
     loose = sorted(p.name for p in (ROOT / "flows").glob("*.py"))

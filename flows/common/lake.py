@@ -17,9 +17,11 @@ Storage choices (codec, float width, row groups) are measured and justified in
 from __future__ import annotations
 
 import os
+import shutil
 import uuid
 from datetime import date, datetime, timezone
 from pathlib import Path
+from typing import Iterable, Iterator
 
 import numpy as np
 import polars as pl
@@ -111,10 +113,23 @@ def _fsync_dir(folder: Path) -> None:
         os.close(fd)
 
 
-def _write_temp(tmp: Path, frame: pl.DataFrame, gap_us: int) -> None:
-    """Write the frame as Parquet to ``tmp``, flushed and fsynced."""
-    table = frame.to_arrow().cast(SENSOR_ARROW_SCHEMA)
-    t_us = frame["timestamp_utc"].to_physical().to_numpy()
+def _coalesced(frames: Iterable[pl.DataFrame], min_rows: int) -> Iterator[pl.DataFrame]:
+    """The frames joined into pieces of at least ``min_rows`` rows (the last may be shorter)."""
+    buffer: list[pl.DataFrame] = []
+    n = 0
+    for frame in frames:
+        buffer.append(frame)
+        n += frame.height
+        if n >= min_rows:
+            yield pl.concat(buffer) if len(buffer) > 1 else buffer[0]
+            buffer, n = [], 0
+    if buffer:
+        yield pl.concat(buffer) if len(buffer) > 1 else buffer[0]
+
+
+def _write_temp(tmp: Path, frames: Iterable[pl.DataFrame], gap_us: int) -> None:
+    """Write the frames, in order, as one Parquet file to ``tmp``, flushed and fsynced; pieces
+    are joined up to :data:`ROW_GROUP_MAX_ROWS` rows before being cut into row groups."""
     with open(tmp, "wb") as fh:
         with pq.ParquetWriter(
             fh,
@@ -126,8 +141,11 @@ def _write_temp(tmp: Path, frame: pl.DataFrame, gap_us: int) -> None:
             write_statistics=STATISTICS_COLUMNS,
             sorting_columns=[pq.SortingColumn(SENSOR_ARROW_SCHEMA.get_field_index("timestamp_utc"))],
         ) as writer:
-            for a, b in row_group_bounds(t_us, gap_us):
-                writer.write_table(table.slice(a, b - a), row_group_size=b - a)
+            for frame in _coalesced(frames, ROW_GROUP_MAX_ROWS):
+                table = frame.to_arrow().cast(SENSOR_ARROW_SCHEMA)
+                t_us = frame["timestamp_utc"].to_physical().to_numpy()
+                for a, b in row_group_bounds(t_us, gap_us):
+                    writer.write_table(table.slice(a, b - a), row_group_size=b - a)
         fh.flush()
         os.fsync(fh.fileno())
 
@@ -150,12 +168,18 @@ def write_partition(path: Path, frame: pl.DataFrame, *, gap_us: int = ROW_GROUP_
     gap_us : int
         Window separation for the row groups (``export.max_gap_s`` in µs).
     """
+    write_partition_pieces(path, [frame], gap_us=gap_us)
+
+
+def write_partition_pieces(path: Path, frames: Iterable[pl.DataFrame], *, gap_us: int = ROW_GROUP_GAP_US) -> None:
+    """:func:`write_partition` for content that arrives in consecutive time-sorted pieces (e.g.
+    streamed from a file being thinned): memory holds one row group's worth, not the file."""
     folder = path.parent
     folder.mkdir(parents=True, exist_ok=True)
     _remove_stale_temps(folder)
     tmp = folder / f".{PART_NAME}.{uuid.uuid4().hex}.tmp"
     try:
-        _write_temp(tmp, frame, gap_us)
+        _write_temp(tmp, frames, gap_us)
         _commit(tmp, path)
     except BaseException:
         # an ordinary exception: tidy up; a killed process leaves the file to the next write
@@ -176,16 +200,9 @@ def list_partitions(warehouse: str | Path, valve_ids: list[str] | None = None, s
 
     ``start`` (inclusive) and ``end`` (exclusive) select the UTC dates that can hold such times.
     """
-    root = lake_root(warehouse)
-    if not root.exists():
-        return []
     t0, t1 = utc_instant(start), utc_instant(end)
-    wanted = set(valve_ids) if valve_ids is not None else None
     out = []
-    for vdir in sorted(root.glob("valve_id=*")):
-        vid = vdir.name.split("=", 1)[1]
-        if wanted is not None and vid not in wanted:
-            continue
+    for vid, vdir in valve_folders(warehouse, valve_ids):
         for ddir in sorted(vdir.glob("date=*")):
             day = date.fromisoformat(ddir.name.split("=", 1)[1])
             if t0 is not None and day < t0.date():
@@ -195,6 +212,17 @@ def list_partitions(warehouse: str | Path, valve_ids: list[str] | None = None, s
             path = ddir / PART_NAME
             if path.exists():
                 out.append((vid, day, path))
+    return out
+
+
+def valve_folders(warehouse: str | Path, valve_ids: list[str] | None = None) -> list[tuple[str, Path]]:
+    """``(valve_id, folder)`` of the lake's ``valve_id=`` folders, optionally only some valves."""
+    wanted = set(valve_ids) if valve_ids is not None else None
+    out = []
+    for vdir in sorted(lake_root(warehouse).glob("valve_id=*")):
+        vid = vdir.name.split("=", 1)[1]
+        if wanted is None or vid in wanted:
+            out.append((vid, vdir))
     return out
 
 
@@ -231,3 +259,98 @@ def read_lake(
 
 def _midnight(t: datetime) -> bool:
     return t.hour == t.minute == t.second == t.microsecond == 0
+
+
+# --- partitions as folders (retention) ------------------------------------------------------
+
+DROPPED_SUFFIX = ".dropped"
+"""A partition being dropped is first renamed to ``.date=<day>.<action id>.dropped`` beside the
+others (hidden: no ``date=*`` glob matches it), then deleted (:func:`drop_partition`)."""
+
+
+def partition_folders(warehouse: str | Path, valve_ids: list[str] | None = None) -> list[tuple[str, date, Path]]:
+    """``(valve_id, date, folder)`` of every ``date=`` folder of the lake holding a ``*.parquet``
+    file: the partition as retention sees it, whatever files the day is split into."""
+    out = []
+    for vid, vdir in valve_folders(warehouse, valve_ids):
+        for ddir in sorted(vdir.glob("date=*")):
+            if ddir.is_dir() and partition_files(ddir):
+                out.append((vid, date.fromisoformat(ddir.name.split("=", 1)[1]), ddir))
+    return out
+
+
+def partition_files(folder: Path) -> list[Path]:
+    """The partition's data files: every visible ``*.parquet`` in its ``date=`` folder."""
+    return sorted(p for p in folder.glob("*.parquet") if not p.name.startswith("."))
+
+
+def partition_bytes(folder: Path) -> int:
+    """Bytes of the partition's data files. [B]"""
+    return sum(p.stat().st_size for p in partition_files(folder))
+
+
+def partition_rows(folder: Path) -> int:
+    """Rows of the partition, from the files' footers (no data is read)."""
+    return sum(pq.ParquetFile(p).metadata.num_rows for p in partition_files(folder))
+
+
+def iter_file_batches(
+    path: Path, columns: list[str] | None = None, batch_rows: int = ROW_GROUP_MAX_ROWS, row_groups: list[int] | None = None,
+) -> Iterator[pl.DataFrame]:
+    """One lake file in batches of at most ``batch_rows`` rows (all columns in the canonical
+    schema, or only ``columns``; all row groups or only ``row_groups``): memory holds one batch,
+    never the file."""
+    pf = pq.ParquetFile(path)
+    schema = {c: SENSOR_POLARS_SCHEMA[c] for c in (columns or SENSOR_POLARS_SCHEMA.names())}
+    if row_groups is not None and not row_groups:
+        return
+    for batch in pf.iter_batches(batch_size=batch_rows, columns=columns, row_groups=row_groups):
+        yield pl.from_arrow(batch).cast(schema)
+
+
+def row_group_spans(path: Path) -> list[tuple[int, int, int]]:
+    """``(rows, first, last)`` of each row group of a lake file: its rows and the range of its
+    ``timestamp_utc`` (µs since the epoch) from the footer's statistics (no data is read); a
+    group without statistics spans all time."""
+    md = pq.ParquetFile(path).metadata
+    col = md.schema.to_arrow_schema().get_field_index("timestamp_utc")
+    out = []
+    for i in range(md.num_row_groups):
+        rg = md.row_group(i)
+        st = rg.column(col).statistics
+        known = st is not None and st.has_min_max
+        out.append((rg.num_rows, int(st.min_raw) if known else -(2**63), int(st.max_raw) if known else 2**63 - 1))
+    return out
+
+
+def drop_partition(folder: Path, action_id: str) -> Path:
+    """Take a partition out of the lake in one atomic step: rename its ``date=`` folder to a
+    hidden name in the same parent and fsync the parent. Returns the hidden folder, which
+    :func:`remove_dropped` deletes (a crash in between leaves it to :func:`dropped_folders`)."""
+    hidden = folder.parent / f".{folder.name}.{action_id}{DROPPED_SUFFIX}"
+    os.rename(folder, hidden)
+    _fsync_dir(folder.parent)
+    return hidden
+
+
+def dropped_folders(warehouse: str | Path, valve_ids: list[str] | None = None) -> list[tuple[str, date, str, Path]]:
+    """``(valve_id, date, action_id, folder)`` of partitions renamed by :func:`drop_partition`
+    whose deletion has not finished (a killed run)."""
+    out = []
+    for vid, vdir in valve_folders(warehouse, valve_ids):
+        for hidden in sorted(vdir.glob(f".date=*{DROPPED_SUFFIX}")):
+            day, action_id = hidden.name[len(".date="):-len(DROPPED_SUFFIX)].split(".", 1)
+            out.append((vid, date.fromisoformat(day), action_id, hidden))
+    return out
+
+
+def remove_dropped(hidden: Path) -> None:
+    """Delete a dropped partition's hidden folder (:func:`drop_partition`) and fsync the parent."""
+    shutil.rmtree(hidden)
+    _fsync_dir(hidden.parent)
+
+
+def remove_partition_file(path: Path) -> None:
+    """Delete one of a partition's files (thinning left nothing of it) and fsync the folder."""
+    path.unlink()
+    _fsync_dir(path.parent)

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import fcntl
-from contextlib import contextmanager
+from contextlib import AbstractContextManager, contextmanager
 from pathlib import Path
 from typing import Iterator
 
@@ -30,3 +30,11 @@ def file_lock(path: Path, busy: str | None = None) -> Iterator[None]:
         yield
     finally:
         fh.close()
+
+
+def partition_lock(warehouse: Path, target: Path) -> AbstractContextManager:
+    """Exclusive lock on one lake partition (``target``: a file in its ``date=`` folder) while it
+    is read and rewritten: by the backfill's ingest units (read-merge-write) and by retention
+    (``WAREHOUSE/.locks/lake/sensors/valve_id=…/date=….lock``)."""
+    rel = target.parent.relative_to(Path(warehouse))
+    return file_lock(Path(warehouse) / ".locks" / rel.parent / f"{rel.name}.lock")

@@ -67,7 +67,7 @@ from flows.common.config import load_plant_config
 from flows.common.errors import ValvemonError
 from flows.common.instants import utc_instant
 from flows.common.lake import SENSOR_POLARS_SCHEMA, list_partitions
-from flows.common.locks import file_lock
+from flows.common.locks import file_lock, partition_lock
 from flows.common.warehouse_db import connect, ensure_ingest_tables, insert_frame, migrate_hash_column, query_frame
 from flows.ingest.flow import (
     LEGACY_HASH_PREFIX,
@@ -241,16 +241,6 @@ def export_in_span(path: Path, start: datetime, end: datetime) -> bool:
 
 
 # --- ingest unit (runs on a worker) -----------------------------------------------------------
-
-
-def _lock_path(warehouse: Path, target: Path) -> Path:
-    rel = target.parent.relative_to(Path(warehouse))
-    return Path(warehouse) / ".locks" / rel.parent / f"{rel.name}.lock"
-
-
-def partition_lock(warehouse: Path, target: Path) -> AbstractContextManager:
-    """Exclusive lock on one lake partition for a read-merge-write (``WAREHOUSE/.locks/...``)."""
-    return file_lock(_lock_path(warehouse, target))
 
 
 @dataclass

@@ -8,7 +8,10 @@
    schedule's time zone (default the plant's) — for all valves, and the days of any newly
    ingested file that arrived late, one unit per valve and day (the backfill's machinery,
    :mod:`flows.orchestration.backfill`, so a failed night is simply continued by the next run);
-3. refreshes the report (:func:`flows.report.flow.report_flow`: views, snapshot, pictures, HTML).
+3. refreshes the report (:func:`flows.report.flow.report_flow`: views, snapshot, pictures, HTML);
+4. applies the plant's ``[retention]``, if it has one (:func:`flows.retention.flow.retention_flow`,
+   as of the day after the monitored one): after monitoring and the report, because a partition
+   may go only once its windows are fitted and the report's standstill check has read it.
 
 :func:`serve_nightly` registers it as a deployment with a cron schedule on the Prefect server
 ``PREFECT_API_URL`` names and serves it: this process polls the server and runs each scheduled
@@ -76,7 +79,7 @@ def nightly_flow(
     dask_address: str | None = None,
     report: bool = True,
 ) -> dict:
-    """Ingest the inbox, monitor the previous day, refresh the report (module doc).
+    """Ingest the inbox, monitor the previous day, refresh the report, apply retention (module doc).
 
     ``day`` (ISO date) overrides "the previous day" for a manual run.
     """
@@ -99,9 +102,11 @@ def nightly_flow(
         )  # fmt: skip
     except BackfillFailed as exc:  # some units failed: still report what is there, then fail
         failure, summary = exc, exc.summary
-    result = {"day": d.isoformat(), "timezone": tz, "summary": summary.line(), "report": None}
+    result = {"day": d.isoformat(), "timezone": tz, "summary": summary.line(), "report": None, "retention": None}
     if report:
         result["report"] = str(refresh_report(config_path, warehouse))
+    if config.retention is not None:
+        result["retention"] = apply_retention(config_path, warehouse, d + timedelta(days=1))
     if failure is not None:
         raise failure
     return result
@@ -112,6 +117,13 @@ def refresh_report(config_path: str, warehouse: str) -> Path:
     from flows.report.flow import report_flow
 
     return report_flow(config_path=config_path, warehouse=warehouse).html
+
+
+def apply_retention(config_path: str, warehouse: str, as_of: date) -> str:
+    """The retention step of the nightly run (a subflow): the summary's last line."""
+    from flows.retention.flow import retention_flow
+
+    return retention_flow(config_path=config_path, warehouse=warehouse, as_of=as_of.isoformat()).lines()[-1]
 
 
 def serve_nightly(

@@ -5,7 +5,8 @@
 1. writes each configured valve's condition bounds (``[valve_types.NAME.bounds]``, with the
    Eq. 9 rest residual of its design) to table ``condition_bounds``;
 2. brings table ``standstill_checks`` up to date from the lake (Eq. 9 per window,
-   :mod:`flows.report.standstill`; only windows from the latest one already checked onwards are read);
+   :mod:`flows.report.standstill`; only windows from the latest one already checked onwards are read)
+   and records how far it has read in ``standstill_progress`` (retention waits for it);
 3. creates or refreshes the ``sql/`` views (:mod:`flows.report.views`) and publishes the read-only
    snapshot ``WAREHOUSE/snapshot/valvemon.duckdb`` that readers query;
 4. reads the views from the snapshot and writes the BI hand-off (:mod:`flows.report.export`), the PNG
@@ -99,8 +100,19 @@ def update_standstill(config: PlantConfig, warehouse: Path, now: datetime) -> in
                 with transaction(con):
                     con.execute("DELETE FROM standstill_checks WHERE valve_id = ? AND window_start BETWEEN ? AND ?", [v.id, lo, hi])
                     insert_frame(con, "standstill_checks", frame)
+                    mark_standstill_progress(con, v.id, hi, now)
             added += frame.height
     return added
+
+
+def mark_standstill_progress(con, valve_id: str, checked_through: datetime, now: datetime) -> None:
+    """Record that the standstill check has read the valve's lake up to ``checked_through``
+    (table ``standstill_progress``; retention keeps a partition until it has)."""
+    con.execute("DELETE FROM standstill_progress WHERE valve_id = ? AND checked_through <= ?", [valve_id, checked_through])
+    con.execute(
+        "INSERT INTO standstill_progress SELECT ?, ?, ? WHERE NOT EXISTS (SELECT 1 FROM standstill_progress WHERE valve_id = ?)",
+        [valve_id, checked_through, now, valve_id],
+    )
 
 
 def refresh(config: PlantConfig, warehouse: Path, now: datetime) -> tuple[list[str], Path]:

@@ -36,7 +36,7 @@ import duckdb
 
 from flows.common.errors import ValvemonError
 from flows.common.warehouse_db import DB_NAME, db_path, ensure_tables, transaction
-from schemas.fields import CONDITION_BOUNDS_FIELDS, STANDSTILL_FIELDS
+from schemas.fields import CONDITION_BOUNDS_FIELDS, STANDSTILL_FIELDS, STANDSTILL_PROGRESS_FIELDS
 
 SQL_DIR = Path(__file__).resolve().parents[2] / "sql"
 """The repository's ``sql/`` folder."""
@@ -47,7 +47,7 @@ LAYERS: tuple[str, ...] = ("staging", "core", "report")
 SNAPSHOT_DIR = "snapshot"
 """Folder of the published read-only copy of the database inside the warehouse."""
 
-REPORT_TABLES = {"condition_bounds": CONDITION_BOUNDS_FIELDS, "standstill_checks": STANDSTILL_FIELDS}
+REPORT_TABLES = {"condition_bounds": CONDITION_BOUNDS_FIELDS, "standstill_checks": STANDSTILL_FIELDS, "standstill_progress": STANDSTILL_PROGRESS_FIELDS}
 """Tables the report writes (besides the monitor's), created empty if missing so the views bind."""
 
 
@@ -117,7 +117,7 @@ def ordered_views(views: dict[str, ViewFile]) -> list[ViewFile]:
 
 
 def ensure_report_tables(con: duckdb.DuckDBPyConnection) -> None:
-    """Create ``condition_bounds`` and ``standstill_checks`` (and the monitor's tables) if missing."""
+    """Create ``condition_bounds``, ``standstill_checks``, ``standstill_progress`` (and the monitor's tables) if missing."""
     from flows.monitor.flow import ensure_monitor_tables
 
     ensure_monitor_tables(con)

@@ -78,3 +78,37 @@ def test_backfill_command_checks_its_options(archive, tmp_path):
     assert "exclude each other" in str(res.exception)
     res = runner.invoke(app, [*base, "--from", "2025-01-01", "--to", "2025-01-02", "--dask-address", "tcp://127.0.0.1:9"])
     assert "cannot reach the Dask scheduler" in str(res.exception)
+
+
+@pytest.mark.slow
+def test_nightly_applies_retention_after_monitoring_and_the_report(prefect_server, archive, tmp_path, monkeypatch):
+    """keep_days 1, drop: the night after 2025-01-03 drops the two older days, which are fitted and
+    were read by the standstill check of the report step (here only that part of the report)."""
+    import dataclasses
+
+    import tomli_w
+
+    from flows.common.config import load_plant_config
+    from flows.common.lake import partition_folders
+    from flows.report.flow import update_standstill
+    from schemas.plant_config import RetentionSpec, plant_config_to_dict
+
+    config = dataclasses.replace(load_plant_config(archive / "plant.toml"), retention=RetentionSpec(keep_days=1, mode="drop"))
+    cfg = tmp_path / "plant.toml"
+    cfg.write_bytes(tomli_w.dumps(plant_config_to_dict(config)).encode())
+    wh = tmp_path / "wh"
+    steps = []
+
+    def report_step(config_path, warehouse):
+        steps.append("report")
+        update_standstill(load_plant_config(config_path), wh, datetime.now(UTC))
+        return "report.html"
+
+    monkeypatch.setattr(nightly, "refresh_report", report_step)
+    out = nightly.nightly_flow(config_path=str(cfg), exports=str(archive / "exports"), warehouse=str(wh), timezone_name="UTC", day="2025-01-03")
+    assert steps == ["report"] and out["retention"].startswith("freed ")
+    assert sorted({d for _, d, _ in partition_folders(wh)}) == [date(2025, 1, 3)]
+    log = table(wh, "retention_log")
+    assert sorted(zip(log["valve_id"], log["date"])) == [(v, date(2025, 1, d)) for v in ("V001", "V002") for d in (1, 2)]
+    assert set(log["as_of"]) == {date(2025, 1, 4)} and set(log["action"]) == {"drop"}
+    assert table(wh, "edge_fits").height == 2 * 3 * 4 * 4  # the fits of the dropped days stay

@@ -194,3 +194,38 @@ def test_valve_bounds_errors_name_the_valve(raw):
     raw["valves"][0]["bounds"] = {"alpha_fault_low": 0.9}
     with pytest.raises(ConfigError, match=r"valves\[0\]\.bounds\.alpha_wear_low: 0\.8 must be >= alpha_fault_low = 0\.9"):
         parse_plant_config(raw)
+
+
+def test_retention_is_off_unless_configured_and_round_trips(raw, tmp_path):
+    assert parse_plant_config(raw).retention is None
+    raw["retention"] = {"keep_days": 30}
+    r = parse_plant_config(raw).retention
+    assert (r.keep_days, r.mode, r.thin_keep_s_per_hour) == (30, "thin", 10.0)
+    for table in ({"keep_days": 7, "mode": "drop"}, {"keep_days": 90, "mode": "thin", "thin_keep_s_per_hour": 2.5}):
+        raw["retention"] = table
+        cfg = parse_plant_config(raw)
+        path = tmp_path / "plant.toml"
+        path.write_bytes(tomli_w.dumps(plant_config_to_dict(cfg)).encode())
+        assert load_plant_config(path) == cfg and tomllib.loads(path.read_text())["retention"] == table | ({"thin_keep_s_per_hour": 2.5} if table["mode"] == "thin" else {})
+
+
+@pytest.mark.parametrize(
+    "table, message",
+    [
+        ({}, "retention.keep_days: missing required key"),
+        ({"keep_days": 0}, "retention.keep_days: expected a whole number of days >= 1, got 0"),
+        ({"keep_days": 1.5}, "retention.keep_days: expected a whole number of days >= 1, got 1.5"),
+        ({"keep_days": True}, "retention.keep_days: expected a whole number"),
+        ({"keep_days": 9, "mode": "delete"}, "retention.mode: 'delete' is not one of 'thin', 'drop'"),
+        ({"keep_days": 9, "mode": "drop", "thin_keep_s_per_hour": 10}, "retention.thin_keep_s_per_hour: only used with mode = 'thin'"),
+        ({"keep_days": 9, "thin_keep_s_per_hour": 0}, "retention.thin_keep_s_per_hour: 0 must be > 0"),
+        ({"keep_days": 9, "thin_keep_s_per_hour": 3600}, "retention.thin_keep_s_per_hour: 3600 must be < 3600"),
+        ({"keep_days": 9, "keep_hours": 3}, "retention.keep_hours: unknown key"),
+        ("90 days", "retention: expected a table"),
+    ],
+)
+def test_broken_retention_names_the_key(raw, table, message):
+    raw["retention"] = table
+    with pytest.raises(ConfigError) as err:
+        parse_plant_config(raw)
+    assert message in str(err.value)

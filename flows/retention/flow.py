@@ -1,0 +1,390 @@
+"""``valvemon retention``: thin or drop old lake partitions once their fits exist.
+
+For every lake partition (one valve, one UTC ``date=`` folder, all its ``*.parquet`` files) of
+the plant's valves, :func:`run_retention` decides with :func:`transforms.retention.decide`
+(older than ``keep_days``, not a commissioning day, every sample inside a fitted window, read by
+the standstill check; thin mode: not thinned yet) and, unless it is a dry run, applies it:
+
+* **drop**: the ``date=`` folder is renamed to a hidden name beside it and the parent fsynced
+  (the commit point: from then on no reader sees the partition), the action is recorded in
+  ``retention_log``, then the hidden folder is deleted. A run killed after the rename leaves the
+  hidden folder; the next run deletes it (and records it first if the record is missing).
+* **thin**: each file of the partition is streamed batch by batch (memory holds one batch, never
+  a day) and replaced atomically by its kept rows (:func:`flows.common.lake.write_partition_pieces`);
+  then the action is recorded. A run killed in between leaves some files thinned and some not,
+  never a mix within a file; the next run thins the rest.
+
+The lake and the database are read first; a dry run (and the summary it prints) writes nothing,
+not even the database's tables. Only the hidden folders of interrupted drops are handled before
+anything else (a dry run reports them). One retention run at a time per warehouse
+(``WAREHOUSE/.retention.lock``); each partition is locked like an ingest's merge while it is read
+and changed, so an ingest of late data into the same day waits.
+
+``docs/warehouse.md``, "Retention", explains the rules and the storage arithmetic.
+"""
+
+from __future__ import annotations
+
+import uuid
+from contextlib import nullcontext
+from dataclasses import dataclass, field
+from datetime import date, datetime, timedelta, timezone
+from pathlib import Path
+
+import numpy as np
+import polars as pl
+from prefect import flow
+
+from flows.common.config import load_plant_config
+from flows.common.errors import ValvemonError
+from flows.common.lake import (
+    PART_NAME,
+    dropped_folders,
+    drop_partition,
+    iter_file_batches,
+    partition_bytes,
+    partition_files,
+    partition_folders,
+    partition_rows,
+    remove_dropped,
+    row_group_spans,
+    remove_partition_file,
+    write_partition_pieces,
+)
+from flows.common.locks import file_lock, partition_lock
+from flows.common.warehouse_db import connect, db_path, ensure_tables, insert_frame, query_frame
+from schemas.fields import RETENTION_LOG_FIELDS, polars_schema
+from schemas.plant_config import PlantConfig, RetentionSpec
+from transforms.retention import (
+    KEEP,
+    REASON_THINNED,
+    Decision,
+    PartitionScan,
+    decide,
+    decide_fitted,
+    decide_unscanned,
+    fitted_cover,
+    kept_row_groups,
+    protected_days,
+    thin_mask,
+)
+
+RETENTION_TABLES = {"retention_log": (RETENTION_LOG_FIELDS, "action_id")}
+"""Table → (fields, primary key)."""
+
+TIME = "timestamp_utc"
+
+
+@dataclass
+class PartitionOutcome:
+    """What retention did (or, in a dry run, would do) to one partition."""
+
+    valve_id: str
+    day: date
+    action: str
+    """drop, thin or keep."""
+    reason: str
+    bytes_before: int
+    rows_before: int | None = None
+    """None: kept without reading it (recent or a commissioning day)."""
+    rows_after: int | None = None
+    bytes_after: int | None = None
+    """In a dry run of a thinning: estimated in proportion to the rows."""
+
+
+@dataclass
+class RetentionSummary:
+    """One retention run: its settings and every partition's outcome."""
+
+    as_of: date
+    spec: RetentionSpec
+    dry_run: bool
+    outcomes: list[PartitionOutcome] = field(default_factory=list)
+    interrupted: list[tuple[str, date]] = field(default_factory=list)
+    """Drops a killed run had committed (renamed) but not finished; completed by this run
+    (reported only, in a dry run)."""
+
+    def groups(self) -> list[tuple[str, str, int, int, int, int, int]]:
+        """(action, reason, partitions, rows before, rows after, bytes before, bytes after) per
+        reason, acted-on groups first. Rows of unread partitions count from the files' footers."""
+        acc: dict[tuple[str, str], list[int]] = {}
+        for o in self.outcomes:
+            g = acc.setdefault((o.action, o.reason), [0, 0, 0, 0, 0])
+            before = o.rows_before or 0
+            g[0] += 1
+            g[1] += before
+            g[2] += before if o.rows_after is None else o.rows_after
+            g[3] += o.bytes_before
+            g[4] += o.bytes_before if o.bytes_after is None else o.bytes_after
+        order = {"drop": 0, "thin": 1, KEEP: 2}
+        return [(a, r, *v) for (a, r), v in sorted(acc.items(), key=lambda kv: (order[kv[0][0]], kv[0][1]))]
+
+    def freed_bytes(self) -> int:
+        """Bytes the actions free (estimated for thinning in a dry run). [B]"""
+        return sum(o.bytes_before - (o.bytes_after or 0) for o in self.outcomes if o.action != KEEP)
+
+    def lines(self) -> list[str]:
+        """The summary the command prints."""
+        s = self.spec
+        how = f"mode {s.mode}" + (f", first {s.thin_keep_s_per_hour:g} s of every hour kept" if s.mode == "thin" else "")
+        head = f"retention as of {self.as_of} (keep_days {s.keep_days}, {how})" + (": DRY RUN, nothing changed" if self.dry_run else "")
+        out = [head]
+        for action, reason, n, r0, r1, b0, b1 in self.groups():
+            verb = action if action != KEEP else "keep"
+            if action == KEEP:
+                out.append(f"  {verb:5} {n:6d} partitions  {reason}  ({_size(b0)})")
+            else:
+                approx = "≈" if self.dry_run and action == "thin" else ""
+                out.append(f"  {verb:5} {n:6d} partitions  {reason}  rows {r0:,} -> {r1:,}  bytes {_size(b0)} -> {approx}{_size(b1)}")
+        if self.interrupted:
+            verb = "would complete" if self.dry_run else "completed"
+            out.append(f"  {verb} {len(self.interrupted)} drop(s) a killed run had begun: " + ", ".join(f"{v} {d}" for v, d in self.interrupted))
+        if not self.outcomes:
+            out.append("  no lake partitions")
+        out.append(("would free " if self.dry_run else "freed ") + _size(self.freed_bytes()))
+        return out
+
+
+def _size(n: int) -> str:
+    for unit, scale in (("GB", 1e9), ("MB", 1e6), ("kB", 1e3)):
+        if n >= scale:
+            return f"{n / scale:.2f} {unit}"
+    return f"{n} B"
+
+
+def _us(t: datetime) -> int:
+    return int((t - datetime(1970, 1, 1, tzinfo=timezone.utc)) / timedelta(microseconds=1))
+
+
+@dataclass(frozen=True)
+class WarehouseState:
+    """What retention reads from the database, once, before touching the lake."""
+
+    covers: dict[str, tuple[np.ndarray, np.ndarray]]
+    """valve → its fitted windows (:func:`transforms.retention.fitted_cover`) over the candidate days."""
+    checked_through_us: dict[str, int]
+    """valve → ``standstill_progress.checked_through`` (µs since the epoch)."""
+    logged: frozenset[str]
+    """``action_id`` of the interrupted drops that are already in ``retention_log``."""
+    thinned: dict[tuple[str, date], tuple[int, int, float]] = field(default_factory=dict)
+    """(valve, date) → (size_after_bytes, applied_at µs, thin_keep_s_per_hour) of its latest thinning."""
+
+    def thinned_as_logged(self, valve_id: str, day: date, folder: Path, keep_s: float) -> bool:
+        """Whether the partition is still exactly as its latest thinning with ``keep_s`` left it
+        (same bytes, no file written since): it is then kept without being read again, so the
+        thinned days of past years cost nothing each night."""
+        entry = self.thinned.get((valve_id, day))
+        if entry is None or entry[2] != keep_s:
+            return False
+        files = partition_files(folder)
+        return sum(f.stat().st_size for f in files) == entry[0] and max(f.stat().st_mtime_ns for f in files) // 1000 <= entry[1]
+
+
+def read_state(warehouse: Path, candidates: dict[str, tuple[date, date]], action_ids: list[str]) -> WarehouseState:
+    """Fitted windows of each valve over its candidate days ``[first, last]``, the standstill
+    progress and which interrupted drops are logged; read-only (a warehouse without a database or
+    without the tables has none of them)."""
+    empty = (np.zeros(0, np.int64), np.zeros(0, np.int64))
+    covers = {v: empty for v in candidates}
+    if not db_path(warehouse).exists():
+        return WarehouseState(covers, {}, frozenset())
+    with connect(warehouse, read_only=True) as con:
+        have = {r[0] for r in con.execute("SELECT table_name FROM duckdb_tables() WHERE database_name = current_database()").fetchall()}
+        if "edge_fits" in have:
+            for v, (first, last) in candidates.items():
+                lo = datetime.combine(first, datetime.min.time(), timezone.utc)
+                hi = datetime.combine(last + timedelta(days=1), datetime.min.time(), timezone.utc)
+                w = query_frame(
+                    con,
+                    "SELECT DISTINCT epoch_us(window_start) AS s, epoch_us(window_end) AS e FROM edge_fits "
+                    "WHERE valve_id = ? AND window_end >= ? AND window_start < ?",
+                    [v, lo, hi],
+                )
+                covers[v] = fitted_cover(w["s"].to_numpy(), w["e"].to_numpy()) if w.height else empty
+        checked: dict[str, int] = {}
+        if "standstill_progress" in have:
+            checked = dict(con.execute("SELECT valve_id, epoch_us(checked_through) FROM standstill_progress").fetchall())
+        logged: set[str] = set()
+        thinned: dict[tuple[str, date], tuple[int, int, float]] = {}
+        if "retention_log" in have and action_ids:
+            logged = {r[0] for r in con.execute("SELECT action_id FROM retention_log WHERE list_contains(?, action_id)", [action_ids]).fetchall()}
+        if "retention_log" in have and candidates:
+            rows = con.execute(
+                "SELECT valve_id, date, size_after_bytes, epoch_us(applied_at), thin_keep_s_per_hour FROM retention_log "
+                "WHERE action = 'thin' AND list_contains(?, valve_id) QUALIFY applied_at = max(applied_at) OVER (PARTITION BY valve_id, date)",
+                [list(candidates)],
+            ).fetchall()
+            thinned = {(v, d): (b, t, k) for v, d, b, t, k in rows}
+    return WarehouseState(covers, checked, frozenset(logged), thinned)
+
+
+def scan_partition(folder: Path, cover: tuple[np.ndarray, np.ndarray], hours: bool) -> PartitionScan:
+    """First pass over a partition's time stamps, file by file, batch by batch (``hours``: note
+    each hour's first sample, for thinning)."""
+    scan = PartitionScan(cover, hours)
+    for f in partition_files(folder):
+        for batch in iter_file_batches(f, [TIME]):
+            scan.add(batch[TIME].to_physical().to_numpy())
+    return scan
+
+
+@dataclass(frozen=True)
+class FileThinning:
+    """One file of a partition in thin mode: its rows, the rows kept, the row groups holding them."""
+
+    rows: int
+    kept: int
+    row_groups: list[int]
+
+
+def count_kept(folder: Path, scan: PartitionScan, keep_s: float) -> dict[Path, FileThinning]:
+    """Second pass (thin mode): the rows thinning keeps (into ``scan``), per file; only the row
+    groups whose time range can hold kept samples are read (:func:`kept_row_groups`)."""
+    scan.rows_kept = 0
+    per_file = {}
+    for f in partition_files(folder):
+        spans = row_group_spans(f)
+        groups = kept_row_groups(spans, scan.firsts, keep_s)
+        before = scan.rows_kept
+        for batch in iter_file_batches(f, [TIME], row_groups=groups):
+            scan.count_kept(batch[TIME].to_physical().to_numpy(), keep_s)
+        per_file[f] = FileThinning(sum(n for n, _, _ in spans), scan.rows_kept - before, groups)
+    return per_file
+
+
+def thin_partition(scan: PartitionScan, per_file: dict[Path, FileThinning], keep_s: float) -> int:
+    """Replace each file of the partition by its kept rows, streamed batch by batch from the row
+    groups that hold them (memory holds one batch and one row group of kept rows), atomically per
+    file; a file that keeps all its rows is left alone, one that keeps none is deleted. Returns
+    the rows kept."""
+    for f, ft in per_file.items():
+        if ft.kept == ft.rows:
+            continue
+        if ft.kept == 0:
+            remove_partition_file(f)
+            continue
+        batches = iter_file_batches(f, row_groups=ft.row_groups)
+        pieces = (b.filter(pl.Series(thin_mask(b[TIME].to_physical().to_numpy(), scan.firsts, keep_s))) for b in batches)
+        write_partition_pieces(f, (p for p in pieces if p.height))
+    return sum(ft.kept for ft in per_file.values())
+
+
+def _log_row(action_id: str, o: PartitionOutcome, spec: RetentionSpec, as_of: date) -> pl.DataFrame:
+    return pl.DataFrame(
+        [{
+            "action_id": action_id, "valve_id": o.valve_id, "date": o.day, "action": o.action,
+            "rows_before": o.rows_before, "rows_after": o.rows_after,
+            "size_before_bytes": o.bytes_before, "size_after_bytes": o.bytes_after,
+            "keep_days": spec.keep_days, "thin_keep_s_per_hour": spec.thin_keep_s_per_hour if o.action == "thin" else None,
+            "as_of": as_of, "applied_at": datetime.now(timezone.utc),
+        }],
+        schema=polars_schema(RETENTION_LOG_FIELDS),
+    )  # fmt: skip
+
+
+def record(warehouse: Path, rows: pl.DataFrame) -> None:
+    """Append applied actions to ``retention_log`` (created from the field registry if missing)."""
+    with connect(warehouse) as con:
+        ensure_tables(con, RETENTION_TABLES)
+        insert_frame(con, "retention_log", rows)
+
+
+def complete_interrupted(warehouse: Path, spec: RetentionSpec, as_of: date, valve_ids: list[str] | None, dry_run: bool) -> list[tuple[str, date]]:
+    """Finish the drops a killed run committed (renamed) but did not delete: record those not in
+    ``retention_log`` yet (measured from what is left), then delete them."""
+    left = dropped_folders(warehouse, valve_ids)
+    if dry_run or not left:
+        return [(v, d) for v, d, _, _ in left]
+    logged = read_state(warehouse, {}, [a for _, _, a, _ in left]).logged
+    for vid, day, action_id, hidden in left:
+        if action_id not in logged:
+            o = PartitionOutcome(vid, day, "drop", "", partition_bytes(hidden), partition_rows(hidden), 0, 0)
+            record(warehouse, _log_row(action_id, o, spec, as_of))
+        remove_dropped(hidden)
+    return [(v, d) for v, d, _, _ in left]
+
+
+def run_retention(
+    config: PlantConfig, warehouse: str | Path, *, valve_ids: list[str] | None = None, as_of: date | None = None, dry_run: bool = False,
+) -> RetentionSummary:
+    """Apply (or with ``dry_run`` only report) the plant's ``[retention]`` to the lake (module doc)."""
+    spec = config.retention
+    if spec is None:
+        raise ValueError("run_retention: the plant configures no [retention]")
+    warehouse = Path(warehouse)
+    known = [v.id for v in config.valves]
+    unknown = sorted(set(valve_ids or []) - set(known))
+    if unknown:
+        raise ValvemonError(f"--valves: no valve {unknown[0]!r} in plant {config.name!r} (valves: {', '.join(known)})")
+    ids = list(valve_ids or known)
+    as_of = as_of or datetime.now(timezone.utc).date()
+    summary = RetentionSummary(as_of, spec, dry_run)
+    # a dry run takes no lock either: even a lock file would be a write
+    lock = nullcontext() if dry_run else file_lock(warehouse / ".retention.lock", f"{warehouse}: another retention run is working on this warehouse")
+    with lock:
+        summary.interrupted = complete_interrupted(warehouse, spec, as_of, ids, dry_run)
+        protected = {v.id: protected_days([v.baseline_window] if v.baseline_window else []) for v in config.valves}
+        todo: list[tuple[str, date, Path]] = []
+        for vid, day, folder in partition_folders(warehouse, ids):
+            early = decide_unscanned(day, as_of, spec, protected[vid])
+            if early is not None:
+                summary.outcomes.append(PartitionOutcome(vid, day, early.action, early.reason, partition_bytes(folder)))
+            else:
+                todo.append((vid, day, folder))
+        spans: dict[str, tuple[date, date]] = {}
+        for vid, day, _ in todo:
+            first, last = spans.get(vid, (day, day))
+            spans[vid] = (min(first, day), max(last, day))
+        state = read_state(warehouse, spans, [])
+        for vid, day, folder in todo:
+            if spec.mode == "thin" and state.thinned_as_logged(vid, day, folder, spec.thin_keep_s_per_hour):
+                summary.outcomes.append(PartitionOutcome(vid, day, KEEP, REASON_THINNED, partition_bytes(folder)))
+                continue
+            with nullcontext() if dry_run else partition_lock(warehouse, folder / PART_NAME):
+                summary.outcomes.append(_one_partition(warehouse, vid, day, folder, spec, protected[vid], state, as_of, dry_run))
+    summary.outcomes.sort(key=lambda o: (o.valve_id, o.day))
+    return summary
+
+
+def _one_partition(
+    warehouse: Path, vid: str, day: date, folder: Path, spec: RetentionSpec, protected: frozenset[date], state: WarehouseState,
+    as_of: date, dry_run: bool,
+) -> PartitionOutcome:
+    """Decide one partition past steps 1–2 and, unless ``dry_run``, apply the decision."""
+    bytes_before = partition_bytes(folder)
+    scan = scan_partition(folder, state.covers[vid], spec.mode == "thin")
+    checked = state.checked_through_us.get(vid)
+    per_file: dict[Path, FileThinning] = {}
+    if spec.mode == "thin" and decide_fitted(scan, checked) is None:
+        per_file = count_kept(folder, scan, spec.thin_keep_s_per_hour)
+    d: Decision = decide(day, as_of, spec, protected, scan, checked)
+    o = PartitionOutcome(vid, day, d.action, d.reason, bytes_before, scan.rows)
+    if d.action == "drop":
+        o.rows_after, o.bytes_after = 0, 0
+        if not dry_run:
+            action_id = uuid.uuid4().hex
+            hidden = drop_partition(folder, action_id)
+            record(warehouse, _log_row(action_id, o, spec, as_of))
+            remove_dropped(hidden)
+    elif d.action == "thin":
+        o.rows_after = scan.rows_kept
+        o.bytes_after = round(bytes_before * scan.rows_kept / scan.rows) if scan.rows else 0
+        if not dry_run:
+            o.rows_after = thin_partition(scan, per_file, spec.thin_keep_s_per_hour)
+            o.bytes_after = partition_bytes(folder)
+            record(warehouse, _log_row(uuid.uuid4().hex, o, spec, as_of))
+    return o
+
+
+@flow(name="valvemon-retention", persist_result=False, validate_parameters=False)
+def retention_flow(config_path: str, warehouse: str, valve_ids: list[str] | None = None, as_of: str | None = None, dry_run: bool = False) -> RetentionSummary | None:
+    """The Prefect flow behind ``valvemon retention`` (and the nightly run's last step); None when
+    the plant configures no ``[retention]``."""
+    config = load_plant_config(config_path)
+    if config.retention is None:
+        return None
+    try:
+        day = date.fromisoformat(as_of) if as_of else None
+    except ValueError:
+        raise ValvemonError(f"--as-of: {as_of!r} is not an ISO date (YYYY-MM-DD)") from None
+    return run_retention(config, warehouse, valve_ids=valve_ids, as_of=day, dry_run=dry_run)

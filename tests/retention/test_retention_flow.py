@@ -1,0 +1,245 @@
+"""flows/retention/flow.py on a small simulated warehouse (run_simulate → run_ingest → run_monitor →
+the report's standstill pass, the plain functions the flows run), then retention with --as-of."""
+
+from __future__ import annotations
+
+import hashlib
+import shutil
+from datetime import date, timedelta
+from pathlib import Path
+
+import polars as pl
+import pytest
+
+import flows.retention.flow as fr
+from flows.common.lake import dropped_folders, partition_files, partition_folders, partition_rows, read_lake, write_partition
+from flows.common.warehouse_db import connect, query_frame
+from tests.retention.conftest import AS_OF, DAYS, plant_with
+
+
+def _fingerprint(wh: Path) -> dict[str, str]:
+    """Every file of the warehouse (lake, database, hidden folders) → sha256 of its bytes."""
+    return {str(p.relative_to(wh)): hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(wh.rglob("*")) if p.is_file()}
+
+
+def _q(wh: Path, sql: str) -> pl.DataFrame:
+    with connect(wh, read_only=True) as con:
+        return query_frame(con, sql)
+
+
+def _decisions(summary) -> dict[tuple[str, date], tuple[str, str]]:
+    return {(o.valve_id, o.day): (o.action, o.reason) for o in summary.outcomes}
+
+
+def test_drop_only_fitted_old_days_and_dry_run_writes_nothing(base, wh, tmp_path):
+    plant = plant_with(base, tmp_path, keep_days=3, mode="drop")
+    lake_before = read_lake(wh).collect()
+    # V002's 2025-01-02 08:00 window was never fitted: its day stays
+    with connect(wh) as con:
+        con.execute("DELETE FROM edge_fits WHERE valve_id = 'V002' AND window_start >= '2025-01-02T08:00Z' AND window_start < '2025-01-02T09:00Z'")
+    before = _fingerprint(wh)
+    dry = fr.run_retention(plant, wh, as_of=AS_OF, dry_run=True)
+    assert _fingerprint(wh) == before  # a dry run writes nothing, the database included
+    expected = {
+        ("V001", DAYS[0]): ("keep", "kept: commissioning window"),
+        ("V001", DAYS[1]): ("drop", "drop: fitted, checked and older than 3 days"),
+        ("V001", DAYS[2]): ("drop", "drop: fitted, checked and older than 3 days"),
+        ("V001", DAYS[3]): ("keep", "kept: within 3 days"),
+        ("V002", DAYS[0]): ("drop", "drop: fitted, checked and older than 3 days"),
+        ("V002", DAYS[1]): ("keep", "kept: not all windows fitted yet"),
+        ("V002", DAYS[2]): ("drop", "drop: fitted, checked and older than 3 days"),
+        ("V002", DAYS[3]): ("keep", "kept: within 3 days"),
+    }
+    assert _decisions(dry) == expected
+    per_day = lake_before.group_by("valve_id", "date").len()
+    rows = {(v, d): n for v, d, n in per_day.iter_rows()}
+    groups = {(a, r): (n, r0, r1) for a, r, n, r0, r1, _, _ in dry.groups()}
+    dropped = [k for k, v in expected.items() if v[0] == "drop"]
+    assert groups[("drop", expected[dropped[0]][1])] == (4, sum(rows[k] for k in dropped), 0)
+    assert "DRY RUN" in dry.lines()[0] and dry.lines()[-1].startswith("would free")
+
+    done = fr.run_retention(plant, wh, as_of=AS_OF)
+    assert _decisions(done) == expected
+    assert {(v, d) for v, d, _ in partition_folders(wh)} == set(expected) - set(dropped)
+    assert not dropped_folders(wh)
+    lake_after = read_lake(wh).collect()
+    assert lake_after.equals(lake_before.filter(~pl.struct("valve_id", "date").is_in([{"valve_id": v, "date": d} for v, d in dropped])))
+    log = _q(wh, "SELECT valve_id, date, action, rows_before, rows_after, size_after_bytes, keep_days, as_of FROM retention_log ORDER BY ALL")
+    assert log.rows() == [(v, d, "drop", rows[(v, d)], 0, 0, 3, AS_OF) for v, d in sorted(dropped)]
+    assert (_q(wh, "SELECT size_before_bytes FROM retention_log")["size_before_bytes"] > 0).all()
+    assert done.freed_bytes() == dry.freed_bytes() > 0
+    # fits and baselines are kept
+    assert _q(wh, "SELECT count(*) AS n FROM edge_fits")["n"][0] == 2 * 24 * 4 - 4
+    assert _q(wh, "SELECT count(DISTINCT valve_id) AS n FROM baselines")["n"][0] == 2
+
+    # a second run changes nothing
+    snap = _fingerprint(wh)
+    again = fr.run_retention(plant, wh, as_of=AS_OF)
+    assert _fingerprint(wh) == snap
+    assert all(o.action == "keep" for o in again.outcomes) and again.freed_bytes() == 0
+
+
+def test_thin_keeps_the_first_seconds_of_every_hour_once(base, wh, tmp_path):
+    plant = plant_with(base, tmp_path, keep_days=3, mode="thin", thin_keep_s_per_hour=2.0)
+    lake_before = read_lake(wh).collect()
+    summary = fr.run_retention(plant, wh, as_of=AS_OF)
+    thinned = {(o.valve_id, o.day) for o in summary.outcomes if o.action == "thin"}
+    assert thinned == {("V001", DAYS[1]), ("V001", DAYS[2]), ("V002", DAYS[0]), ("V002", DAYS[1]), ("V002", DAYS[2])}
+    lake_after = read_lake(wh).collect()
+    first = pl.col("timestamp_utc").min().over("valve_id", pl.col("timestamp_utc").dt.truncate("1h"))
+    is_thinned = pl.struct("valve_id", "date").is_in([{"valve_id": v, "date": d} for v, d in thinned])
+    expected = lake_before.filter(~is_thinned | (pl.col("timestamp_utc") - first < timedelta(seconds=2)))
+    assert lake_after.equals(expected)
+    # 6 windows a day, each in its own hour: 2 s of 1 kHz samples kept from each
+    log = _q(wh, "SELECT valve_id, date, rows_after, size_before_bytes, size_after_bytes, thin_keep_s_per_hour FROM retention_log ORDER BY ALL")
+    assert log.height == 5 and set(log["rows_after"]) == {6 * 2000} and set(log["thin_keep_s_per_hour"]) == {2.0}
+    assert (log["size_after_bytes"] < log["size_before_bytes"]).all()
+    # the thinned days are still covered by their fits: a second run finds them thinned already
+    snap = _fingerprint(wh)
+    again = fr.run_retention(plant, wh, as_of=AS_OF)
+    assert _fingerprint(wh) == snap
+    assert {(o.valve_id, o.day) for o in again.outcomes if o.reason == "kept: already thinned"} == thinned
+    # ... without reading them: each is as its log row left it. A partition written since is read again
+    assert all(o.rows_before is None for o in again.outcomes if o.reason == "kept: already thinned")
+    folder = next(f for v, d, f in partition_folders(wh) if (v, d) == ("V002", DAYS[0]))
+    (only,) = partition_files(folder)
+    write_partition(only, pl.read_parquet(only))
+    third = {(o.valve_id, o.day): o for o in fr.run_retention(plant, wh, as_of=AS_OF).outcomes}
+    assert third[("V002", DAYS[0])].reason == "kept: already thinned" and third[("V002", DAYS[0])].rows_before == 6 * 2000
+    assert third[("V002", DAYS[1])].rows_before is None
+
+
+def test_unchecked_days_are_kept(base, wh, tmp_path):
+    plant = plant_with(base, tmp_path, keep_days=1, mode="drop")
+    with connect(wh) as con:
+        con.execute("UPDATE standstill_progress SET checked_through = TIMESTAMPTZ '2025-01-02 12:00:00Z' WHERE valve_id = 'V002'")
+        con.execute("DELETE FROM standstill_progress WHERE valve_id = 'V001'")
+    d = _decisions(fr.run_retention(plant, wh, as_of=AS_OF, dry_run=True))
+    assert {k for k, v in d.items() if v[0] == "drop"} == {("V002", DAYS[0])}
+    assert {k for k, v in d.items() if v[1] == "kept: standstill check not yet run"} == {("V001", d_) for d_ in DAYS[1:]} | {("V002", d_) for d_ in DAYS[1:]}
+
+
+def test_no_database_keeps_everything(base, tmp_path):
+    wh = tmp_path / "lake_only"
+    shutil.copytree(base[0] / "lake", wh / "lake")
+    d = _decisions(fr.run_retention(plant_with(base, tmp_path, keep_days=1, mode="drop"), wh, as_of=AS_OF))
+    assert {v[1] for v in d.values()} == {"kept: no fits yet", "kept: commissioning window"}
+    assert not (wh / "valvemon.duckdb").exists()
+
+
+class Killed(BaseException):
+    """Stands for the process being killed at that point (not caught by ordinary handlers)."""
+
+
+def test_killed_drop_is_completed_by_the_next_run(base, wh, tmp_path, monkeypatch):
+    plant = plant_with(base, tmp_path, keep_days=3, mode="drop")
+    lake_before = read_lake(wh).collect()
+    rows = dict(((v, d), n) for v, d, n in lake_before.group_by("valve_id", "date").len().iter_rows())
+
+    def killed(*a, **k):
+        raise Killed
+
+    # killed after the rename, before the record: the hidden folder stays, readers do not see it
+    monkeypatch.setattr(fr, "record", killed)
+    with pytest.raises(Killed):
+        fr.run_retention(plant, wh, as_of=AS_OF)
+    monkeypatch.undo()
+    left = dropped_folders(wh)
+    assert [(v, d) for v, d, _, _ in left] == [("V001", DAYS[1])]
+    assert read_lake(wh).collect().height == lake_before.height - rows[("V001", DAYS[1])]
+    # killed after the record, before the delete
+    real_remove = fr.remove_dropped
+    calls = []
+
+    def killed_once(hidden):
+        calls.append(hidden)
+        if len(calls) == 2:  # the first is the left-over, the second the next drop
+            raise Killed
+        real_remove(hidden)
+
+    monkeypatch.setattr(fr, "remove_dropped", killed_once)
+    with pytest.raises(Killed):
+        fr.run_retention(plant, wh, as_of=AS_OF)
+    monkeypatch.undo()
+    assert [(v, d) for v, d, _, _ in dropped_folders(wh)] == [("V001", DAYS[2])]
+    summary = fr.run_retention(plant, wh, as_of=AS_OF)
+    assert summary.interrupted == [("V001", DAYS[2])]
+    assert not dropped_folders(wh) and not list((wh / "lake").rglob(".date=*"))
+    log = _q(wh, "SELECT valve_id, date, rows_before FROM retention_log ORDER BY ALL")
+    dropped = [("V001", DAYS[1]), ("V001", DAYS[2]), ("V002", DAYS[0]), ("V002", DAYS[1]), ("V002", DAYS[2])]
+    assert log.rows() == [(v, d, rows[(v, d)]) for v, d in dropped]  # each recorded once, with its rows
+
+
+def test_partition_of_several_files_is_thinned_file_by_file(base, wh, tmp_path, monkeypatch):
+    """A day split into files (a layout the lake may take) is one partition; a run killed between
+    two files leaves each file whole or thinned, and the next run finishes the same result."""
+    plant = plant_with(base, tmp_path, keep_days=3, mode="thin", thin_keep_s_per_hour=2.0)
+    folder = next(f for v, d, f in partition_folders(wh) if (v, d) == ("V002", DAYS[0]))
+    (only,) = partition_files(folder)
+    day = pl.read_parquet(only)
+    write_partition(folder / "part-1.parquet", day.filter(pl.col("timestamp_utc").dt.hour() >= 12))
+    write_partition(only, day.filter(pl.col("timestamp_utc").dt.hour() < 12))
+    reference = tmp_path / "ref"
+    shutil.copytree(wh, reference)
+    fr.run_retention(plant, reference, valve_ids=["V002"], as_of=AS_OF)
+    expected = _files(reference / folder.relative_to(wh))
+
+    real = fr.write_partition_pieces
+    calls = []
+
+    def killed_second(path, pieces):
+        calls.append(path)
+        if len(calls) == 2:
+            raise Killed
+        real(path, pieces)
+
+    monkeypatch.setattr(fr, "write_partition_pieces", killed_second)
+    with pytest.raises(Killed):
+        fr.run_retention(plant, wh, valve_ids=["V002"], as_of=AS_OF)
+    monkeypatch.undo()
+    assert partition_rows(folder) == 3 * 2000 + 3 * 10_000  # part-0 thinned, part-1 not yet
+    fr.run_retention(plant, wh, valve_ids=["V002"], as_of=AS_OF)
+    assert _files(folder).equals(expected) and expected.height == 6 * 2000
+    assert len(partition_files(folder)) == 2
+
+
+def _files(folder: Path) -> pl.DataFrame:
+    """All files of a partition, by time."""
+    return pl.concat([pl.read_parquet(f) for f in partition_files(folder)]).sort("timestamp_utc")
+
+
+def test_standstill_progress_is_the_last_sample_the_report_read(base, wh):
+    from datetime import datetime, timezone
+
+    from flows.report.flow import mark_standstill_progress
+
+    last = read_lake(wh).group_by("valve_id").agg(pl.col("timestamp_utc").max()).collect().sort("valve_id")
+    progress = _q(wh, "SELECT valve_id, checked_through AS timestamp_utc FROM standstill_progress ORDER BY valve_id")
+    assert progress.equals(last)
+    with connect(wh) as con:  # it never moves back
+        mark_standstill_progress(con, "V001", datetime(2025, 1, 2, tzinfo=timezone.utc), datetime.now(timezone.utc))
+    assert _q(wh, "SELECT valve_id, checked_through AS timestamp_utc FROM standstill_progress ORDER BY valve_id").equals(last)
+
+
+def test_stray_samples_get_fit_rows_so_their_day_can_go(base, wh, tmp_path):
+    """A day holding only a 1-sample and a 2-sample window: the monitor gives both fit rows (no
+    estimate), so the day is fitted and, once checked, dropped rather than kept forever."""
+    from datetime import datetime, timezone
+
+    from flows.common.config import load_plant_config
+    from flows.common.lake import partition_path
+    from flows.monitor.flow import run_monitor
+    from flows.report.flow import update_standstill
+
+    plant = plant_with(base, tmp_path, keep_days=1, mode="drop")
+    day = date(2025, 1, 6)
+    sample = read_lake(wh, ["V002"]).head(3).collect().with_columns(pl.lit(day).alias("date"))
+    times = [datetime(2025, 1, 6, 12, tzinfo=timezone.utc), datetime(2025, 1, 6, 13, tzinfo=timezone.utc), datetime(2025, 1, 6, 13, 0, 0, 1000, tzinfo=timezone.utc)]
+    write_partition(partition_path(wh, "V002", day), sample.with_columns(pl.Series("timestamp_utc", times, dtype=pl.Datetime("us", "UTC"))))
+    cfg = tmp_path / "plant.toml"
+    run_monitor(cfg, wh, ["V002"], "2025-01-06", "2025-01-07")
+    fits = _q(wh, "SELECT window_start, status FROM edge_fits WHERE window_start >= '2025-01-06'")
+    assert fits.height == 2 * 4 and fits["window_start"].n_unique() == 2 and "ok" not in set(fits["status"])
+    update_standstill(load_plant_config(cfg), wh, datetime.now(timezone.utc))
+    d = _decisions(fr.run_retention(plant, wh, valve_ids=["V002"], as_of=date(2025, 1, 8), dry_run=True))
+    assert d[("V002", day)][0] == "drop"
