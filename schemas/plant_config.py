@@ -17,6 +17,9 @@ Keys the project adds to the specification (all optional, documented in the READ
 - ``[valve_types.NAME.bounds]``: the condition bounds of step 5b (:class:`ConditionBounds`,
   every key optional with a documented default); a valve may override single keys in its own
   ``[valves.bounds]`` table.
+- ``[monitor] window_s`` (default :data:`DEFAULT_WINDOW_S`): the length of a monitoring window;
+  a recording at least half as long is cut at every multiple of it since the UTC epoch
+  (``transforms.windows``). It must divide a day, so windows start at the same times every day. [s]
 """
 
 from __future__ import annotations
@@ -60,6 +63,22 @@ class ExportSpec:
     sample_rate_hz: float = 1000.0
     max_gap_s: float = 0.005
     duplicate_rule: str = "last"
+
+
+DEFAULT_WINDOW_S = 60.0
+"""Default monitoring window length (docs/monitoring.md, "Continuous recordings": the shortest
+length that divides an hour whose window-to-window scatter of α̂, x̂ and e stays within a third
+of the condition bounds' ``*_sigma_floor`` values, measured on simulated 20-min recordings). [s]"""
+
+
+@dataclass(frozen=True)
+class MonitorSpec:
+    """How the monitor cuts recordings into windows (``[monitor]``)."""
+
+    window_s: float = DEFAULT_WINDOW_S
+    """Window length; a run of samples at least half as long is cut at its multiples since the
+    epoch, a shorter one (a snapshot) is one window. [s]"""
+
 
 @dataclass(frozen=True)
 class ConditionBounds:
@@ -189,6 +208,7 @@ class PlantConfig:
     export: ExportSpec
     valve_types: dict[str, ValveDesign]
     valves: tuple[ValveSpec, ...]
+    monitor: MonitorSpec = field(default_factory=MonitorSpec)
 
     def valve(self, valve_id: str) -> ValveSpec:
         """The valve with this id (``KeyError`` naming it if absent)."""
@@ -293,6 +313,16 @@ def _parse_export(raw: Any) -> ExportSpec:
         raise ConfigError("export.max_gap_s: must be at least one sample period")
     kw["duplicate_rule"] = _str(t.get("duplicate_rule", "last"), "export.duplicate_rule", ("last", "first", "error"))
     return ExportSpec(**kw)
+
+
+def _parse_monitor(raw: Any) -> MonitorSpec:
+    t = _table(raw, "monitor")
+    _no_unknown(t, {"window_s"}, "monitor")
+    window_s = _number(t.get("window_s", DEFAULT_WINDOW_S), "monitor.window_s", 1.0, 86_400.0)
+    per_day = 86_400.0 / window_s
+    if abs(per_day - round(per_day)) > 1e-9 * per_day:
+        raise ConfigError(f"monitor.window_s: {window_s:g} s does not divide a day (86400 s) into whole windows (e.g. 60, 300, 600, 3600)")
+    return MonitorSpec(window_s=window_s)
 
 
 _DESIGN_KEYS = {
@@ -482,7 +512,7 @@ def parse_plant_config(data: dict) -> PlantConfig:
         For unknown keys, missing required keys, impossible values, unknown units, duplicate
         valve ids or a historian tag used twice; the message starts with the key's path.
     """
-    _no_unknown(_table(data, "top level"), {"plant", "export", "valve_types", "valves"}, "")
+    _no_unknown(_table(data, "top level"), {"plant", "export", "monitor", "valve_types", "valves"}, "")
     plant = _table(_required(data, "plant", ""), "plant")
     _no_unknown(plant, {"name", "timezone"}, "plant")
     name = _str(_required(plant, "name", "plant"), "plant.name")
@@ -492,6 +522,7 @@ def parse_plant_config(data: dict) -> PlantConfig:
     except (ZoneInfoNotFoundError, ValueError):
         raise ConfigError(f"plant.timezone: {tz_name!r} is not an IANA time zone name") from None
     export = _parse_export(_required(data, "export", ""))
+    monitor = _parse_monitor(data.get("monitor", {}))
     types_raw = _table(_required(data, "valve_types", ""), "valve_types")
     types: dict[str, ValveDesign] = {}
     for tname, traw in types_raw.items():
@@ -519,7 +550,7 @@ def parse_plant_config(data: dict) -> PlantConfig:
         clash = reserved & set(seen_tags)
         if clash:
             raise ConfigError(f"export.timestamp_column: {clash.pop()!r} is also a tag name")
-    return PlantConfig(name, tz_name, export, types, valves)
+    return PlantConfig(name, tz_name, export, types, valves, monitor)
 
 
 # --- writing back ----------------------------------------------------------------------------
@@ -591,9 +622,7 @@ def plant_config_to_dict(config: PlantConfig) -> dict:
             d["scenario"] = v.scenario
         d["tags"] = {s: {"tag": t.tag, "unit": t.unit} for s, t in v.tags.items()}
         valves.append(d)
-    return {
-        "plant": {"name": config.name, "timezone": config.timezone},
-        "export": export,
-        "valve_types": {n: _design_dict(t, _DESIGN_KEYS) for n, t in config.valve_types.items()},
-        "valves": valves,
-    }
+    out: dict[str, Any] = {"plant": {"name": config.name, "timezone": config.timezone}, "export": export}
+    if config.monitor != MonitorSpec():
+        out["monitor"] = {"window_s": config.monitor.window_s}
+    return out | {"valve_types": {n: _design_dict(t, _DESIGN_KEYS) for n, t in config.valve_types.items()}, "valves": valves}
