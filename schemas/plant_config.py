@@ -68,7 +68,7 @@ class ExportSpec:
 DEFAULT_WINDOW_S = 60.0
 """Default monitoring window length (docs/monitoring.md, "Continuous recordings", measured on
 simulated 20-min recordings): twice the shortest length at which every window-edge was fitted
-(30 s; at 10 s 5 % were not), ≥ 11,000 points per window-edge (the fit needs 500), its
+(30 s; at 10 s 5 % were not), 95 % of its window-edges with ≥ 11,000 points (the fit needs 500), its
 window-to-window scatter of α̂, x̂ and e below a tenth of the condition bounds' ``*_sigma_floor``;
 a 10 s snapshot (shorter than half of it) is never cut. [s]"""
 
