@@ -24,7 +24,8 @@ thread), so that CPU seconds are per-core figures and the peak resident memory i
 ``--from``/``--to`` limit the ``full`` step to a span, as ``valvemon monitor --from --to`` does
 (one day: what a nightly run reads; ``--steps full``).
 
-Each process first warms up on one day of one valve (numba cache loads, imports), not timed.
+Each process first warms up on the first ten minutes of one valve's first day (numba cache loads, imports; a
+snapshot or ten minutes of a continuous recording, so the peak memory is the run's own), not timed.
 Rows/s are lake rows per CPU second of the process (all its threads) and per wall second.
 """
 
@@ -120,7 +121,7 @@ def _warm_rows(config, warehouse: Path):
     from datetime import datetime, timezone
 
     lo = datetime(day.year, day.month, day.day, tzinfo=timezone.utc)
-    rows = read_lake(warehouse, [vid], lo, lo + timedelta(days=1)).collect()
+    rows = read_lake(warehouse, [vid], lo, lo + timedelta(minutes=10)).collect()
     valve = config.valve(vid)
     return valve, fm.monitor_params(valve, config.export.sample_rate_hz, config.monitor.window_s), rows
 

@@ -360,17 +360,20 @@ CHUNK_SPAN_S = 1800.0
 1 kHz recording (rounded down to whole windows, at least one). [s]"""
 
 
-def _day_rows(warehouse: Path, valve_id: str, day: date) -> int:
+def _day_extent(warehouse: Path, valve_id: str, day: date) -> tuple[int, datetime, datetime]:
+    """Rows of a valve's lake day, its first and last time stamp (only the time column is decoded)."""
     lo = datetime.combine(day, datetime.min.time(), timezone.utc)
-    return int(read_lake(warehouse, [valve_id], lo, lo + timedelta(days=1)).select(pl.len()).collect().item())
+    t = pl.col("timestamp_utc")
+    n, first, last = read_lake(warehouse, [valve_id], lo, lo + timedelta(days=1)).select(pl.len(), t.min().alias("first"), t.max().alias("last")).collect().row(0)
+    return int(n), first, last
 
 
 def _read_spans(
     warehouse: Path, valve_id: str, start: datetime | None, end: datetime | None, days: int, window_s: float | None,
 ) -> Iterator[tuple[datetime, datetime]]:
     """The [lo, hi) spans :func:`_gap_chunks` reads one at a time: whole days, up to ``days`` of
-    them holding at most :data:`CHUNK_ROWS` rows together (counted from the files' metadata);
-    a day holding more in spans of :data:`CHUNK_SPAN_S` (whole windows of ``window_s``)."""
+    them holding at most :data:`CHUNK_ROWS` rows together; a day holding more in spans of
+    :data:`CHUNK_SPAN_S` (whole windows of ``window_s``) over its first to its last sample."""
     step = timedelta(seconds=CHUNK_SPAN_S)
     if window_s is not None:
         step = timedelta(seconds=window_s) * max(1, int(CHUNK_SPAN_S // window_s))
@@ -383,14 +386,16 @@ def _read_spans(
             yield lo, datetime.combine(group[-1] + timedelta(days=1), datetime.min.time(), timezone.utc)
 
     for day in sorted({d for _, d, _ in list_partitions(warehouse, [valve_id], start, end)}):
-        n = _day_rows(warehouse, valve_id, day)
+        n, first, last = _day_extent(warehouse, valve_id, day)
         if n > CHUNK_ROWS:
             yield from flush()
             group, rows = [], 0
-            lo = datetime.combine(day, datetime.min.time(), timezone.utc)
-            hi = lo + timedelta(days=1)
-            while lo < hi:
-                yield lo, min(lo + step, hi)
+            midnight = datetime.combine(day, datetime.min.time(), timezone.utc)
+            lo = midnight + step * ((first - midnight) // step)
+            while lo <= last:
+                hi = min(lo + step, midnight + timedelta(days=1))
+                if (start is None or hi > start) and (end is None or lo < end):
+                    yield lo, hi
                 lo += step
             continue
         if len(group) >= days or (group and rows + n > CHUNK_ROWS):
