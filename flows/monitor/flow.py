@@ -360,20 +360,26 @@ CHUNK_SPAN_S = 1800.0
 1 kHz recording (rounded down to whole windows, at least one). [s]"""
 
 
-def _day_extent(warehouse: Path, valve_id: str, day: date) -> tuple[int, datetime, datetime]:
-    """Rows of a valve's lake day, its first and last time stamp (only the time column is decoded)."""
+def _day_rows(warehouse: Path, valve_id: str, day: date) -> int:
+    """Rows of a valve's lake day (from the files' metadata)."""
+    lo = datetime.combine(day, datetime.min.time(), timezone.utc)
+    return int(read_lake(warehouse, [valve_id], lo, lo + timedelta(days=1)).select(pl.len()).collect().item())
+
+
+def _day_extent(warehouse: Path, valve_id: str, day: date) -> tuple[datetime, datetime]:
+    """First and last time stamp of a valve's lake day (only the time column is decoded)."""
     lo = datetime.combine(day, datetime.min.time(), timezone.utc)
     t = pl.col("timestamp_utc")
-    n, first, last = read_lake(warehouse, [valve_id], lo, lo + timedelta(days=1)).select(pl.len(), t.min().alias("first"), t.max().alias("last")).collect().row(0)
-    return int(n), first, last
+    return read_lake(warehouse, [valve_id], lo, lo + timedelta(days=1)).select(t.min().alias("a"), t.max().alias("b")).collect().row(0)
 
 
 def _read_spans(
     warehouse: Path, valve_id: str, start: datetime | None, end: datetime | None, days: int, window_s: float | None,
 ) -> Iterator[tuple[datetime, datetime]]:
     """The [lo, hi) spans :func:`_gap_chunks` reads one at a time: whole days, up to ``days`` of
-    them holding at most :data:`CHUNK_ROWS` rows together; a day holding more in spans of
-    :data:`CHUNK_SPAN_S` (whole windows of ``window_s``) over its first to its last sample."""
+    them holding at most :data:`CHUNK_ROWS` rows together (counted from the files' metadata); a
+    day holding more in spans of :data:`CHUNK_SPAN_S` (whole windows of ``window_s``) over its
+    first to its last sample."""
     step = timedelta(seconds=CHUNK_SPAN_S)
     if window_s is not None:
         step = timedelta(seconds=window_s) * max(1, int(CHUNK_SPAN_S // window_s))
@@ -386,8 +392,9 @@ def _read_spans(
             yield lo, datetime.combine(group[-1] + timedelta(days=1), datetime.min.time(), timezone.utc)
 
     for day in sorted({d for _, d, _ in list_partitions(warehouse, [valve_id], start, end)}):
-        n, first, last = _day_extent(warehouse, valve_id, day)
+        n = _day_rows(warehouse, valve_id, day)
         if n > CHUNK_ROWS:
+            first, last = _day_extent(warehouse, valve_id, day)
             yield from flush()
             group, rows = [], 0
             midnight = datetime.combine(day, datetime.min.time(), timezone.utc)
