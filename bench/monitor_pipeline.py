@@ -24,7 +24,8 @@ thread), so that CPU seconds are per-core figures and the peak resident memory i
 ``--from``/``--to`` limit the ``full`` step to a span, as ``valvemon monitor --from --to`` does
 (one day: what a nightly run reads; ``--steps full``).
 
-Each process first warms up on one day of one valve (numba cache loads, imports), not timed.
+Each process first warms up on the first ten minutes of one valve's first day (numba cache loads, imports; a
+snapshot or ten minutes of a continuous recording, so the peak memory is the run's own), not timed.
 Rows/s are lake rows per CPU second of the process (all its threads) and per wall second.
 """
 
@@ -103,9 +104,9 @@ def _chunks(config, warehouse: Path, valve_ids):
     out = []
     for vid in valve_ids:
         valve = config.valve(vid)
-        params = fm.monitor_params(valve, config.export.sample_rate_hz)
+        params = fm.monitor_params(valve, config.export.sample_rate_hz, config.monitor.window_s)
         gap_s = params.gap_limit_periods * params.sample_period_s
-        out += [(vid, rows) for rows in fm.lake_chunks(warehouse, vid, gap_s, None, None)]
+        out += [(vid, rows) for rows in fm.lake_chunks(warehouse, vid, gap_s, None, None, window_s=params.window_s)]
     return out
 
 
@@ -120,9 +121,9 @@ def _warm_rows(config, warehouse: Path):
     from datetime import datetime, timezone
 
     lo = datetime(day.year, day.month, day.day, tzinfo=timezone.utc)
-    rows = read_lake(warehouse, [vid], lo, lo + timedelta(days=1)).collect()
+    rows = read_lake(warehouse, [vid], lo, lo + timedelta(minutes=10)).collect()
     valve = config.valve(vid)
-    return valve, fm.monitor_params(valve, config.export.sample_rate_hz), rows
+    return valve, fm.monitor_params(valve, config.export.sample_rate_hz, config.monitor.window_s), rows
 
 
 def step_full(config_path: Path, warehouse: Path, valve_ids, start: str | None = None, end: str | None = None) -> dict:
@@ -163,7 +164,7 @@ def step_transforms(config_path: Path, warehouse: Path, valve_ids) -> dict:
     base = {}
     for vid in valve_ids:
         v = config.valve(vid)
-        p = fm.monitor_params(v, config.export.sample_rate_hz)
+        p = fm.monitor_params(v, config.export.sample_rate_hz, config.monitor.window_s)
         base[vid] = (v, p, fm.ensure_baselines(v, p, warehouse))
     n = sum(r.height for _, r in chunks)
     c, w = time.process_time(), time.perf_counter()
@@ -190,7 +191,7 @@ def step_baseline(config_path: Path, warehouse: Path, valve_ids) -> dict:
     setup = {}
     for vid in valve_ids:
         v = config.valve(vid)
-        p = fm.monitor_params(v, config.export.sample_rate_hz)
+        p = fm.monitor_params(v, config.export.sample_rate_hz, config.monitor.window_s)
         b = fm.ensure_baselines(v, p, warehouse)
         setup[vid] = (
             p,

@@ -18,6 +18,7 @@ commissioning window. docs/monitoring.md describes the whole.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass
 
@@ -105,6 +106,7 @@ def _framed(lake_one_valve: pl.DataFrame, params: MonitorParams, sample_period_s
         sample_period_s=dt,
         gap_limit_s=params.gap_limit_periods * dt,
         step_tolerance=params.step_tolerance,
+        window_s=params.window_s,
     )
     return add_savgol(lf, window=params.savgol_window, order=params.savgol_order, sample_period_s=dt, outputs=_SG_OUTPUTS)
 
@@ -210,7 +212,7 @@ def _valve_numba(lake_v, valve_id, p, leakage, with_ratio, want_points):
     ts = lake_v["timestamp_utc"].cast(_UTC_US).to_physical().to_numpy()
     win, valid, n_windows = window_arrays(
         ts, sample_period_s=dt, gap_limit_s=p.gap_limit_periods * dt, step_tolerance=p.step_tolerance,
-        half_window=p.half_window,
+        half_window=p.half_window, window_s=p.window_s,
     )
     first = np.concatenate([[0], np.flatnonzero(win[1:] != win[:-1]) + 1]) if n else np.zeros(0, dtype=np.int64)
     last = np.append(first[1:] - 1, n - 1) if n else first
@@ -570,8 +572,11 @@ def commissioning_baseline(
     search bound). With ``leakage`` (the default, and what :func:`monitor` then must use too)
     the points are corrected for the closed edge's flow, first at its nominal state, then
     ``leakage_passes`` times (default ``params.leakage_passes``) at the state that edge's own
-    points give (Eq. 8 onto the nominal: α_b, x_b).
+    points give (Eq. 8 onto the nominal: α_b, x_b). The points of all windows are pooled, so the
+    rows are taken as whole runs (``params.window_s`` is not applied: a baseline does not depend
+    on the window length).
     """
+    params = dataclasses.replace(params, window_s=None)
     valve_ids = lake["valve_id"].unique().to_list()
     if len(valve_ids) != 1:
         raise ValueError(f"commissioning_baseline needs the rows of one valve, got {len(valve_ids)}")

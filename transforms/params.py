@@ -146,6 +146,10 @@ class MonitorParams:
     sample_period_s: float | None = None
     """Nominal sample period; None = the median time step of the valve's data."""
     gap_limit_periods: float = 3.0
+    window_s: float | None = None
+    """Length of a monitoring window (a run at least half as long is cut at every multiple of it
+    since the epoch, :mod:`transforms.windows`); None = a window is a whole run. The flows set
+    it from the plant configuration (``[monitor] window_s``)."""
     step_tolerance: float = 0.1
     """Relative deviation of a time step from the sample period beyond which the SG stencil is cut."""
     savgol_window: int = 21

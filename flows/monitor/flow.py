@@ -9,7 +9,9 @@ For every valve of the plant, :func:`run_monitor`
    nominal Eq. 3 characteristic, step 5a), otherwise the nominal α_nominal·A(u) (paper
    Sec. 5.1). A baseline whose definition changed (other design data, another window, other
    method settings) is stored as a new version; an unchanged one is reused;
-3. reads the lake in chunks of days (cut at a gap, so no window is split), runs steps 2–4b
+3. reads the lake in chunks (days, or spans of a day holding a continuous recording; each cut
+   at a window boundary, so no window is split; windows are runs cut by the clock at the
+   plant's ``[monitor] window_s``, :mod:`transforms.windows`), runs steps 2–4b
    (:func:`transforms.monitor.monitor`, with the closed-edge leakage correction that follows
    each window's own estimates, built from the nominal characteristic and the baseline's state
    α_b, x_b against it) and replaces the chunk's rows of ``edge_fits`` and ``selection_stats``
@@ -49,7 +51,7 @@ from schemas.plant_config import PlantConfig, ValveSpec
 from transforms.characteristic import Characteristic, scaled_shifted
 from transforms.monitor import LAKE_COLUMNS, MonitorResult, commissioning_baseline, monitor
 from transforms.params import MonitorParams
-from transforms.windows import window_starts
+from transforms.windows import LONG_RUN_FRACTION, window_starts
 
 MONITOR_TABLES = {
     "baselines": (BASELINE_FIELDS, ("valve_id", "edge", "version")),
@@ -87,8 +89,9 @@ def ensure_monitor_tables(con) -> None:
             con.execute(f"DROP INDEX {name}_key")
 
 
-def monitor_params(valve: ValveSpec, sample_rate_hz: float) -> MonitorParams:
-    """The algorithm's view of one valve: design data from the configuration, default settings."""
+def monitor_params(valve: ValveSpec, sample_rate_hz: float, window_s: float | None = None) -> MonitorParams:
+    """The algorithm's view of one valve: design data from the configuration, default settings,
+    the plant's window length (``[monitor] window_s``; None: a window is a whole run)."""
     return MonitorParams.from_design(
         piston_diameter_m=valve.piston_diameter_m,
         rod_diameter_m=valve.rod_diameter_m,
@@ -99,6 +102,7 @@ def monitor_params(valve: ValveSpec, sample_rate_hz: float) -> MonitorParams:
         underlap_m=valve.design.underlap_m,
         x_max_m=valve.design.x_max_m,
         sample_period_s=1.0 / sample_rate_hz,
+        window_s=window_s,
     )
 
 
@@ -128,8 +132,10 @@ BASELINE_METHOD = "carrier-shaped step 4a, closed-edge leakage corrected"
 
 def _method_settings() -> dict:
     """The algorithm's settings (:class:`MonitorParams` defaults without the design data, which
-    :func:`monitor_params` takes from the configuration, and the sample period)."""
-    design = {"piston_area_m2", "annulus_area_m2", "v01_m3", "v02_m3", "bulk_modulus_pa", "density_kg_m3", "underlap_m", "x_max_m", "sample_period_s"}
+    :func:`monitor_params` takes from the configuration, the sample period and the window length,
+    which a baseline does not depend on: :func:`transforms.monitor.commissioning_baseline`)."""
+    design = {"piston_area_m2", "annulus_area_m2", "v01_m3", "v02_m3", "bulk_modulus_pa", "density_kg_m3", "underlap_m", "x_max_m", "sample_period_s",
+              "window_s"}  # fmt: skip
     return {f.name: f.default for f in dataclasses.fields(MonitorParams) if f.name not in design}
 
 
@@ -259,38 +265,48 @@ def monitor_rows(valve: ValveSpec, params: MonitorParams, baselines: dict[str, B
 
 def lake_chunks(
     warehouse: Path, valve_id: str, gap_s: float, start: datetime | None, end: datetime | None, days: int | None = None,
-    columns: tuple[str, ...] | None = None,
+    columns: tuple[str, ...] | None = None, window_s: float | None = None,
 ) -> Iterator[pl.DataFrame]:
-    """The valve's lake rows, ``days`` partitions at a time (default :data:`CHUNK_DAYS`), each
-    chunk ending at a gap: a contiguous run of samples (a window) that reaches the end of a chunk
-    is carried into the next, so no window is ever split.
+    """The valve's lake rows in chunks (:func:`_read_spans`: up to ``days`` days, default
+    :data:`CHUNK_DAYS`, and about :data:`CHUNK_ROWS` rows), each chunk ending at a window
+    boundary: the window that reaches the end of a chunk is carried into the next, so no window
+    is ever split. Windows are those of :func:`transforms.windows.window_starts` with the gap
+    limit ``gap_s`` and the length ``window_s`` (None: whole runs).
 
     With ``start``/``end`` the chunks hold the windows that *start* in [start, end), whole: a
     window that began before ``start`` is left out (it belongs to an earlier span), one that
-    starts before ``end`` is read to its end. So the lake is read from two gap limits before
-    ``start`` (a window running at ``start`` has a sample in that interval) to the first gap
-    after ``end`` (:func:`_run_end`).
+    starts before ``end`` is read to its end. So the lake is read from two gap limits (and, with
+    a length, half a length: enough to tell whether the run at ``start`` is cut by the clock)
+    before ``start`` to a time by which the window running at ``end`` has ended (the next gap,
+    :func:`_run_end`; with a length, one length and two gap limits after ``end``).
 
     ``columns``: read only these (``timestamp_utc`` always; ``valve_id`` is then filled in
     rather than decoded from the files)."""
     if start is None and end is None:
-        yield from _gap_chunks(warehouse, valve_id, gap_s, None, None, days, columns)
+        yield from _gap_chunks(warehouse, valve_id, gap_s, None, None, days, columns, window_s)
         return
-    read_lo = start - timedelta(seconds=2 * gap_s) if start is not None else None
-    read_hi = _run_end(warehouse, valve_id, gap_s, end) if end is not None else None
+    length = timedelta(seconds=window_s) if window_s is not None else None
+    back = timedelta(seconds=2 * gap_s) + (length * LONG_RUN_FRACTION if length else timedelta(0))
+    read_lo = start - back if start is not None else None
+    if end is None:
+        read_hi = None
+    elif length is not None:
+        read_hi = end + length + timedelta(seconds=2 * gap_s)
+    else:
+        read_hi = _run_end(warehouse, valve_id, gap_s, end)
     lo_us = None if start is None else int((start - _EPOCH) / timedelta(microseconds=1))
     hi_us = None if end is None else int((end - _EPOCH) / timedelta(microseconds=1))
-    for rows in _gap_chunks(warehouse, valve_id, gap_s, read_lo, read_hi, days, columns):
-        # the runs starting in [start, end) are one contiguous slice of the time-sorted rows
+    for rows in _gap_chunks(warehouse, valve_id, gap_s, read_lo, read_hi, days, columns, window_s):
+        # the windows starting in [start, end) are one contiguous slice of the time-sorted rows
         if rows.height == 0:
             continue
         ts = rows["timestamp_utc"].to_physical().to_numpy()
-        run_starts = window_starts(ts, gap_s * 1e6)
-        first = 0 if lo_us is None else int(np.searchsorted(ts[run_starts], lo_us, side="left"))
-        last = len(run_starts) if hi_us is None else int(np.searchsorted(ts[run_starts], hi_us, side="left"))
+        starts = window_starts(ts, gap_s * 1e6, window_s)
+        first = 0 if lo_us is None else int(np.searchsorted(ts[starts], lo_us, side="left"))
+        last = len(starts) if hi_us is None else int(np.searchsorted(ts[starts], hi_us, side="left"))
         if first < last:
-            a = int(run_starts[first])
-            b = int(run_starts[last]) if last < len(run_starts) else rows.height
+            a = int(starts[first])
+            b = int(starts[last]) if last < len(starts) else rows.height
             yield rows.slice(a, b - a)
 
 
@@ -317,14 +333,16 @@ def _run_end(warehouse: Path, valve_id: str, gap_s: float, end: datetime) -> dat
         lo = hi
 
 
-def _last_gap(t: pl.Series, gap_s: float) -> int:
-    """Index of the first sample after the last gap in ``t`` (0: none), looked for from the end
-    (a tail of 64 k samples, then four times as much, …): a chunk's last run is short."""
+def _last_window(t: pl.Series, gap_s: float, window_s: float | None = None) -> int:
+    """Index of the first sample of the last window in ``t`` (0: one window), looked for from
+    the end (a tail of 64 k samples, then four times as much, …): a chunk's last window is short.
+    (A tail whose run looks short may miss a clock cut of the longer run it belongs to, so it is
+    widened until it shows a window start after its first sample.)"""
     n = t.len()
     ts = t.to_physical()
     k = min(n, 1 << 16)
     while True:
-        starts = window_starts(ts.slice(n - k, k).to_numpy(), gap_s * 1e6)
+        starts = window_starts(ts.slice(n - k, k).to_numpy(), gap_s * 1e6, window_s)
         if starts.size > 1:
             return n - k + int(starts[-1])
         if k == n:
@@ -332,11 +350,74 @@ def _last_gap(t: pl.Series, gap_s: float) -> int:
         k = min(n, 4 * k)
 
 
+CHUNK_ROWS = 2_000_000
+"""About the most lake rows :func:`lake_chunks` reads at once per valve (besides the window it
+carries over): days are read together up to this many rows (a week of hourly 10 s snapshots at
+1 kHz is 1.7 M); a day holding more (a continuous recording) in spans of :data:`CHUNK_SPAN_S`."""
+
+CHUNK_SPAN_S = 1800.0
+"""Span of one read on a day with more than :data:`CHUNK_ROWS` rows: half an hour, 1.8 M rows of a
+1 kHz recording (rounded down to whole windows, at least one). [s]"""
+
+
+def _day_rows(warehouse: Path, valve_id: str, day: date) -> int:
+    """Rows of a valve's lake day (from the files' metadata)."""
+    lo = datetime.combine(day, datetime.min.time(), timezone.utc)
+    return int(read_lake(warehouse, [valve_id], lo, lo + timedelta(days=1)).select(pl.len()).collect().item())
+
+
+def _day_extent(warehouse: Path, valve_id: str, day: date) -> tuple[datetime, datetime]:
+    """First and last time stamp of a valve's lake day (only the time column is decoded)."""
+    lo = datetime.combine(day, datetime.min.time(), timezone.utc)
+    t = pl.col("timestamp_utc")
+    return read_lake(warehouse, [valve_id], lo, lo + timedelta(days=1)).select(t.min().alias("a"), t.max().alias("b")).collect().row(0)
+
+
+def _read_spans(
+    warehouse: Path, valve_id: str, start: datetime | None, end: datetime | None, days: int, window_s: float | None,
+) -> Iterator[tuple[datetime, datetime]]:
+    """The [lo, hi) spans :func:`_gap_chunks` reads one at a time: whole days, up to ``days`` of
+    them holding at most :data:`CHUNK_ROWS` rows together (counted from the files' metadata); a
+    day holding more in spans of :data:`CHUNK_SPAN_S` (whole windows of ``window_s``) over its
+    first to its last sample."""
+    step = timedelta(seconds=CHUNK_SPAN_S)
+    if window_s is not None:
+        step = timedelta(seconds=window_s) * max(1, int(CHUNK_SPAN_S // window_s))
+    group: list[date] = []
+    rows = 0
+
+    def flush() -> Iterator[tuple[datetime, datetime]]:
+        if group:
+            lo = datetime.combine(group[0], datetime.min.time(), timezone.utc)
+            yield lo, datetime.combine(group[-1] + timedelta(days=1), datetime.min.time(), timezone.utc)
+
+    for day in sorted({d for _, d, _ in list_partitions(warehouse, [valve_id], start, end)}):
+        n = _day_rows(warehouse, valve_id, day)
+        if n > CHUNK_ROWS:
+            first, last = _day_extent(warehouse, valve_id, day)
+            yield from flush()
+            group, rows = [], 0
+            midnight = datetime.combine(day, datetime.min.time(), timezone.utc)
+            lo = midnight + step * ((first - midnight) // step)
+            while lo <= last:
+                hi = min(lo + step, midnight + timedelta(days=1))
+                if (start is None or hi > start) and (end is None or lo < end):
+                    yield lo, hi
+                lo += step
+            continue
+        if len(group) >= days or (group and rows + n > CHUNK_ROWS):
+            yield from flush()
+            group, rows = [], 0
+        group.append(day)
+        rows += n
+    yield from flush()
+
+
 def _gap_chunks(
     warehouse: Path, valve_id: str, gap_s: float, start: datetime | None, end: datetime | None, days: int | None,
-    columns: tuple[str, ...] | None,
+    columns: tuple[str, ...] | None, window_s: float | None = None,
 ) -> Iterator[pl.DataFrame]:
-    """:func:`lake_chunks` for rows in [start, end) (runs cut at the bounds)."""
+    """:func:`lake_chunks` for rows in [start, end) (windows cut at the bounds)."""
     select = None
     if columns is not None:
         names = list(dict.fromkeys(["timestamp_utc", *columns]))
@@ -344,25 +425,22 @@ def _gap_chunks(
     days = CHUNK_DAYS if days is None else int(days)
     if days < 1:
         raise ValueError(f"chunk days must be >= 1, got {days}")
-    dates = sorted({d for _, d, _ in list_partitions(warehouse, [valve_id], start, end)})
+    spans = list(_read_spans(warehouse, valve_id, start, end, days, window_s))
     carry = None
-    for i in range(0, len(dates), days):
-        lo = datetime.combine(dates[i], datetime.min.time(), timezone.utc)
-        hi = datetime.combine(dates[min(i + days, len(dates)) - 1] + timedelta(days=1), datetime.min.time(), timezone.utc)
+    for i, (lo, hi) in enumerate(spans):
         lf = read_lake(warehouse, [valve_id], max(lo, start) if start else lo, min(hi, end) if end else hi)
         rows = (lf if select is None else lf.select(select)).collect()
         if carry is not None:
             rows = pl.concat([carry, rows])
-        last = i + days >= len(dates)
         if rows.height == 0:
             carry = None
             continue
-        if last:
+        if i == len(spans) - 1:
             yield rows
             return
-        cut = _last_gap(rows["timestamp_utc"], gap_s)
+        cut = _last_window(rows["timestamp_utc"], gap_s, window_s)
         if cut == 0:
-            carry = rows  # one run spanning the whole chunk: keep collecting
+            carry = rows  # one window reaching over the whole chunk: keep collecting
             continue
         carry = rows.slice(cut)
         yield rows.slice(0, cut)
@@ -439,12 +517,12 @@ def monitor_valve(
 ) -> ValveReport:
     """Steps 2–6 for one valve over [start, end) of its lake; see the module docstring."""
     valve = config.valve(valve_id)
-    params = monitor_params(valve, config.export.sample_rate_hz)
+    params = monitor_params(valve, config.export.sample_rate_hz, config.monitor.window_s)
     baselines = ensure_baselines(valve, params, warehouse)
     report = ValveReport(valve_id, baseline_source=baselines["s1"].source, baseline_plausible=all(b.plausible for b in baselines.values()))
     gap_s = params.gap_limit_periods * params.sample_period_s
     spans: WriteBatch[Span] = WriteBatch(lambda batch: store_spans(warehouse, batch))
-    for rows in lake_chunks(warehouse, valve.id, gap_s, start, end, chunk_days, LAKE_COLUMNS):
+    for rows in lake_chunks(warehouse, valve.id, gap_s, start, end, chunk_days, LAKE_COLUMNS, params.window_s):
         res = monitor_rows(valve, params, baselines, rows)
         now = datetime.now(timezone.utc)
         fits = _fits_table(res.fits, valve, baselines, now)

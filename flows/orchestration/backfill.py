@@ -66,7 +66,7 @@ from flows.common.batches import WriteBatch
 from flows.common.config import load_plant_config
 from flows.common.errors import ValvemonError
 from flows.common.instants import utc_instant
-from flows.common.lake import SENSOR_POLARS_SCHEMA, list_partitions
+from flows.common.lake import list_partitions
 from flows.common.locks import file_lock, partition_lock
 from flows.common.warehouse_db import connect, ensure_ingest_tables, insert_frame, migrate_hash_column, query_frame
 from flows.ingest.flow import (
@@ -292,27 +292,34 @@ class MonitorOutcome:
     rows_read: int
 
 
-def unit_rows(warehouse: Path, valve_id: str, start: datetime, end: datetime, gap_s: float) -> pl.DataFrame:
+def unit_chunks(
+    warehouse: Path, valve_id: str, start: datetime, end: datetime, gap_s: float, window_s: float | None = None
+) -> Iterator[pl.DataFrame]:
     """The lake columns the monitor reads (``LAKE_COLUMNS``) of the windows whose first sample
-    lies in ``[start, end)``, whole: :func:`flows.monitor.flow.lake_chunks` for the span, in one chunk
-    (a window starts after a step longer than ``gap_s``, ``transforms.windows.window_starts``)."""
+    lies in ``[start, end)``, whole, in chunks of whole windows: :func:`flows.monitor.flow.lake_chunks`
+    for the span (windows of ``transforms.windows.window_starts`` with the gap limit ``gap_s``
+    and the length ``window_s``, the same windows as ``valvemon monitor`` cuts, whatever the
+    unit borders: a window belongs to the unit it starts in)."""
     days = (end - start).days + 2  # every partition the span and its last window can touch
-    chunks = list(lake_chunks(warehouse, valve_id, gap_s, start, end, days, LAKE_COLUMNS))
-    return pl.concat(chunks) if chunks else pl.DataFrame(schema={c: SENSOR_POLARS_SCHEMA[c] for c in LAKE_COLUMNS})
+    yield from lake_chunks(warehouse, valve_id, gap_s, start, end, days, LAKE_COLUMNS, window_s)
 
 
 def monitor_unit(config: PlantConfig, unit: MonitorUnit, baselines: dict[str, Baseline], warehouse: str | Path) -> MonitorOutcome:
-    """Steps 2–4b for one unit (the rows of :func:`unit_rows`) against the given baselines."""
+    """Steps 2–4b for one unit (chunk by chunk of :func:`unit_chunks`) against the given baselines."""
     valve = config.valve(unit.valve_id)
-    params = monitor_params(valve, config.export.sample_rate_hz)
-    rows = unit_rows(Path(warehouse), unit.valve_id, unit.start, unit.end, params.gap_limit_periods * params.sample_period_s)
+    params = monitor_params(valve, config.export.sample_rate_hz, config.monitor.window_s)
+    gap_s = params.gap_limit_periods * params.sample_period_s
     selection_schema = polars_schema(SELECTION_FIELDS)
-    if rows.height == 0:
-        return MonitorOutcome(unit, pl.DataFrame(schema=polars_schema(EDGE_FIT_FIELDS)), pl.DataFrame(schema=selection_schema), 0, 0)
-    res = monitor_rows(valve, params, baselines, rows)
-    fits = _fits_table(res.fits, valve, baselines, _now())
-    selection = res.selection.select([f.name for f in SELECTION_FIELDS]).cast(dict(selection_schema))
-    return MonitorOutcome(unit, fits, selection, res.windows.height, rows.height)
+    fits = [pl.DataFrame(schema=polars_schema(EDGE_FIT_FIELDS))]
+    selection = [pl.DataFrame(schema=selection_schema)]
+    windows = rows_read = 0
+    for rows in unit_chunks(Path(warehouse), unit.valve_id, unit.start, unit.end, gap_s, params.window_s):
+        res = monitor_rows(valve, params, baselines, rows)
+        fits.append(_fits_table(res.fits, valve, baselines, _now()))
+        selection.append(res.selection.select([f.name for f in SELECTION_FIELDS]).cast(dict(selection_schema)))
+        windows += res.windows.height
+        rows_read += rows.height
+    return MonitorOutcome(unit, pl.concat(fits), pl.concat(selection), windows, rows_read)
 
 
 def baseline_rows(config: PlantConfig, valve_id: str, warehouse: str | Path, versions: dict[str, int]) -> pl.DataFrame:
@@ -490,7 +497,7 @@ def _valve_signature(config: PlantConfig, valve_id: str, baselines: dict[str, Ba
     valve = config.valve(valve_id)
     return json.dumps(
         {
-            "params": repr(monitor_params(valve, config.export.sample_rate_hz)),
+            "params": repr(monitor_params(valve, config.export.sample_rate_hz, config.monitor.window_s)),
             "commissioned": valve.commissioned.isoformat(),
             "baselines": {e: baselines[e].version for e in EDGES},
             "definition": baseline_definition(valve),

@@ -93,8 +93,9 @@ def update_standstill(config: PlantConfig, warehouse: Path, now: datetime) -> in
     added = 0
     for v in config.valves:
         start = last.get(v.id)
-        for rows in lake_chunks(warehouse, v.id, config.export.max_gap_s, start, None):
-            frame = standstill_rows(rows, max_gap_s=config.export.max_gap_s, commissioned=v.commissioned, computed_at=now)
+        window_s = config.monitor.window_s
+        for rows in lake_chunks(warehouse, v.id, config.export.max_gap_s, start, None, window_s=window_s):
+            frame = standstill_rows(rows, max_gap_s=config.export.max_gap_s, commissioned=v.commissioned, computed_at=now, window_s=window_s)
             lo, hi = rows["timestamp_utc"][0], rows["timestamp_utc"][-1]
             with connect(warehouse) as con:
                 with transaction(con):

@@ -51,18 +51,21 @@ def _run_age(mask: np.ndarray) -> np.ndarray:
     return np.where(mask, idx - last_false, 0)
 
 
-def standstill_rows(frame: pl.DataFrame, *, max_gap_s: float, commissioned: datetime, computed_at: datetime) -> pl.DataFrame:
+def standstill_rows(
+    frame: pl.DataFrame, *, max_gap_s: float, commissioned: datetime, computed_at: datetime, window_s: float | None = None
+) -> pl.DataFrame:
     """Eq. 9 rows (:data:`schemas.fields.STANDSTILL_FIELDS`) of one valve's lake rows.
 
-    ``frame`` is the canonical sensor frame of one valve, sorted by time; windows are the runs
-    without a gap longer than ``max_gap_s``.
+    ``frame`` is the canonical sensor frame of one valve, sorted by time; windows are the
+    monitor's: runs without a gap longer than ``max_gap_s``, cut by the clock every ``window_s``
+    (:func:`transforms.windows.window_starts`; None: whole runs).
     """
     schema = polars_schema(STANDSTILL_FIELDS)
     if frame.height < 2:
         return pl.DataFrame(schema=schema)
     valve_id = frame["valve_id"][0]
     t_us = frame["timestamp_utc"].dt.epoch("us").to_numpy()
-    starts = np.r_[window_starts(t_us, max_gap_s * 1e6), t_us.size]
+    starts = np.r_[window_starts(t_us, max_gap_s * 1e6, window_s), t_us.size]
     cols = {c: frame[c].to_numpy() for c in ("ps_pa", "pr_pa", "p1_pa", "p2_pa", "x_spool_m", "x_cyl_m")}
     rows = []
     for a, b in zip(starts[:-1], starts[1:]):

@@ -19,8 +19,13 @@ def simulated_lake(
 
     ``trajectory``: a :class:`model.TrajectoryParams` instead of Table 1's default moves.
     Window i draws its inputs from (seed, i) alone, so two condition lists give the same
-    reference trajectories, loads and supply (twins)."""
+    reference trajectories, loads and supply (twins). A window longer than 10 s (a continuous
+    recording) keeps Table 1's supply drift at most 10 bar over the whole window (the drift rate
+    is drawn for a 10 s window; over 20 min it would reach the 250 bar sensor limit)."""
     plant = TABLE1 if trajectory is None else dataclasses.replace(TABLE1, trajectory=trajectory)
+    if duration_s > 10.0:
+        drift = min(plant.supply.p_s_drift_max_pa_s, 10e5 / duration_s)
+        plant = dataclasses.replace(plant, supply=dataclasses.replace(plant.supply, p_s_drift_max_pa_s=drift))
     res = simulate_windows(plant, conditions, duration_s, seed)
     m = measure(res, sensors or TABLE1.sensors, np.random.default_rng(seed))
     n_w, n_s = m.p1.shape

@@ -234,11 +234,11 @@ def test_span_bounds_read_whole_windows_and_little_else(tmp_path):
 
 
 @pytest.mark.parametrize("gaps", [[], [5], [100, 250_000], [299_999], [10, 20, 70_000]])
-def test_last_gap_found_from_the_end(gaps):
+def test_last_window_found_from_the_end(gaps):
     # 1 ms steps, a 1 s jump before each index in `gaps`; the search looks at 64 k samples first,
     # then at four times as many: a gap far from the end must still be found
     steps = np.full(300_000, 1_000, dtype=np.int64)
     steps[0] = 0
     steps[gaps] = 1_000_000
     t = pl.Series(np.cumsum(steps) + 1_700_000_000_000_000).cast(pl.Datetime("us", "UTC"))
-    assert fm._last_gap(t, 0.005) == (max(gaps) if gaps else 0)
+    assert fm._last_window(t, 0.005) == (max(gaps) if gaps else 0)

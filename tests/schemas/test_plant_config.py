@@ -229,3 +229,37 @@ def test_broken_retention_names_the_key(raw, table, message):
     with pytest.raises(ConfigError) as err:
         parse_plant_config(raw)
     assert message in str(err.value)
+
+
+# --- [monitor] window_s ------------------------------------------------------------------------
+
+
+def test_monitor_window_default_and_round_trip(raw, tmp_path):
+    from schemas.plant_config import DEFAULT_WINDOW_S
+
+    assert parse_plant_config(raw).monitor.window_s == DEFAULT_WINDOW_S
+    assert "monitor" not in plant_config_to_dict(parse_plant_config(raw))  # the default is not written
+    raw["monitor"] = {"window_s": 300}
+    cfg = parse_plant_config(raw)
+    assert cfg.monitor.window_s == 300.0
+    path = tmp_path / "plant.toml"
+    path.write_bytes(tomli_w.dumps(plant_config_to_dict(cfg)).encode())
+    assert load_plant_config(path) == cfg
+
+
+@pytest.mark.parametrize(
+    "monitor, message",
+    [
+        ({"window_s": 0}, "monitor.window_s: 0 must be >= 1"),
+        ({"window_s": 7}, "monitor.window_s: 7 s does not divide a day"),
+        ({"window_s": 172_800}, "monitor.window_s: 172800 must be <= 86400"),
+        ({"window_s": "1 min"}, "monitor.window_s: expected a finite number"),
+        ({"window": 60}, "monitor.window: unknown key"),
+        ("60", "monitor: expected a table"),
+    ],
+)
+def test_broken_monitor_window_names_the_key(raw, monitor, message):
+    raw["monitor"] = monitor
+    with pytest.raises(ConfigError) as err:
+        parse_plant_config(raw)
+    assert message in str(err.value)

@@ -1,13 +1,15 @@
-"""Step 2: windows from time gaps; Savitzky–Golay values exact on polynomials, never across a gap."""
+"""Step 2: windows from time gaps and the clock; Savitzky–Golay values exact on polynomials, never across a gap."""
 
 from datetime import datetime, timezone
 
 import numpy as np
 import polars as pl
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from transforms.derivatives import add_savgol, savgol_weights
-from transforms.windows import assign_windows, infer_sample_period_s, window_starts, window_table
+from transforms.windows import LONG_RUN_FRACTION, assign_windows, infer_sample_period_s, window_arrays, window_starts, window_table
 
 DT = 1e-3
 T0_US = int(datetime(2025, 3, 1, tzinfo=timezone.utc).timestamp() * 1e6)
@@ -154,3 +156,97 @@ def test_savgol_missing_value_nulls_its_stencils_only():
     assert null[100 - h : 100 + h + 1].all() and out["ys"].is_null().to_numpy()[100 - h : 100 + h + 1].all()
     assert not null[h : 100 - h].any() and not null[100 + h + 1 : 200 - h].any()
     np.testing.assert_allclose(out["dy"].to_numpy()[~null], 3e5, rtol=1e-9)
+
+
+# --------------------------------------------------------------------------------------------
+# windows cut by the clock (continuous recordings)
+# --------------------------------------------------------------------------------------------
+
+GAP_US = 3_000.0
+
+
+@st.composite
+def _recordings(draw):
+    """Sorted time stamps (µs) of one valve: runs of 1 ms steps with the odd 2 ms or 3 ms step
+    (no gap), separated by gaps of 3.5 ms … an hour, starting anywhere on the clock; and a
+    window length of 0.05 … 2 s (so runs span several lengths)."""
+    t0 = draw(st.integers(T0_US, T0_US + 10**9))
+    steps = draw(st.lists(st.sampled_from([1_000] * 30 + [2_000, 3_000, 3_001, 3_500, 250_000, 3_600_000_000]), min_size=1, max_size=3000))
+    length_s = draw(st.sampled_from([0.05, 0.1, 0.25, 0.6, 1.0, 1.7, 2.0]))
+    return np.r_[t0, t0 + np.cumsum(steps)].astype(np.int64), length_s
+
+
+def _runs(t_us: np.ndarray) -> np.ndarray:
+    return np.r_[0, np.flatnonzero(np.diff(t_us) > GAP_US) + 1, t_us.size]
+
+
+@given(_recordings())
+@settings(max_examples=150, deadline=None)
+def test_clock_windows_never_straddle_a_gap_and_cut_at_multiples_of_the_length(rec):
+    t, length_s = rec
+    length_us = round(length_s * 1e6)
+    starts = window_starts(t, GAP_US, length_s)
+    is_start = np.zeros(t.size, dtype=bool)
+    is_start[starts] = True
+    runs = _runs(t)
+    assert is_start[runs[:-1]].all()  # every gap starts a window: none straddles one
+    cell = t // length_us
+    for a, b in zip(runs[:-1], runs[1:]):
+        inner = np.arange(a + 1, b)
+        if t[b - 1] - t[a] < LONG_RUN_FRACTION * length_us:
+            assert not is_start[inner].any()  # a short run (a snapshot) is one window, whole
+        else:
+            # a long run: a window starts exactly at the first sample of each clock cell
+            np.testing.assert_array_equal(is_start[inner], cell[inner] != cell[inner - 1])
+    assert window_starts(t, GAP_US, None).tolist() == runs[:-1].tolist()  # no length: whole runs
+
+
+@given(_recordings(), st.data())
+@settings(max_examples=150, deadline=None)
+def test_clock_windows_the_same_however_the_recording_is_read(rec, data):
+    """Cut in two at any instant and read chunk by chunk (the last window of a chunk carried into
+    the next, as flows.monitor.flow.lake_chunks does), or sliced to any run of whole windows (a
+    span of a backfill): the same windows as the recording read whole."""
+    t, length_s = rec
+    whole = window_starts(t, GAP_US, length_s)
+    k = data.draw(st.integers(1, t.size))
+    first = window_starts(t[:k], GAP_US, length_s)
+    carry = int(first[-1])
+    rest = carry + window_starts(t[carry:], GAP_US, length_s)
+    np.testing.assert_array_equal(np.r_[first[:-1], rest], whole)
+    bounds = np.r_[whole, t.size]
+    i = data.draw(st.integers(0, whole.size - 1))
+    j = data.draw(st.integers(i + 1, whole.size))
+    a, b = int(bounds[i]), int(bounds[j])
+    np.testing.assert_array_equal(a + window_starts(t[a:b], GAP_US, length_s), whole[i:j])
+
+
+@given(_recordings())
+@settings(max_examples=40, deadline=None)
+def test_clock_windows_of_assign_windows_and_window_arrays_follow_window_starts(rec):
+    t, length_s = rec
+    ts = (t - T0_US) * 1e-6
+    framed = assign_windows(_frame(ts, {"y": np.zeros(t.size)}), sample_period_s=DT, gap_limit_s=GAP_US * 1e-6, window_s=length_s)
+    expected = window_starts(t, GAP_US, length_s)
+    np.testing.assert_array_equal(np.flatnonzero(np.diff(framed["window_id"].to_numpy(), prepend=-1)), expected)
+    assert framed["run_start"].to_numpy()[expected].all()  # a stencil never reaches into the next window
+    win, _, n_w = window_arrays(t, sample_period_s=DT, gap_limit_s=GAP_US * 1e-6, half_window=10, window_s=length_s)
+    assert n_w == expected.size
+    np.testing.assert_array_equal(np.flatnonzero(np.diff(win, prepend=-1)), expected)
+
+
+def test_snapshots_are_never_cut_continuous_recordings_are():
+    """Hourly 10 s snapshots at any offset (here straddling a minute) stay whole with 60 s
+    windows; a 200 s recording from 12:00:50 is cut at 12:01, 12:02, 12:03, 12:04 (short remainders
+    of 10 s and 10 s at its ends), at the same instants whatever the first sample."""
+    base = int(datetime(2025, 3, 1, 12, tzinfo=timezone.utc).timestamp() * 1e6)
+    snap = np.arange(10_000) * 1_000
+    t = np.concatenate([base + 55_000_000 + snap, base + 3_600_000_000 + 59_999_000 + snap])
+    assert window_starts(t, GAP_US, 60.0).tolist() == [0, 10_000]
+    rec = base + 50_000_000 + np.arange(200_000) * 1_000
+    starts = window_starts(rec, GAP_US, 60.0)
+    assert ((rec[starts] - base) / 1e6).tolist() == [50.0, 60.0, 120.0, 180.0, 240.0]
+    for drop in (1, 4_321, 15_000):  # the file began later: the later cuts do not move
+        assert (drop + window_starts(rec[drop:], GAP_US, 60.0)[1:]).tolist() == starts[starts > drop].tolist()
+    with pytest.raises(ValueError, match="window_s"):
+        window_starts(rec, GAP_US, 0.0)
