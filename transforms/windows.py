@@ -29,9 +29,9 @@ A frame sorted by ``valve_id, timestamp_utc`` gets
   the neighbouring window, so a window's values depend on its own samples only.
 
 Everything is a column expression (diff, cumulative sum, forward/backward fill; the span of a run
-is a ``min``/``max`` over the run): no Python loop. :func:`window_arrays` does the same for one valve in one compiled pass over the
-time stamps, with the Savitzky–Golay validity (what the monitor's fast path uses; the tests hold
-the two equal).
+is a ``min``/``max`` over the run): no Python loop. :func:`window_arrays` does the same for one
+valve in one compiled pass over the time stamps, with the Savitzky–Golay validity (what the
+monitor's fast path uses; the tests hold the two equal).
 """
 
 from __future__ import annotations
