@@ -8,7 +8,8 @@
    schedule's time zone (default the plant's) — for all valves, and the days of any newly
    ingested file that arrived late, one unit per valve and day (the backfill's machinery,
    :mod:`flows.orchestration.backfill`, so a failed night is simply continued by the next run);
-3. refreshes the report (:func:`flows.report.flow.report_flow`: views, snapshot, pictures, HTML).
+3. refreshes the report (:func:`flows.report.flow.report_flow`: views, snapshot, pictures, HTML);
+   with ``--no-report`` it only publishes the snapshot (:mod:`flows.report.publish`).
 
 :func:`serve_nightly` registers it as a deployment with a cron schedule on the Prefect server
 ``PREFECT_API_URL`` names and serves it: this process polls the server and runs each scheduled
@@ -102,6 +103,10 @@ def nightly_flow(
     result = {"day": d.isoformat(), "timezone": tz, "summary": summary.line(), "report": None}
     if report:
         result["report"] = str(refresh_report(config_path, warehouse))
+    else:  # the report publishes the snapshot; without it the night's rows are published here
+        from flows.report.publish import publish
+
+        publish(config, warehouse)
     if failure is not None:
         raise failure
     return result
