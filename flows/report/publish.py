@@ -10,9 +10,9 @@ run, ``discrepancy``, ``report``) ends with :func:`publish`, so ``valvemon query
    ``valve_condition`` and ``fleet_ranking`` have a row per configured valve as soon as there
    are fits (the Eq. 9 standstill columns stay empty until ``valvemon report`` checks the lake);
 3. creates or refreshes the views (:func:`flows.report.views.create_views`);
-4. checkpoints and publishes the read-only snapshot readers open
-   (:func:`flows.report.views.publish_snapshot`: a copy replaced atomically, so a reader never
-   waits for the writer nor the writer for a reader).
+4. publishes the read-only snapshot readers open (:func:`flows.report.views.publish_snapshot`:
+   a byte copy of the checkpointed file, replaced atomically, so a reader never waits for the
+   writer nor the writer for a reader).
 
 The cost grows with the database, not with what the command did (``docs/warehouse.md``,
 "Readers and the writer", has the figures).
@@ -62,6 +62,5 @@ def publish(config: PlantConfig | str | Path, warehouse: str | Path, now: dateti
             con.execute("DELETE FROM condition_bounds")
             insert_frame(con, "condition_bounds", bounds)
         views = create_views(con)
-        con.execute("CHECKPOINT")
         snapshot = publish_snapshot(con, warehouse)
     return views, snapshot
