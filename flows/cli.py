@@ -1,11 +1,15 @@
 """The ``valvemon`` command line (``../shared/spec/interfaces.md``).
 
 Every command takes ``--warehouse DIR`` (or ``$VALVEMON_WAREHOUSE``; default ``warehouse/``).
-Exit status 0 on success; otherwise non-zero with a one-line reason on stderr.
+Exit status 0 on success; otherwise non-zero with a one-line reason on stderr (:func:`main`).
+
+Start-up is kept short: a command imports its stage only inside its function, and the stages
+run without Prefect unless a Prefect API is configured (:mod:`flows.common.prefect_run`).
 """
 
 from __future__ import annotations
 
+import os
 import sys
 from contextlib import contextmanager
 from pathlib import Path
@@ -288,10 +292,41 @@ def discrepancy(
         typer.echo(line)
 
 
+TRACEBACK_ENV = "VALVEMON_TRACEBACK"
+"""Set to 1 to get the traceback of an unexpected failure instead of its one line."""
+
+
+def _first_line(exc: BaseException) -> str:
+    text = str(exc).strip()
+    return text.splitlines()[0] if text else type(exc).__name__
+
+
+def _fail(message: str, code: int = 1) -> None:
+    print(f"valvemon: error: {message}", file=sys.stderr)
+    sys.exit(code)
+
+
 def main() -> None:
-    """Entry point: known failures become one line on stderr and exit status 1."""
+    """Entry point: every failure is one line on stderr and a non-zero exit status: 1, or 2 for
+    a usage error (bad option or argument); an interrupt exits with 130, silently."""
     try:
-        app()
-    except (ValvemonError, ConfigError) as exc:
-        print(f"valvemon: error: {exc}", file=sys.stderr)
-        sys.exit(1)
+        code = app(standalone_mode=False, prog_name="valvemon")
+    except (ValvemonError, ConfigError) as exc:  # the reason, naming file, row, key …
+        _fail(_first_line(exc))
+    except typer.TyperException as exc:  # click's usage errors (click as vendored by typer)
+        from typer._click.exceptions import NoArgsIsHelpError
+
+        if isinstance(exc, NoArgsIsHelpError):  # `valvemon` alone: the help
+            exc.show()
+            sys.exit(exc.exit_code)
+        ctx = getattr(exc, "ctx", None)
+        _fail(_first_line(exc) + (f" (see '{ctx.command_path} --help')" if ctx is not None else ""), exc.exit_code)
+    except typer.Abort:
+        _fail("aborted")
+    except OSError as exc:  # the file system: permissions, a full disk, a vanished file
+        _fail(f"{exc.filename}: {exc.strerror}" if exc.filename and exc.strerror else _first_line(exc))
+    except Exception as exc:  # noqa: BLE001 - a bug or an unforeseen failure: still one line (the traceback on request)
+        if os.environ.get(TRACEBACK_ENV) == "1":
+            raise
+        _fail(f"unexpected {type(exc).__name__}: {_first_line(exc)} (set {TRACEBACK_ENV}=1 for the traceback)")
+    sys.exit(code if isinstance(code, int) else 0)
