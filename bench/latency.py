@@ -8,8 +8,9 @@ the temporary Prefect server included) are printed as a Markdown table.
 
 A fresh environment has no bytecode of its own: "before" (``uv sync`` without
 ``--compile-bytecode``) is measured with ``PYTHONDONTWRITEBYTECODE=1`` after its ``.pyc``
-files are removed (every run compiles every module, as on CI), then without (the first run
-writes the ``.pyc`` files, and is not counted). "after" is measured as ``make setup`` left it
+files are removed (every run compiles every module, as on CI), then without (the first run of
+each command writes the ``.pyc`` files, and is not counted). Commands alternate between the two
+sides, so both see the same load. "after" is measured as ``make setup`` left it
 (bytecode compiled at install).
 
 Commands: ``valvemon --help``; ``valvemon query "select 1"`` (on a warehouse that has a snapshot);
@@ -114,31 +115,36 @@ def main() -> None:
         sides[1].run(["simulate", "--out", str(archive), "--n-valves", "1", "--days", "1", "--windows-per-day", "1",
                       "--format", "parquet", "--quiet"], no_bytecode=False)  # fmt: skip
     for side in sides:
-        prepare(side, archive)
+        if not (side.warehouse / "snapshot" / "valvemon.duckdb").exists():
+            prepare(side, archive)
 
     results: dict[tuple[str, str, bool], tuple[float, float]] = {}
     cmds = commands(archive)
     if args.demo:
         cmds["valvemon demo"] = ["demo"]
-    for side in sides:
-        modes = (True, False)
-        if side.name == "before":
-            side.remove_bytecode()  # a fresh environment, as CI has it
-        for no_bytecode in modes:
-            if not no_bytecode:
-                side.run(["--help"], no_bytecode=False)  # writes the .pyc files of what --help loads (not counted)
-                for args_ in cmds.values():
-                    if args_ != ["demo"]:
-                        side.run(args_, no_bytecode=False)  # and of the rest (not counted)
-            for label, args_ in cmds.items():
-                if args_ == ["demo"]:
-                    wh = work / f"demo-{side.name}-{int(no_bytecode)}"
-                    shutil.rmtree(wh, ignore_errors=True)
-                    results[(label, side.name, no_bytecode)] = side.run(["demo"], no_bytecode, warehouse=wh)
-                else:
-                    results[(label, side.name, no_bytecode)] = measure(side, args_, no_bytecode, args.repeats)
-                w, c = results[(label, side.name, no_bytecode)]
-                print(f"  {side.name:6} PYTHONDONTWRITEBYTECODE={'1' if no_bytecode else '-'}  {label:38} wall {w:7.2f} s  cpu {c:7.2f} s", flush=True)
+
+    def record(label: str, side: Side, no_bytecode: bool) -> None:
+        args_ = cmds[label]
+        if args_ == ["demo"]:
+            wh = work / f"demo-{side.name}-{int(no_bytecode)}"
+            shutil.rmtree(wh, ignore_errors=True)
+            results[(label, side.name, no_bytecode)] = side.run(["demo"], no_bytecode, warehouse=wh)
+        else:
+            results[(label, side.name, no_bytecode)] = measure(side, args_, no_bytecode, args.repeats)
+        w, c = results[(label, side.name, no_bytecode)]
+        print(f"  {side.name:6} PYTHONDONTWRITEBYTECODE={'1' if no_bytecode else '-'}  {label:38} wall {w:7.2f} s  cpu {c:7.2f} s", flush=True)
+
+    # 1. PYTHONDONTWRITEBYTECODE=1 in a fresh environment: "before" has no .pyc files at all
+    sides[0].remove_bytecode()
+    for label in cmds:
+        for side in sides:
+            record(label, side, True)
+    # 2. without it: the first run of each command writes the .pyc files (not counted)
+    for label, args_ in cmds.items():
+        for side in sides:
+            if args_ != ["demo"]:
+                side.run(args_, no_bytecode=False)
+            record(label, side, False)
 
     print(f"\nload after: {os.getloadavg()[0]:.1f}; median of {args.repeats} runs (demo: one run)\n")
     print("| command | PYTHONDONTWRITEBYTECODE | before: wall | after: wall | before: CPU | after: CPU | wall before / after |")

@@ -44,7 +44,9 @@ To = Annotated[Optional[str], typer.Option("--to", help="End, exclusive (ISO-860
 def publishing(config: Path, warehouse: Path) -> Iterator[None]:
     """After the command's work, publish what it committed for ``valvemon query``
     (:mod:`flows.report.publish`); after a failure too (e.g. the quarantine of a rejected file),
-    unless publishing fails as well, which then leaves the first error to be reported."""
+    the command's own error then being the one reported. A publish that cannot get the database
+    (another writer holds it past the wait) is a warning, not a failure: the work is committed,
+    and that writer publishes it with its own when it ends."""
     from flows.report.publish import publish
 
     try:
@@ -55,7 +57,10 @@ def publishing(config: Path, warehouse: Path) -> Iterator[None]:
         except Exception:  # noqa: BLE001 - the command's own error is the one to report
             pass
         raise
-    publish(config, warehouse)
+    try:
+        publish(config, warehouse)
+    except ValvemonError as exc:
+        print(f"valvemon: warning: the snapshot for queries was not published: {_first_line(exc)}", file=sys.stderr)
 
 
 @app.command()

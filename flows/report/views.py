@@ -196,7 +196,7 @@ def connect_snapshot(warehouse: str | Path, *, live: bool = False, wait_s: float
     """
     path = db_path(warehouse) if live else snapshot_path(warehouse)
     if not path.exists():
-        hint = "" if live else " (`valvemon report` publishes it; --live reads the live database)"
+        hint = "" if live else " (every writing command publishes it: ingest, monitor, backfill, report; --live reads the live database)"
         raise ValvemonError(f"{path}: no such database{hint}")
     deadline = time.monotonic() + wait_s
     delay = 0.05
