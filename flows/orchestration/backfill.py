@@ -492,7 +492,8 @@ def _lake_stats(warehouse: Path, valve_ids: list[str]) -> dict[str, dict[date, t
             st = path.stat()
         except FileNotFoundError:
             continue
-        out.setdefault(vid, {})[day] = (st.st_size, st.st_mtime_ns)
+        size, mtime = out.setdefault(vid, {}).get(day, (0, 0))  # a day stored by the hour: all its files
+        out[vid][day] = (size + st.st_size, max(mtime, st.st_mtime_ns))
     return out
 
 
