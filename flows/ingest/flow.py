@@ -26,7 +26,7 @@ from contextlib import AbstractContextManager, contextmanager, nullcontext
 from dataclasses import asdict, dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Callable, Iterator
+from typing import Callable, Iterable, Iterator
 
 import numpy as np
 import polars as pl
@@ -39,12 +39,11 @@ from prefect.cache_policies import NO_CACHE
 from flows.common.allocator import retain_freed_memory
 from flows.common.config import load_plant_config
 from flows.common.errors import ValvemonError
-from flows.common.lake import partition_path, read_partition, write_partition
 from flows.common.locks import file_lock
 from flows.common.warehouse_db import connect, ensure_ingest_tables, insert_frame, transaction
 from schemas.fields import GAP_FIELDS, GAP_SCHEMA, INGEST_RUN_FIELDS, MANIFEST_FIELDS, QUARANTINE_FIELDS, QUARANTINE_SCHEMA, polars_schema
 from schemas.plant_config import ConfigError, ExportSpec, PlantConfig
-from transforms.ingest import Grid, IngestError, TagTable, merge_partition, process_export, tags_by_column
+from transforms.ingest import Grid, IngestError, TagTable
 
 EXPORT_SUFFIXES = (".csv", ".csv.gz", ".txt", ".tsv", ".tsv.gz", ".txt.gz", ".parquet", ".pq")
 """Files a folder argument contributes (searched recursively, sorted by path)."""
@@ -326,9 +325,9 @@ def _now() -> datetime:
     return datetime.now(timezone.utc)
 
 
-def in_manifest(warehouse: Path, ef: ExportFile | str) -> bool:
-    """Whether the manifest already holds a file with this content (an :class:`ExportFile`, or a
-    content hash).
+def in_manifest(warehouse: Path, ef) -> bool:
+    """Whether the manifest already holds a file with this content (an :class:`ExportFile` or a
+    ``flows.ingest.batches.ExportSource``, or a content hash).
 
     A manifest row of an older warehouse holds the file's SHA-256 (``sha256:…``); only when one
     such row has the file's size is the file's SHA-256 computed, and on a match the file's rows
@@ -373,18 +372,30 @@ def _table(frame: pl.DataFrame, fields) -> pl.DataFrame:
 def ingest_file(path: str | Path, config: PlantConfig, warehouse: str | Path, run_id: str, *, force: bool = False, tags: TagTable | None = None) -> FileReport:
     """Ingest one export file into the lake and record it (module doc).
 
+    The file is hashed first (a file in the manifest is not read), then read, processed and
+    merged batch by batch (``flows.ingest.batches``, ``transforms.ingest.stream``), so memory does
+    not grow with the file; an export whose order does not allow that (``NotStreamable``: times
+    going back across a batch edge, tags one after the other) is processed whole.
+
     Raises
     ------
     ValvemonError
         Naming the file and, where it applies, the line, tag, time and what was expected.
     """
+    from flows.ingest.batches import export_batches, open_export
+    from transforms.ingest.stream import NotStreamable
+
     path, warehouse = Path(path), Path(warehouse)
     retain_freed_memory()  # the next file's arrays reuse this one's heap: no page faults (flows/common/allocator.py)
     tags = tags or TagTable.from_config(config)
-    ef = read_export(path, config.export, tags)
-    if not force and in_manifest(warehouse, ef):
-        return FileReport(str(path), ef.file_hash, skipped=True)
-    report, records = merge_export(path, ef, config, warehouse, run_id, tags)
+    src = open_export(path, config.export)
+    if not force and in_manifest(warehouse, src):
+        return FileReport(str(path), src.file_hash, skipped=True)
+    try:
+        report, records = merge_batches(path, src, export_batches(src, config.export, tags), config, warehouse, run_id, tags)
+    except NotStreamable:
+        ef = read_export(path, config.export, tags)
+        report, records = merge_export(path, ef, config, warehouse, run_id, tags)
     record_file(warehouse, *records)
     return report
 
@@ -402,44 +413,66 @@ def merge_export(
     tags: TagTable,
     lock: Callable[[Path], AbstractContextManager] = _unlocked,
 ) -> tuple[FileReport, tuple[dict, pl.DataFrame, pl.DataFrame]]:
-    """Turn a read export into lake partitions and merge each into the lake.
+    """Turn a read export (whole) into lake rows and merge them into the lake (:func:`merge_batches`)."""
+    return merge_batches(path, ef, [(ef.frame, ef.first_line, True)], config, warehouse, run_id, tags, lock)
 
-    ``lock(target)`` is held around each partition's read-merge-write. Returns the file's
+
+def merge_batches(
+    path: Path,
+    source,
+    batches: Iterable[tuple[pl.DataFrame, int, bool]],
+    config: PlantConfig,
+    warehouse: Path,
+    run_id: str,
+    tags: TagTable,
+    lock: Callable[[Path], AbstractContextManager] = _unlocked,
+) -> tuple[FileReport, tuple[dict, pl.DataFrame, pl.DataFrame]]:
+    """Turn an export's batches into lake rows and merge them into the lake's files.
+
+    ``source`` identifies the file (``file_hash``, ``size_bytes``, ``file_format``). The files
+    are staged and committed together after the last batch (``flows.ingest.staging``);
+    ``lock(day file)`` is held from a day folder's first write to the commit. Returns the file's
     report and its database rows (:func:`file_records`), which the caller writes.
 
     Raises
     ------
     ValvemonError
-        Naming the file and what is wrong with its content.
+        Naming the file and what is wrong with its content (nothing of it reaches the lake).
+    NotStreamable
+        The export cannot be taken batch by batch (nothing of it reached the lake).
     """
-    export = config.export
-    report = FileReport(str(path), ef.file_hash)
+    from flows.ingest.staging import LakeStager
+    from transforms.ingest.export import ExportResult
+    from transforms.ingest.stream import ExportStream
+
+    stream = ExportStream(config, tags)
+    stager = LakeStager(warehouse, config, lock)
     try:
-        result = process_export(ef.frame, config, first_line=ef.first_line, tags=tags)
+        for df, first_line, final in batches:
+            for frame in stream.feed(df, first_line=first_line, final=final):
+                stager.add(frame)
+            stager.flush(None if final else stream.given_to())
+        stager.commit()
     except IngestError as exc:
+        stager.discard()
         raise ValvemonError(f"{path}: {exc}") from None
-    c = result.counts
-    report.rows_in, report.samples_in, report.quarantined = c.rows_in, c.samples_in, c.quarantined
+    except BaseException:
+        stager.discard()
+        raise
+    finally:
+        stager.release()
+    c = stream.counts
+    report = FileReport(str(path), source.file_hash, rows_in=c.rows_in, samples_in=c.samples_in, quarantined=c.quarantined)
     report.duplicates, report.conflicts, report.gaps, report.rows_out = c.duplicates, c.conflicts, c.gaps, c.rows_out
     report.valves = c.valves
-    report.partitions = len(result.partitions)
-    gap_us = max(int(round(export.max_gap_s * 1e6)), 1)
-    for part in result.partitions:
-        target = partition_path(warehouse, part.valve_id, part.date)
-        with lock(target):
-            try:
-                merged = merge_partition(read_partition(target), part.frame, export.duplicate_rule, tags_by_column(config, part.valve_id))
-            except IngestError as exc:
-                raise ValvemonError(f"{path}: {exc}") from None
-            report.rows_added += merged.rows_added
-            report.lake_conflicts += merged.lake_conflicts
-            if merged.changed:
-                write_partition(target, merged.frame, gap_us=gap_us)
-                report.partitions_written += 1
-    return report, file_records(path, ef, result, report, run_id, export.layout)
+    report.partitions = len(stager.days)
+    report.partitions_written = len(stager.days_written)
+    report.rows_added, report.lake_conflicts = stager.rows_added, stager.lake_conflicts
+    result = ExportResult([], stream.quarantine_frame(), stream.gap_frame(), c)
+    return report, file_records(path, source, result, report, run_id, config.export.layout)
 
 
-def file_records(path: Path, ef: ExportFile, result, report: FileReport, run_id: str, layout: str) -> tuple[dict, pl.DataFrame, pl.DataFrame]:
+def file_records(path: Path, ef, result, report: FileReport, run_id: str, layout: str) -> tuple[dict, pl.DataFrame, pl.DataFrame]:
     """The manifest row, quarantine rows and gap rows of one ingested file, per the registry."""
     now = _now()
     extra = {"file_hash": ef.file_hash, "source_file": str(path), "run_id": run_id, "ingested_at": now}
