@@ -91,7 +91,7 @@ class _ValveRows:
 
     pending: dict[str, list[tuple[np.ndarray, np.ndarray]]] = field(default_factory=dict)
     reached: dict[str, int] = field(default_factory=dict)
-    """Signal → its last grid instant so far (µs)."""
+    """Signal → the instant (µs) up to which all its grid points are known."""
     given_to: int = -_DONE
     """Rows up to this instant (µs) were given."""
 
@@ -238,7 +238,9 @@ class ExportStream:
         self._carry.pop(tid, None)
         if held is not None:
             self._carry[tid] = held
+        rows = self._valves.setdefault(valve_id, _ValveRows())
         if len(t) == 0:
+            self._reach(rows, signal, held)
             return
         series = prepare_tag(t, v, lines, export.duplicate_rule, tag)
         c.duplicates += series.duplicates
@@ -271,14 +273,22 @@ class ExportStream:
                     schema=GAP_COLUMNS,
                 )
             )
-        rows = self._valves.setdefault(valve_id, _ValveRows())
         if len(g.t_us):
             if g.t_us[0] <= rows.given_to:
                 raise NotStreamable(f"tag {tag}: samples behind lake rows already given")
             rows.pending.setdefault(signal, []).append((g.t_us, g.values))
-            rows.reached[signal] = int(g.t_us[-1])
+        self._reach(rows, signal, held)
+
+    @staticmethod
+    def _reach(rows: _ValveRows, signal: str, held: _TagCarry | None) -> None:
+        """How far the signal's grid instants are all known: later ones lie after its anchor (the
+        last sample on the grid), or, before it has one, at or after its held samples."""
+        if held is None:
+            rows.reached[signal] = _DONE
+        elif held.anchor is not None:
+            rows.reached[signal] = held.anchor[0] // 1000
         else:
-            rows.reached.setdefault(signal, rows.given_to)
+            rows.reached[signal] = (held.last_ns - 1) // 1000
 
     def _give(self, final: bool) -> list[pl.DataFrame]:
         """Lake rows up to where every signal of a valve has reached (all of them when final)."""
@@ -305,6 +315,10 @@ class ExportStream:
                     self.counts.rows_out += frame.height
                     frames.append(frame)
         return frames
+
+    def given_to(self) -> dict[str, int]:
+        """Valve → the instant (µs) up to which its lake rows were given: later rows come after it."""
+        return {v: r.given_to for v, r in self._valves.items()}
 
     def quarantine_frame(self) -> pl.DataFrame:
         """The quarantined samples of the batches so far (:data:`QUARANTINE_COLUMNS`)."""
