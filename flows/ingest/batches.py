@@ -62,8 +62,10 @@ def open_export(path: Path, export: ExportSpec) -> ExportSource:
         raise ValvemonError(f"{path}: cannot read the file ({getattr(exc, 'strerror', None) or exc})") from None
 
 
-def export_batches(src: ExportSource, export: ExportSpec, tags: TagTable | None = None, batch_samples: int = BATCH_SAMPLES, csv_block_bytes: int = CSV_BLOCK_BYTES) -> Iterator[tuple[pl.DataFrame, int, bool]]:
-    """The export's rows in batches: ``(frame, line of its first row, last batch)``.
+def export_batches(src: ExportSource, export: ExportSpec, tags: TagTable | None = None, batch_samples: int | None = None, csv_block_bytes: int | None = None) -> Iterator[tuple[pl.DataFrame, int, bool]]:
+    """The export's rows in batches: ``(frame, line of its first row, last batch)``, of about
+    ``batch_samples`` samples (default :data:`BATCH_SAMPLES`) or ``csv_block_bytes`` of CSV text
+    (default :data:`CSV_BLOCK_BYTES`).
 
     Raises
     ------
@@ -71,6 +73,8 @@ def export_batches(src: ExportSource, export: ExportSpec, tags: TagTable | None 
         Naming the file: not a readable CSV/Parquet export, a truncated gzip, no data rows.
     """
     kind = "Parquet" if src.file_format == "parquet" else "CSV"
+    batch_samples = batch_samples or BATCH_SAMPLES
+    csv_block_bytes = csv_block_bytes or CSV_BLOCK_BYTES
     rows = 0
     try:
         batches = _parquet_batches(src.path, export, tags, batch_samples) if src.file_format == "parquet" else _csv_batches(src, export, tags, csv_block_bytes)
