@@ -18,9 +18,10 @@ from typing import IO, Iterator
 import polars as pl
 import pyarrow as pa
 import pyarrow.parquet as pq
+from blake3 import blake3
 
 from flows.common.errors import ValvemonError
-from flows.ingest.flow import _NOT_BLANK, _is_text, _mapped, _value_columns, content_hash, enum_column, read_csv_export, sniff_format
+from flows.ingest.flow import _NOT_BLANK, HASH_PREFIX, _is_text, _value_columns, enum_column, read_csv_export, sniff_format
 from schemas.plant_config import ExportSpec
 from transforms.ingest import TagTable
 
@@ -41,6 +42,11 @@ class ExportSource:
     size_bytes: int
 
 
+HASH_BLOCK_BYTES = 16 * 1024 * 1024
+"""The content hash reads the file in blocks of this size into one buffer (a memory map would keep
+every page of a large file resident in the process until it is unmapped)."""
+
+
 def open_export(path: Path, export: ExportSpec) -> ExportSource:
     """Hash one export file and check it is not empty (``read_export``'s checks before decoding).
 
@@ -50,16 +56,28 @@ def open_export(path: Path, export: ExportSpec) -> ExportSource:
         Naming the file: unreadable, empty.
     """
     path = Path(path)
+    empty = f"{path}: empty file (expected a {export.layout} export with a header line)"
     try:
-        with _mapped(path) as raw:
-            if not len(raw):
-                raise ValvemonError(f"{path}: empty file (expected a {export.layout} export with a header line)")
-            fmt = sniff_format(path, bytes(raw[:4]))
-            if fmt == "csv" and _NOT_BLANK.search(raw) is None:
-                raise ValvemonError(f"{path}: empty file (expected a {export.layout} export with a header line)")
-            return ExportSource(path, fmt, content_hash(raw), len(raw))
+        with open(path, "rb") as fh:
+            buf = bytearray(HASH_BLOCK_BYTES)
+            view = memoryview(buf)
+            hasher = blake3()
+            size = 0
+            fmt = None
+            blank = True
+            while n := fh.readinto(buf):
+                block = view[:n]
+                if fmt is None:
+                    fmt = sniff_format(path, bytes(block[:4]))
+                if blank and fmt == "csv":
+                    blank = _NOT_BLANK.search(block) is None
+                hasher.update(block)
+                size += n
     except (OSError, ValueError) as exc:
         raise ValvemonError(f"{path}: cannot read the file ({getattr(exc, 'strerror', None) or exc})") from None
+    if size == 0 or (fmt == "csv" and blank):
+        raise ValvemonError(empty)
+    return ExportSource(path, fmt, HASH_PREFIX + hasher.hexdigest(), size)
 
 
 def export_batches(src: ExportSource, export: ExportSpec, tags: TagTable | None = None, batch_samples: int | None = None, csv_block_bytes: int | None = None) -> Iterator[tuple[pl.DataFrame, int, bool]]:
@@ -108,7 +126,7 @@ def _parquet_batches(path: Path, export: ExportSpec, tags: TagTable | None, batc
     wanted = [export.tag_column if export.layout == "long" else None, export.quality_column]
     coded = [c for c in wanted if c and c in schema.names and _is_text(schema.field(c).type)]
     per_row = max(len(_value_columns(schema.names, export)), 1)
-    pf = pq.ParquetFile(path, read_dictionary=coded)
+    pf = pq.ParquetFile(path, read_dictionary=coded, pre_buffer=False, buffer_size=8 << 20)  # pre-buffering reads the whole file
     first = 1
     batches = pf.iter_batches(batch_size=max(batch_samples // per_row, 1024), use_threads=False)
     empty = True
