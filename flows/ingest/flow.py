@@ -1,13 +1,14 @@
 """``valvemon ingest``: historian exports into the sensor lake (the Prefect flow and its plain core).
 
-:func:`run_ingest` does the work file by file: read the export (:func:`read_export`), turn it into
-lake partitions (``transforms.ingest.process_export``), merge each with the stored partition and
-replace it atomically (``flows.common.lake``), then record the file in the manifest together with its
-quarantined samples and gaps in one DuckDB transaction. A file whose content hash is in the
-manifest is skipped (``force`` re-reads it; the lake then stays the same unless the
-configuration changed). A run that dies part-way can simply be run again: a file is in the
-manifest only after all its partitions are written, and merging rows the lake already holds
-changes nothing, so the rerun ends with the same lake as one clean run.
+:func:`run_ingest` does the work file by file: hash the file (``flows.ingest.batches.open_export``;
+a file whose content hash is in the manifest is skipped, ``force`` re-reads it), read it in
+bounded batches (``export_batches``), turn each into lake rows
+(``transforms.ingest.stream.ExportStream``), merge them with the lake's files into staged files
+that are put in place together after the last batch (``flows.ingest.staging``,
+``flows.common.lake``), then record the file in the manifest together with its quarantined
+samples and gaps in one DuckDB transaction. A run that dies part-way can simply be run again: a
+file is in the manifest only after all its lake files are in place, and merging rows the lake
+already holds changes nothing, so the rerun ends with the same lake as one clean run.
 
 :func:`ingest_flow` is the Prefect flow the command line runs: one task per file.
 Method, rules and counts: ``docs/ingest.md``.
