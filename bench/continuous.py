@@ -195,7 +195,7 @@ def main() -> None:
         for name, r in (("bare", bare), ("ingest", ing)):
             print(f"{name:<8}{r['wall_s']:>9.1f}{r['cpu_s']:>9.1f}{r['peak_rss_mb']:>13.0f}{rows / r['cpu_s'] / 1e6:>20.2f}")
         print(f"ingest / bare: wall {ing['wall_s'] / bare['wall_s']:.2f}×, CPU {ing['cpu_s'] / bare['cpu_s']:.2f}×")
-        print(f"lake: {rows:,} rows, {lake_bytes / 1e9:.2f} GB ({lake_bytes / max(rows, 1):.1f} bytes/row), {ing['partitions_written']} day folders written")
+        print(f"lake: {rows:,} rows, {lake_bytes / 1e9:.2f} GB ({lake_bytes / max(rows, 1):.1f} bytes/row), {ing['partitions_written']} day-folder writes (summed over the files)")
         print(f"load after: {os.getloadavg()}")
 
 

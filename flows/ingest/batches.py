@@ -10,6 +10,7 @@ quality text as codes), so that memory is bounded by the batch, not the file.
 from __future__ import annotations
 
 import gzip
+import mmap
 import zlib
 from dataclasses import dataclass
 from pathlib import Path
@@ -21,7 +22,7 @@ import pyarrow.parquet as pq
 from blake3 import blake3
 
 from flows.common.errors import ValvemonError
-from flows.ingest.flow import _NOT_BLANK, HASH_PREFIX, _is_text, _value_columns, enum_column, read_csv_export, sniff_format
+from flows.ingest.flow import _NOT_BLANK, HASH_PREFIX, _is_text, _mapped, _value_columns, enum_column, read_csv_export, sniff_format
 from schemas.plant_config import ExportSpec
 from transforms.ingest import TagTable
 
@@ -43,8 +44,9 @@ class ExportSource:
 
 
 HASH_BLOCK_BYTES = 16 * 1024 * 1024
-"""The content hash reads the file in blocks of this size into one buffer (a memory map would keep
-every page of a large file resident in the process until it is unmapped)."""
+"""The content hash maps the file and hashes it in blocks of this size, dropping each block's pages
+from the process after it (a plain memory map keeps every page of a large file resident until it
+is unmapped)."""
 
 
 def open_export(path: Path, export: ExportSpec) -> ExportSource:
@@ -58,25 +60,21 @@ def open_export(path: Path, export: ExportSpec) -> ExportSource:
     path = Path(path)
     empty = f"{path}: empty file (expected a {export.layout} export with a header line)"
     try:
-        with open(path, "rb") as fh:
-            buf = bytearray(HASH_BLOCK_BYTES)
-            view = memoryview(buf)
+        with _mapped(path) as raw:
+            size = len(raw)
+            if not size:
+                raise ValvemonError(empty)
+            fmt = sniff_format(path, bytes(raw[:4]))
+            if fmt == "csv" and _NOT_BLANK.search(raw) is None:
+                raise ValvemonError(empty)
             hasher = blake3()
-            size = 0
-            fmt = None
-            blank = True
-            while n := fh.readinto(buf):
-                block = view[:n]
-                if fmt is None:
-                    fmt = sniff_format(path, bytes(block[:4]))
-                if blank and fmt == "csv":
-                    blank = _NOT_BLANK.search(block) is None
-                hasher.update(block)
-                size += n
+            view = memoryview(raw)
+            for a in range(0, size, HASH_BLOCK_BYTES):
+                hasher.update(view[a : a + HASH_BLOCK_BYTES])
+                raw.madvise(mmap.MADV_DONTNEED, a, min(HASH_BLOCK_BYTES, size - a))
+            view.release()
     except (OSError, ValueError) as exc:
         raise ValvemonError(f"{path}: cannot read the file ({getattr(exc, 'strerror', None) or exc})") from None
-    if size == 0 or (fmt == "csv" and blank):
-        raise ValvemonError(empty)
     return ExportSource(path, fmt, HASH_PREFIX + hasher.hexdigest(), size)
 
 
@@ -128,14 +126,13 @@ def _parquet_batches(path: Path, export: ExportSpec, tags: TagTable | None, batc
     per_row = max(len(_value_columns(schema.names, export)), 1)
     pf = pq.ParquetFile(path, read_dictionary=coded, pre_buffer=False, buffer_size=8 << 20)  # pre-buffering reads the whole file
     first = 1
-    batches = pf.iter_batches(batch_size=max(batch_samples // per_row, 1024), use_threads=False)
+    rows = max(batch_samples // per_row, 1024)
     empty = True
-    for batch, final in _lookahead(batches):
+    for batch, final in _lookahead(_coalesced(pf.iter_batches(batch_size=rows, use_threads=False), rows)):
         empty = False
-        table = pa.Table.from_batches([batch])
         columns = []
-        for name in table.column_names:
-            col = table[name]
+        for name in batch.column_names:
+            col = batch[name]
             if name in coded:
                 enum = enum_column(col, tags.tags if tags is not None and name == export.tag_column else None)
                 columns.append((enum if enum is not None else pl.from_arrow(col.cast(col.type.value_type))).alias(name))
@@ -146,6 +143,19 @@ def _parquet_batches(path: Path, export: ExportSpec, tags: TagTable | None, batc
         first += df.height
     if empty:
         yield pl.read_parquet(path), 1, True
+
+
+def _coalesced(batches: Iterator[pa.RecordBatch], rows: int) -> Iterator[pa.Table]:
+    """Record batches (at most one row group each) joined into tables of about ``rows`` rows."""
+    pending, n = [], 0
+    for b in batches:
+        pending.append(b)
+        n += b.num_rows
+        if n >= rows:
+            yield pa.Table.from_batches(pending)
+            pending, n = [], 0
+    if pending:
+        yield pa.Table.from_batches(pending)
 
 
 def _blocks(fh: IO[bytes], block_bytes: int) -> Iterator[bytes]:
