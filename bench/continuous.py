@@ -14,7 +14,8 @@ pinned to one core (``taskset -c 0``, ``POLARS_MAX_THREADS=1``), it measures on 
 - ``bare``: ``pl.read_parquet`` / ``pl.read_csv`` of each file + ``write_parquet`` (LZ4) of the frame;
 - ``ingest``: ``flows.ingest.flow.run_ingest`` of the files into an empty warehouse;
 
-wall time, CPU time (user + system of the child) and peak RSS (``ru_maxrss`` of the child). The
+wall time, CPU time (user + system of the child, after its imports) and peak RSS (the child's
+``VmHWM``; its ``ru_maxrss`` would include the generator's peak, inherited over fork). The
 inputs and warehouses are deleted afterwards.
 """
 
@@ -139,6 +140,15 @@ def child_ingest(config: str, files: list[str], warehouse: str) -> dict:
     return {"rows": s.rows_written, "rows_read": s.rows_read, "partitions_written": s.partitions_written}
 
 
+def peak_rss_mb() -> float:
+    """This process's peak resident memory: ``VmHWM`` (``ru_maxrss`` would carry the parent's peak
+    over ``fork`` + ``exec``: the generator's, here)."""
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith("VmHWM:"):
+            return int(line.split()[1]) / 1024
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
 def _child(argv: list[str]) -> None:
     kind, payload = argv[0], json.loads(argv[1])
     import polars  # noqa: F401  (imports are not what is measured)
@@ -147,8 +157,7 @@ def _child(argv: list[str]) -> None:
         import flows.ingest.flow  # noqa: F401
     t0, c0 = time.perf_counter(), time.process_time()
     r = child_bare(**payload) if kind == "bare" else child_ingest(**payload)
-    ru = resource.getrusage(resource.RUSAGE_SELF)
-    r.update(wall_s=time.perf_counter() - t0, cpu_s=time.process_time() - c0, peak_rss_mb=ru.ru_maxrss / 1024)
+    r.update(wall_s=time.perf_counter() - t0, cpu_s=time.process_time() - c0, peak_rss_mb=peak_rss_mb())
     print(json.dumps(r))
 
 

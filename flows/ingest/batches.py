@@ -28,8 +28,9 @@ from transforms.ingest import TagTable
 
 BATCH_SAMPLES = 4_194_304
 """Samples per batch (a wide row holds one per tag column): ~0.5 GB of working memory."""
-CSV_BLOCK_BYTES = 128 * 1024 * 1024
-"""Bytes of CSV text per batch (cut at a line end)."""
+CSV_BLOCK_BYTES = 48 * 1024 * 1024
+"""Bytes of CSV text per batch (cut at a line end): ~1 M long rows; a long CSV takes ~10× its text in
+working memory (128 MB blocks peaked at 2.0 GB for an hour of one valve, 48 MB at 1.0 GB)."""
 
 
 @dataclass

@@ -103,15 +103,17 @@ def test_a_day_file_that_outgrows_its_limit_switches_to_hour_files(wide10, tmp_p
 
 CHILD = textwrap.dedent(
     """
-    import json, os, resource, signal, sys
+    import json, os, signal, sys
     sys.path.insert(0, {root!r})
     import flows.common.lake, flows.ingest.batches, flows.ingest.staging
     from flows.ingest.flow import run_ingest
     small, kill_at, warm = json.loads(sys.argv[1]), int(sys.argv[2]), sys.argv[3]
     for k, v in small.items():
         setattr(flows.ingest.batches if k == "BATCH_SAMPLES" else flows.ingest.staging, k, v)
+    def hwm():  # VmHWM: ru_maxrss would carry pytest's own peak over fork + exec
+        return next(int(l.split()[1]) for l in open("/proc/self/status") if l.startswith("VmHWM:"))
     run_ingest(sys.argv[4], [warm], sys.argv[6])  # imports, compiled kernels, first allocations
-    base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    base = hwm()
     real, calls = flows.common.lake._commit, []
     def commit(tmp, path):
         calls.append(path)
@@ -120,7 +122,7 @@ CHILD = textwrap.dedent(
         return real(tmp, path)
     flows.common.lake._commit = commit
     run_ingest(sys.argv[4], [sys.argv[5]], sys.argv[6])
-    print(json.dumps({{"growth_mb": (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - base) / 1024}}))
+    print(json.dumps({{"growth_mb": (hwm() - base) / 1024}}))
     """
 )
 
