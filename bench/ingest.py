@@ -44,7 +44,7 @@ pa.set_io_thread_count(1)
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from flows.common.config import load_plant_config  # noqa: E402
-from flows.ingest.flow import ingest_file  # noqa: E402
+from flows.ingest.flow import ingest_file
 from transforms.ingest import TagTable  # noqa: E402
 
 CONFIG = Path(__file__).resolve().parents[1] / "tests" / "fixtures" / "plant_example.toml"
@@ -142,17 +142,18 @@ def throughput(seconds: int, repeat: int) -> None:
 
 
 STAGES = [
-    ("flows.ingest.flow", "read_export", "read file + BLAKE3 + CSV/Parquet decode"),
-    ("transforms.ingest.export", "samples_of", "samples: tags, timestamps, values, quarantine"),
+    ("flows.ingest.batches", "open_export", "BLAKE3 of the mapped file, in blocks"),
+    ("flows.ingest.batches", "read_csv_export", "CSV decode (per block of lines)"),
+    ("transforms.ingest.stream", "samples_of", "samples: tags, timestamps, values, quarantine"),
     ("transforms.ingest.samples", "parse_timestamps", "  of which: timestamps to UTC"),
-    ("transforms.ingest.export", "validate_raw_rows", "pandera: raw rows"),
-    ("transforms.ingest.export", "prepare_tag", "sort + duplicates per tag"),
-    ("transforms.ingest.export", "to_grid", "grid + gaps per tag"),
-    ("transforms.ingest.export", "assemble_valve", "assemble valve frame"),
-    ("transforms.ingest.export", "validate_sensor_frame", "pandera: sensor frame"),
-    ("flows.ingest.flow", "process_export", "process_export (all of the above but reading)"),
-    ("flows.ingest.flow", "read_partition", "read existing partition"),
-    ("flows.ingest.flow", "write_partition", "write partition (fsync, rename)"),
+    ("transforms.ingest.stream", "validate_raw_rows", "pandera: raw rows"),
+    ("transforms.ingest.stream", "prepare_tag", "sort + duplicates per tag"),
+    ("transforms.ingest.stream", "to_grid", "grid + gaps per tag"),
+    ("transforms.ingest.stream", "assemble_valve", "assemble valve frame"),
+    ("transforms.ingest.stream", "validate_sensor_frame", "pandera: sensor frame"),
+    ("flows.ingest.staging", "read_partition", "read existing lake file"),
+    ("flows.ingest.staging", "stage_file", "write lake files (fsync)"),
+    ("flows.ingest.staging", "commit_files", "put files in place (rename)"),
     ("flows.ingest.flow", "record_file", "DuckDB manifest, quarantine, gaps"),
 ]
 

@@ -51,7 +51,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from flows.common.config import load_plant_config  # noqa: E402
 from flows.common.lake import partition_bytes, partition_folders, partition_rows  # noqa: E402
 from flows.common.warehouse_db import connect, create_table_sql, query_frame  # noqa: E402
-from flows.ingest.flow import run_ingest  # noqa: E402
+from flows.ingest.flow import run_ingest
 from flows.monitor.flow import run_monitor  # noqa: E402
 from flows.report.flow import update_standstill  # noqa: E402
 from flows.retention.flow import run_retention  # noqa: E402

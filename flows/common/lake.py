@@ -1,14 +1,25 @@
 """The sensor lake on disk: partition paths, atomic partition writes, reads.
 
-Layout: ``WAREHOUSE/lake/sensors/valve_id=<id>/date=<YYYY-MM-DD>/part-0.parquet``, one file per
-valve and UTC date, the canonical sensor frame of ``schemas.fields.SENSOR_FIELDS`` (keys
-``valve_id`` and ``date`` inside the files too), sorted by ``timestamp_utc``.
+Layout: ``WAREHOUSE/lake/sensors/valve_id=<id>/date=<YYYY-MM-DD>/`` holds one valve's UTC date,
+the canonical sensor frame of ``schemas.fields.SENSOR_FIELDS`` (keys ``valve_id`` and ``date``
+inside the files too), each file sorted by ``timestamp_utc``, in one of two forms:
 
-A partition is replaced whole and atomically (:func:`write_partition`): the new content goes to
-a hidden temporary file beside the partition (``.part-0.parquet.<random>.tmp``, a name no
-``*.parquet`` glob matches), is flushed and fsynced, then ``os.replace`` puts it in place and
-the folder is fsynced. A process killed at any moment leaves the old partition or the new one,
-never a mix; a left-over temporary file is removed by the next write to that folder.
+- a *day file* ``part-0.parquet`` while the day holds at most :data:`DAY_FILE_MAX_ROWS` rows
+  (hourly snapshots, a few hours of continuous recording), or
+- *hour files* ``part-h00.parquet`` … ``part-h23.parquet`` (the rows of that UTC hour) once it
+  holds more (continuous recordings: 3.6 M rows per hour at 1 kHz), so that a file is read,
+  merged and rewritten an hour at a time and memory never grows with the day.
+
+A folder that holds ``part-0.parquet`` *is* its day file: hour files beside it are the unfinished
+switch of a killed ingest (the day file is removed last, as the switch's commit) and are ignored
+by :func:`day_files` and removed by :func:`repair_day`. Why these sizes: ``docs/ingest.md``.
+
+A file is replaced whole and atomically (:func:`write_partition`, or :func:`stage_file` then
+:func:`commit_files`): the new content goes to a hidden temporary file beside it
+(``.part-0.parquet.<random>.tmp``, a name no ``*.parquet`` glob matches), is flushed and fsynced,
+then ``os.replace`` puts it in place and the folder is fsynced. A process killed at any moment
+leaves the old file or the new one, never a mix; a left-over temporary file is removed by the next
+write to that folder.
 
 Storage choices (codec, float width, row groups) are measured and justified in
 ``docs/ingest.md``; they are the constants below.
@@ -33,6 +44,12 @@ from transforms.windows import window_starts
 
 LAKE_DIR = Path("lake") / "sensors"
 PART_NAME = "part-0.parquet"
+"""The day file of a day folder."""
+HOUR_NAME = "part-h{hour:02d}.parquet"
+"""An hour file of a day folder (UTC hour 00–23)."""
+DAY_FILE_MAX_ROWS = 4_194_304
+"""A day with more rows is stored as hour files (``docs/ingest.md``, "Continuous recordings")."""
+US_PER_HOUR = 3_600_000_000
 
 COMPRESSION = "lz4"
 """Parquet codec of the lake (``docs/ingest.md``, "Storage"): LZ4 decodes 2× as fast as zstd
@@ -64,8 +81,36 @@ def lake_root(warehouse: str | Path) -> Path:
 
 
 def partition_path(warehouse: str | Path, valve_id: str, day: date) -> Path:
-    """The partition file of one valve and UTC date."""
+    """The day file of one valve and UTC date (its folder: ``partition_path(...).parent``)."""
     return lake_root(warehouse) / f"valve_id={valve_id}" / f"date={day.isoformat()}" / PART_NAME
+
+
+def hour_path(folder: Path, hour: int) -> Path:
+    """The hour file of a day folder for UTC hour ``hour``."""
+    return folder / HOUR_NAME.format(hour=hour)
+
+
+def _hour_files(folder: Path) -> list[Path]:
+    return sorted(folder.glob("part-h[0-2][0-9].parquet"))
+
+
+def day_files(folder: Path) -> list[Path]:
+    """The files that hold a day folder's rows, in time order (module doc): the day file if there
+    is one, else the hour files."""
+    day = folder / PART_NAME
+    if day.exists():
+        return [day]
+    return _hour_files(folder)
+
+
+def repair_day(folder: Path) -> None:
+    """Undo the unfinished switch of a killed ingest: hour files beside a day file go (module doc)."""
+    if (folder / PART_NAME).exists():
+        stray = _hour_files(folder)
+        for p in stray:
+            p.unlink(missing_ok=True)
+        if stray:
+            _fsync_dir(folder)
 
 
 def row_group_bounds(t_us: np.ndarray, gap_us: int = ROW_GROUP_GAP_US, min_rows: int = ROW_GROUP_MIN_ROWS, max_rows: int = ROW_GROUP_MAX_ROWS) -> list[tuple[int, int]]:
@@ -98,7 +143,7 @@ def row_group_bounds(t_us: np.ndarray, gap_us: int = ROW_GROUP_GAP_US, min_rows:
 
 
 def _remove_stale_temps(folder: Path) -> None:
-    for p in folder.glob(f".{PART_NAME}.*.tmp"):
+    for p in folder.glob(".part-*.parquet.*.tmp"):
         try:
             p.unlink()
         except FileNotFoundError:
@@ -174,18 +219,50 @@ def write_partition(path: Path, frame: pl.DataFrame, *, gap_us: int = ROW_GROUP_
 def write_partition_pieces(path: Path, frames: Iterable[pl.DataFrame], *, gap_us: int = ROW_GROUP_GAP_US) -> None:
     """:func:`write_partition` for content that arrives in consecutive time-sorted pieces (e.g.
     streamed from a file being thinned): memory holds one row group's worth, not the file."""
-    folder = path.parent
-    folder.mkdir(parents=True, exist_ok=True)
-    _remove_stale_temps(folder)
-    tmp = folder / f".{PART_NAME}.{uuid.uuid4().hex}.tmp"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    _remove_stale_temps(path.parent)
+    tmp = _stage(path, frames, gap_us)
     try:
-        _write_temp(tmp, frames, gap_us)
         _commit(tmp, path)
     except BaseException:
-        # an ordinary exception: tidy up; a killed process leaves the file to the next write
-        if tmp.exists():
-            tmp.unlink()
+        tmp.unlink(missing_ok=True)
         raise
+
+
+def stage_file(path: Path, frame: pl.DataFrame, *, gap_us: int = ROW_GROUP_GAP_US) -> Path:
+    """Write a lake file's complete new content to a hidden temporary file beside ``path``
+    (flushed, fsynced) and return it; :func:`commit_files` puts it in place."""
+    return _stage(path, [frame], gap_us)
+
+
+def _stage(path: Path, frames: Iterable[pl.DataFrame], gap_us: int) -> Path:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.parent / f".{path.name}.{uuid.uuid4().hex}.tmp"
+    try:
+        _write_temp(tmp, frames, gap_us)
+    except BaseException:
+        # an ordinary exception: tidy up; a killed process leaves the file to the next write
+        tmp.unlink(missing_ok=True)
+        raise
+    return tmp
+
+
+def commit_files(staged: list[tuple[Path, Path]], remove: list[Path] = ()) -> None:
+    """Put staged files ``(temporary, final)`` in place in the given order, then remove the files
+    ``remove`` (day files whose rows moved into hour files: their removal commits the switch)."""
+    for tmp, path in staged:
+        _commit(tmp, path)
+    for path in remove:
+        path.unlink(missing_ok=True)
+        _fsync_dir(path.parent)
+
+
+def clear_stale(folder: Path) -> None:
+    """Before a day folder is first written in a run: left-over temporary files of killed writes
+    go, and so do the hour files of an unfinished switch (:func:`repair_day`)."""
+    if folder.exists():
+        _remove_stale_temps(folder)
+        repair_day(folder)
 
 
 def read_partition(path: Path) -> pl.DataFrame | None:
@@ -196,7 +273,9 @@ def read_partition(path: Path) -> pl.DataFrame | None:
 
 
 def list_partitions(warehouse: str | Path, valve_ids: list[str] | None = None, start: str | date | datetime | None = None, end: str | date | datetime | None = None) -> list[tuple[str, date, Path]]:
-    """Partitions ``(valve_id, date, path)`` of the lake, optionally only some valves and dates.
+    """Lake files ``(valve_id, date, path)``, optionally only some valves and dates, in valve,
+    date and time order: one per day file, or one per hour file of a day stored by the hour
+    (:func:`day_files`; a date may occur several times).
 
     ``start`` (inclusive) and ``end`` (exclusive) select the UTC dates that can hold such times.
     """
@@ -209,9 +288,7 @@ def list_partitions(warehouse: str | Path, valve_ids: list[str] | None = None, s
                 continue
             if t1 is not None and datetime(day.year, day.month, day.day, tzinfo=timezone.utc) >= t1:
                 continue
-            path = ddir / PART_NAME
-            if path.exists():
-                out.append((vid, day, path))
+            out.extend((vid, day, path) for path in day_files(ddir))
     return out
 
 
@@ -274,24 +351,19 @@ def partition_folders(warehouse: str | Path, valve_ids: list[str] | None = None)
     out = []
     for vid, vdir in valve_folders(warehouse, valve_ids):
         for ddir in sorted(vdir.glob("date=*")):
-            if ddir.is_dir() and partition_files(ddir):
+            if ddir.is_dir() and day_files(ddir):
                 out.append((vid, date.fromisoformat(ddir.name.split("=", 1)[1]), ddir))
     return out
 
 
-def partition_files(folder: Path) -> list[Path]:
-    """The partition's data files: every visible ``*.parquet`` in its ``date=`` folder."""
-    return sorted(p for p in folder.glob("*.parquet") if not p.name.startswith("."))
-
-
 def partition_bytes(folder: Path) -> int:
     """Bytes of the partition's data files. [B]"""
-    return sum(p.stat().st_size for p in partition_files(folder))
+    return sum(p.stat().st_size for p in day_files(folder))
 
 
 def partition_rows(folder: Path) -> int:
     """Rows of the partition, from the files' footers (no data is read)."""
-    return sum(pq.ParquetFile(p).metadata.num_rows for p in partition_files(folder))
+    return sum(pq.ParquetFile(p).metadata.num_rows for p in day_files(folder))
 
 
 def iter_file_batches(

@@ -72,17 +72,8 @@ from flows.common.lake import list_partitions
 from flows.common.locks import file_lock, partition_lock
 from flows.common.prefect_run import flow, in_flow_run, task
 from flows.common.warehouse_db import connect, ensure_ingest_tables, insert_frame, migrate_hash_column, query_frame
-from flows.ingest.flow import (
-    LEGACY_HASH_PREFIX,
-    FileReport,
-    discover_files,
-    ingest_lock,
-    legacy_hash,
-    merge_export,
-    read_export,
-    record_file,
-    rekey_file,
-)
+from flows.ingest.flow import FileReport, ingest_lock, merge_export, record_file, rekey_file
+from flows.ingest.read import LEGACY_HASH_PREFIX, discover_files, legacy_hash, read_export
 from flows.monitor.flow import (
     Baseline,
     _baseline_rows,
@@ -504,7 +495,8 @@ def _lake_stats(warehouse: Path, valve_ids: list[str]) -> dict[str, dict[date, t
             st = path.stat()
         except FileNotFoundError:
             continue
-        out.setdefault(vid, {})[day] = (st.st_size, st.st_mtime_ns)
+        size, mtime = out.setdefault(vid, {}).get(day, (0, 0))  # a day stored by the hour: all its files
+        out[vid][day] = (size + st.st_size, max(mtime, st.st_mtime_ns))
     return out
 
 

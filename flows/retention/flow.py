@@ -38,11 +38,11 @@ from flows.common.config import load_plant_config
 from flows.common.errors import ValvemonError
 from flows.common.lake import (
     PART_NAME,
+    day_files,
     drop_partition,
     dropped_folders,
     iter_file_batches,
     partition_bytes,
-    partition_files,
     partition_folders,
     partition_rows,
     remove_dropped,
@@ -176,7 +176,7 @@ class WarehouseState:
         entry = self.thinned.get((valve_id, day))
         if entry is None or entry[2] != keep_s:
             return False
-        files = partition_files(folder)
+        files = day_files(folder)
         return sum(f.stat().st_size for f in files) == entry[0] and max(f.stat().st_mtime_ns for f in files) // 1000 <= entry[1]
 
 
@@ -222,7 +222,7 @@ def scan_partition(folder: Path, cover: tuple[np.ndarray, np.ndarray], hours: bo
     """First pass over a partition's time stamps, file by file, batch by batch (``hours``: note
     each hour's first sample, for thinning)."""
     scan = PartitionScan(cover, hours)
-    for f in partition_files(folder):
+    for f in day_files(folder):
         for batch in iter_file_batches(f, [TIME]):
             scan.add(batch[TIME].to_physical().to_numpy())
     return scan
@@ -242,7 +242,7 @@ def count_kept(folder: Path, scan: PartitionScan, keep_s: float) -> dict[Path, F
     groups whose time range can hold kept samples are read (:func:`kept_row_groups`)."""
     scan.rows_kept = 0
     per_file = {}
-    for f in partition_files(folder):
+    for f in day_files(folder):
         spans = row_group_spans(f)
         groups = kept_row_groups(spans, scan.firsts, keep_s)
         before = scan.rows_kept

@@ -47,7 +47,7 @@ import tomli_w
 from flows.common.config import load_plant_config
 from flows.common.errors import ValvemonError
 from flows.common.instants import utc_instant
-from flows.simulate.simulator import iso_us, default_workers, run_ordered, simulate_measured, valve_key, window_rng  # noqa: F401 (window_rng: API)
+from flows.simulate.simulator import default_workers, iso_us, run_ordered, simulate_measured, valve_key, window_rng  # noqa: F401 (window_rng: API)
 from flows.simulate.writers import ExportColumns, decimals_for_step, export_suffix, open_day_writer
 from model import condition as mcond
 from model.params import (

@@ -176,19 +176,19 @@ def test_crash_between_partitions_then_rerun_equals_one_clean_run(wide, tmp_path
     clean = tmp_path / "clean"
     ingest(wide, DATA / "midnight.csv", clean)
     wh = tmp_path / "wh"
-    real = flows.ingest.flow.write_partition
+    real = flows.common.lake._commit
     n = []
 
-    def die_second(path, frame, **kw):
+    def die_second(tmp, path):
         n.append(path)
         if len(n) == 2:
-            raise Crash("killed between two partitions")
-        return real(path, frame, **kw)
+            raise Crash("killed between putting two files in place")
+        return real(tmp, path)
 
-    monkeypatch.setattr(flows.ingest.flow, "write_partition", die_second)
+    monkeypatch.setattr(flows.common.lake, "_commit", die_second)
     with pytest.raises(Crash):
         ingest(wide, DATA / "midnight.csv", wh)
-    monkeypatch.setattr(flows.ingest.flow, "write_partition", real)
+    monkeypatch.setattr(flows.common.lake, "_commit", real)
     ingest(wide, DATA / "midnight.csv", wh)
     assert_frame_equal(lake(wh), lake(clean))
     assert _bytes_equal(clean, wh)

@@ -15,7 +15,7 @@ from polars.testing import assert_frame_equal
 from flows.common.lake import partition_path, read_lake, row_group_bounds, write_partition
 from tests.ingest.conftest import DATA, base_lake, ingest
 from transforms.ingest import Grid, IngestError, merge_partition, parse_timestamps, prepare_tag, to_grid
-from transforms.ingest.export import split_by_tag
+from transforms.ingest.samples import split_by_tag
 
 UTC = timezone.utc
 

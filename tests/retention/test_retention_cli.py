@@ -7,9 +7,9 @@ from __future__ import annotations
 import pytest
 
 from flows.common.lake import partition_folders
+from schemas.plant_config import RetentionSpec
 from tests.ingest.conftest import run_cli
 from tests.retention.conftest import write_config
-from schemas.plant_config import RetentionSpec
 
 
 def _cli(args, wh, cfg, monkeypatch, capsys):

@@ -12,7 +12,7 @@ import polars as pl
 import pytest
 
 import flows.retention.flow as fr
-from flows.common.lake import dropped_folders, partition_files, partition_folders, partition_rows, read_lake, write_partition
+from flows.common.lake import day_files, dropped_folders, hour_path, partition_folders, partition_rows, read_lake, write_partition
 from flows.common.warehouse_db import connect, query_frame
 from tests.retention.conftest import AS_OF, DAYS, plant_with
 
@@ -102,7 +102,7 @@ def test_thin_keeps_the_first_seconds_of_every_hour_once(base, wh, tmp_path):
     # ... without reading them: each is as its log row left it. A partition written since is read again
     assert all(o.rows_before is None for o in again.outcomes if o.reason == "kept: already thinned")
     folder = next(f for v, d, f in partition_folders(wh) if (v, d) == ("V002", DAYS[0]))
-    (only,) = partition_files(folder)
+    (only,) = day_files(folder)
     write_partition(only, pl.read_parquet(only))
     third = {(o.valve_id, o.day): o for o in fr.run_retention(plant, wh, as_of=AS_OF).outcomes}
     assert third[("V002", DAYS[0])].reason == "kept: already thinned" and third[("V002", DAYS[0])].rows_before == 6 * 2000
@@ -171,14 +171,15 @@ def test_killed_drop_is_completed_by_the_next_run(base, wh, tmp_path, monkeypatc
 
 
 def test_partition_of_several_files_is_thinned_file_by_file(base, wh, tmp_path, monkeypatch):
-    """A day split into files (a layout the lake may take) is one partition; a run killed between
+    """A day stored as hour files is one partition; a run killed between
     two files leaves each file whole or thinned, and the next run finishes the same result."""
     plant = plant_with(base, tmp_path, keep_days=3, mode="thin", thin_keep_s_per_hour=2.0)
     folder = next(f for v, d, f in partition_folders(wh) if (v, d) == ("V002", DAYS[0]))
-    (only,) = partition_files(folder)
+    (only,) = day_files(folder)
     day = pl.read_parquet(only)
-    write_partition(folder / "part-1.parquet", day.filter(pl.col("timestamp_utc").dt.hour() >= 12))
-    write_partition(only, day.filter(pl.col("timestamp_utc").dt.hour() < 12))
+    write_partition(hour_path(folder, 0), day.filter(pl.col("timestamp_utc").dt.hour() < 12))
+    write_partition(hour_path(folder, 12), day.filter(pl.col("timestamp_utc").dt.hour() >= 12))
+    only.unlink()  # the day is stored as hour files (as the ingest stores a continuous day)
     reference = tmp_path / "ref"
     shutil.copytree(wh, reference)
     fr.run_retention(plant, reference, valve_ids=["V002"], as_of=AS_OF)
@@ -197,15 +198,15 @@ def test_partition_of_several_files_is_thinned_file_by_file(base, wh, tmp_path, 
     with pytest.raises(Killed):
         fr.run_retention(plant, wh, valve_ids=["V002"], as_of=AS_OF)
     monkeypatch.undo()
-    assert partition_rows(folder) == 3 * 2000 + 3 * 10_000  # part-0 thinned, part-1 not yet
+    assert partition_rows(folder) == 3 * 2000 + 3 * 10_000  # the first hour file thinned, the second not yet
     fr.run_retention(plant, wh, valve_ids=["V002"], as_of=AS_OF)
     assert _files(folder).equals(expected) and expected.height == 6 * 2000
-    assert len(partition_files(folder)) == 2
+    assert len(day_files(folder)) == 2
 
 
 def _files(folder: Path) -> pl.DataFrame:
     """All files of a partition, by time."""
-    return pl.concat([pl.read_parquet(f) for f in partition_files(folder)]).sort("timestamp_utc")
+    return pl.concat([pl.read_parquet(f) for f in day_files(folder)]).sort("timestamp_utc")
 
 
 def test_standstill_progress_is_the_last_sample_the_report_read(base, wh):

@@ -368,3 +368,50 @@ def check_required_signals(tags_present: frozenset[str], config: PlantConfig) ->
                 raise IngestError(f"valve {v.id}: required signal {s} (tag {v.tags[s].tag}) is missing from the export", tag=v.tags[s].tag)
         covered.append(v.id)
     return covered
+
+
+@numba.njit(cache=True, nogil=True)
+def _deinterleave(tag_id: np.ndarray, t_ns: np.ndarray, values: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray, bool]:
+    """Rows in a fixed order of ``k`` tags → each tag's times and values (rows ``j, j+k, …``), in
+    one pass that also checks the order; False (and partly filled arrays) where it breaks."""
+    m = len(tag_id) // k
+    t_cols = np.empty((k, m), dtype=t_ns.dtype)
+    v_cols = np.empty((k, m), dtype=values.dtype)
+    for i in range(m):
+        for j in range(k):
+            r = i * k + j
+            if tag_id[r] != tag_id[j]:
+                return t_cols, v_cols, False
+            t_cols[j, i] = t_ns[r]
+            v_cols[j, i] = values[r]
+    return t_cols, v_cols, True
+
+
+def split_by_tag(tag_id: np.ndarray, t_ns: np.ndarray, values: np.ndarray) -> list[tuple[int, np.ndarray, np.ndarray, slice | np.ndarray]]:
+    """Each tag's times and values, in file order: ``(tag id, t_ns, values, row selector)``.
+
+    Two common layouts are split without a gather: rows grouped by tag (PI: one block per
+    tag, slices) and rows interleaved in a fixed tag order (Ignition "tall", archives: one row
+    per tag and instant, one de-interleaving pass). Anything else is grouped by a stable sort.
+    """
+    n = len(tag_id)
+    if n == 0:
+        return []
+    differs = tag_id[1:] != tag_id[:-1]
+    n_blocks = int(np.count_nonzero(differs)) + 1
+    if n_blocks <= 65_536:
+        change = np.flatnonzero(differs) + 1
+        starts = np.r_[0, change]
+        if len(np.unique(tag_id[starts])) == len(starts):  # one contiguous block per tag
+            stops = np.r_[change, n]
+            return [(int(tag_id[a]), t_ns[a:b], values[a:b], slice(int(a), int(b))) for a, b in zip(starts, stops)]
+    first_repeat = tag_id[1 : min(n, 65_537)] == tag_id[0]
+    k = int(np.argmax(first_repeat)) + 1 if first_repeat.any() else n
+    if n % k == 0 and len(np.unique(tag_id[:k])) == k:
+        t_cols, v_cols, interleaved = _deinterleave(tag_id, t_ns, values, k)
+        if interleaved:
+            return [(int(tag_id[j]), t_cols[j], v_cols[j], slice(j, n, k)) for j in range(k)]
+    order = np.argsort(tag_id, kind="stable")
+    sorted_ids = tag_id[order]
+    bounds = np.r_[0, np.flatnonzero(sorted_ids[1:] != sorted_ids[:-1]) + 1, n]
+    return [(int(sorted_ids[a]), t_ns[order[a:b]], values[order[a:b]], order[a:b]) for a, b in zip(bounds[:-1], bounds[1:])]

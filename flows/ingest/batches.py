@@ -1,0 +1,211 @@
+"""An export file read in bounded batches: Parquet by record batches, CSV (plain or gzip) by blocks of lines.
+
+:func:`open_export` hashes the file (memory-mapped) and checks that it is not empty;
+:func:`export_batches` then yields ``(frame, first_line, final)`` of at most about
+:data:`BATCH_SAMPLES` samples each, decoded exactly as a whole file is (``flows.ingest.flow``:
+``read_csv_export`` per block of lines with the header line in front, the Parquet tag and
+quality text as codes), so that memory is bounded by the batch, not the file.
+"""
+
+from __future__ import annotations
+
+import gzip
+import mmap
+import zlib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import IO, Iterator
+
+import polars as pl
+import pyarrow as pa
+import pyarrow.parquet as pq
+from blake3 import blake3
+
+from flows.common.errors import ValvemonError
+from flows.ingest.read import _NOT_BLANK, HASH_PREFIX, _is_text, _mapped, _value_columns, enum_column, read_csv_export, sniff_format
+from schemas.plant_config import ExportSpec
+from transforms.ingest import TagTable
+
+BATCH_SAMPLES = 4_194_304
+"""Samples per batch (a wide row holds one per tag column): ~0.5 GB of working memory."""
+CSV_BLOCK_BYTES = 48 * 1024 * 1024
+"""Bytes of CSV text per batch (cut at a line end): ~1 M long rows; a long CSV takes ~10× its text in
+working memory (128 MB blocks peaked at 2.0 GB for an hour of one valve, 48 MB at 1.0 GB)."""
+
+
+@dataclass
+class ExportSource:
+    """An export file, hashed and checked, not yet read."""
+
+    path: Path
+    file_format: str
+    file_hash: str
+    """``content_hash`` of the file's bytes."""
+    size_bytes: int
+
+
+HASH_BLOCK_BYTES = 16 * 1024 * 1024
+"""The content hash maps the file and hashes it in blocks of this size, dropping each block's pages
+from the process after it (a plain memory map keeps every page of a large file resident until it
+is unmapped)."""
+
+
+def open_export(path: Path, export: ExportSpec) -> ExportSource:
+    """Hash one export file and check it is not empty (``read_export``'s checks before decoding).
+
+    Raises
+    ------
+    ValvemonError
+        Naming the file: unreadable, empty.
+    """
+    path = Path(path)
+    empty = f"{path}: empty file (expected a {export.layout} export with a header line)"
+    try:
+        with _mapped(path) as raw:
+            size = len(raw)
+            if not size:
+                raise ValvemonError(empty)
+            fmt = sniff_format(path, bytes(raw[:4]))
+            if fmt == "csv" and _NOT_BLANK.search(raw) is None:
+                raise ValvemonError(empty)
+            hasher = blake3()
+            view = memoryview(raw)
+            for a in range(0, size, HASH_BLOCK_BYTES):
+                hasher.update(view[a : a + HASH_BLOCK_BYTES])
+                raw.madvise(mmap.MADV_DONTNEED, a, min(HASH_BLOCK_BYTES, size - a))
+            view.release()
+    except (OSError, ValueError) as exc:
+        raise ValvemonError(f"{path}: cannot read the file ({getattr(exc, 'strerror', None) or exc})") from None
+    return ExportSource(path, fmt, HASH_PREFIX + hasher.hexdigest(), size)
+
+
+def export_batches(src: ExportSource, export: ExportSpec, tags: TagTable | None = None, batch_samples: int | None = None, csv_block_bytes: int | None = None) -> Iterator[tuple[pl.DataFrame, int, bool]]:
+    """The export's rows in batches: ``(frame, line of its first row, last batch)``, of about
+    ``batch_samples`` samples (default :data:`BATCH_SAMPLES`) or ``csv_block_bytes`` of CSV text
+    (default :data:`CSV_BLOCK_BYTES`).
+
+    Raises
+    ------
+    ValvemonError
+        Naming the file: not a readable CSV/Parquet export, a truncated gzip, no data rows.
+    """
+    kind = "Parquet" if src.file_format == "parquet" else "CSV"
+    batch_samples = batch_samples or BATCH_SAMPLES
+    csv_block_bytes = csv_block_bytes or CSV_BLOCK_BYTES
+    rows = 0
+    try:
+        batches = _parquet_batches(src.path, export, tags, batch_samples) if src.file_format == "parquet" else _csv_batches(src, export, tags, csv_block_bytes)
+        for df, first_line, final in batches:
+            rows += df.height
+            if final and rows == 0:
+                raise ValvemonError(f"{src.path}: no data rows (only a header)")
+            yield df, first_line, final
+    except ValvemonError:
+        raise
+    except (EOFError, gzip.BadGzipFile, zlib.error) as exc:
+        raise ValvemonError(f"{src.path}: truncated or corrupt gzip file ({exc})") from None
+    except (pl.exceptions.PolarsError, pa.ArrowException, OSError, ValueError) as exc:
+        reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise ValvemonError(f"{src.path}: not a readable {kind} export ({reason})") from None
+
+
+def _lookahead(it: Iterator) -> Iterator[tuple[object, bool]]:
+    """Each item with whether it is the last."""
+    prev = sentinel = object()
+    for item in it:
+        if prev is not sentinel:
+            yield prev, False
+        prev = item
+    if prev is not sentinel:
+        yield prev, True
+
+
+def _parquet_batches(path: Path, export: ExportSpec, tags: TagTable | None, batch_samples: int) -> Iterator[tuple[pl.DataFrame, int, bool]]:
+    schema = pq.read_schema(path)
+    wanted = [export.tag_column if export.layout == "long" else None, export.quality_column]
+    coded = [c for c in wanted if c and c in schema.names and _is_text(schema.field(c).type)]
+    per_row = max(len(_value_columns(schema.names, export)), 1)
+    pf = pq.ParquetFile(path, read_dictionary=coded, pre_buffer=False, buffer_size=8 << 20)  # pre-buffering reads the whole file
+    first = 1
+    rows = max(batch_samples // per_row, 1024)
+    empty = True
+    for batch, final in _lookahead(_coalesced(pf.iter_batches(batch_size=rows, use_threads=False), rows)):
+        empty = False
+        columns = []
+        for name in batch.column_names:
+            col = batch[name]
+            if name in coded:
+                enum = enum_column(col, tags.tags if tags is not None and name == export.tag_column else None)
+                columns.append((enum if enum is not None else pl.from_arrow(col.cast(col.type.value_type))).alias(name))
+            else:
+                columns.append(pl.from_arrow(col).alias(name))
+        df = pl.DataFrame(columns)
+        yield df, first, final
+        first += df.height
+    if empty:
+        yield pl.read_parquet(path), 1, True
+
+
+def _coalesced(batches: Iterator[pa.RecordBatch], rows: int) -> Iterator[pa.Table]:
+    """Record batches (at most one row group each) joined into tables of about ``rows`` rows."""
+    pending, n = [], 0
+    for b in batches:
+        pending.append(b)
+        n += b.num_rows
+        if n >= rows:
+            yield pa.Table.from_batches(pending)
+            pending, n = [], 0
+    if pending:
+        yield pa.Table.from_batches(pending)
+
+
+def _blocks(fh: IO[bytes], block_bytes: int) -> Iterator[bytes]:
+    """The stream's bytes in blocks that end at a line end (the last one where the stream ends)."""
+    rest = b""
+    while True:
+        chunk = fh.read(block_bytes)
+        if not chunk:
+            if rest:
+                yield rest
+            return
+        data = rest + chunk if rest else chunk
+        cut = data.rfind(b"\n") + 1
+        if cut == 0:
+            rest = data
+            continue
+        rest = data[cut:]
+        yield data[:cut]
+
+
+def _csv_batches(src: ExportSource, export: ExportSpec, tags: TagTable | None, block_bytes: int) -> Iterator[tuple[pl.DataFrame, int, bool]]:
+    opener = gzip.open if src.file_format == "csv.gz" else open
+    with opener(src.path, "rb") as fh:
+        header = fh.readline()
+        if not header.strip():  # blank lines before the header (or nothing at all inside a gzip)
+            head = fh.read(1 << 16)
+            if not head.strip():
+                raise ValvemonError(f"{src.path}: empty file inside the gzip (expected a {export.layout} export with a header line)")
+            fh = _Prefixed(header + head, fh)
+            header = b""
+        first = 2
+        any_block = False
+        for block, final in _lookahead(_blocks(fh, block_bytes)):
+            any_block = True
+            df = read_csv_export(header + block, export, tags)
+            yield df, first, final
+            first += block.count(b"\n")
+        if not any_block:
+            yield read_csv_export(header, export, tags), 2, True
+
+
+class _Prefixed:
+    """A byte stream with some bytes already read put back in front."""
+
+    def __init__(self, head: bytes, fh: IO[bytes]):
+        self.head, self.fh = head, fh
+
+    def read(self, n: int) -> bytes:
+        if self.head:
+            out, self.head = self.head, b""
+            return out
+        return self.fh.read(n)

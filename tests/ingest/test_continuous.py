@@ -1,0 +1,175 @@
+"""Continuous recordings: bounded memory, hour files, a late file, kill -9 and rerun.
+
+The recordings are wide Parquet exports of valve V017 on a 10 Hz grid (so that a few hundred
+thousand rows span many hours), written by ``bench/continuous.py``'s generator; the lake's sizes
+(day file limit, batch size, buffer) are lowered so that these small files behave as a valve-day
+of 1 kHz data does with the real ones.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import polars as pl
+import pytest
+from polars.testing import assert_frame_equal
+
+import flows.ingest.batches
+import flows.ingest.staging
+from flows.common.config import load_plant_config
+from tests.ingest.conftest import ingest, lake, table, write_plant
+from transforms.ingest import process_export
+
+ROOT = Path(__file__).parents[2]
+START_US = 1_740_787_200_000_000  # 2025-03-01T00:00:00Z
+SMALL = {"BATCH_SAMPLES": 6_000, "DAY_FILE_MAX_ROWS": 20_000, "BUFFER_ROWS": 60_000}
+
+
+def recording(path: Path, first_s: float, seconds: float, seed: int = 0, rate_hz: float = 10.0) -> Path:
+    """A wide Parquet recording of V017 from ``first_s`` (seconds after 2025-03-01 00:00 UTC)."""
+    rng = np.random.default_rng(seed)
+    n = int(seconds * rate_hz)
+    t = START_US + int(first_s * 1e6) + np.arange(n, dtype=np.int64) * int(1e6 / rate_hz)
+    data = {"timestamp": pl.Series(t).cast(pl.Datetime("us", "UTC"))}
+    for tag, lo, hi in (("PS", 200, 220), ("PR", 1, 3), ("P1", 50, 150), ("P2", 50, 150), ("XS", -1, 1), ("XC", 100, 500)):
+        data[f"MILL1.V017.{tag}"] = np.round(rng.uniform(lo, hi, n), 3)
+    pl.DataFrame(data).write_parquet(path, row_group_size=5_000)
+    return path
+
+
+@pytest.fixture
+def wide10(tmp_path):
+    return write_plant(tmp_path, "wide10.toml", layout="wide", tag_column=None, value_column=None, quality_column=None, good_quality=None, sample_rate_hz=10.0, max_gap_s=0.25)
+
+
+@pytest.fixture
+def small(monkeypatch):
+    monkeypatch.setattr(flows.ingest.batches, "BATCH_SAMPLES", SMALL["BATCH_SAMPLES"])
+    monkeypatch.setattr(flows.ingest.staging, "DAY_FILE_MAX_ROWS", SMALL["DAY_FILE_MAX_ROWS"])
+    monkeypatch.setattr(flows.ingest.staging, "BUFFER_ROWS", SMALL["BUFFER_ROWS"])
+
+
+def _files(wh: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(wh)): p.read_bytes() for p in sorted((wh / "lake").rglob("*")) if p.is_file()}
+
+
+def test_a_long_recording_goes_to_hour_files_equal_to_the_whole_file(wide10, tmp_path, small):
+    rec = recording(tmp_path / "rec.parquet", 22 * 3600, 5 * 3600)  # 22:00 to 03:00 next day: 180,000 rows
+    wh = tmp_path / "wh"
+    report = ingest(wide10, rec, wh)
+    folders = sorted(p.name for p in (wh / "lake" / "sensors" / "valve_id=V017").iterdir())
+    assert folders == ["date=2025-03-01", "date=2025-03-02"]
+    names = [sorted(p.name for p in (wh / "lake" / "sensors" / "valve_id=V017" / f).iterdir()) for f in folders]
+    assert names == [["part-h22.parquet", "part-h23.parquet"], ["part-h00.parquet", "part-h01.parquet", "part-h02.parquet"]]
+    whole = process_export(pl.read_parquet(rec), load_plant_config(wide10), first_line=1)
+    assert_frame_equal(lake(wh), pl.concat([p.frame for p in whole.partitions]))
+    assert report.rows_written == report.rows_added == 180_000 and report.partitions_written == 2
+    for f in (wh / "lake").rglob("*.parquet"):  # each file holds its own hour only
+        t = pl.read_parquet(f)["timestamp_utc"]
+        assert t.dt.hour().n_unique() == 1 and f.name == f"part-h{t.dt.hour()[0]:02d}.parquet"
+
+
+def test_a_late_file_rewrites_only_the_hours_it_touches(wide10, tmp_path, small):
+    wh = tmp_path / "wh"
+    ingest(wide10, recording(tmp_path / "day.parquet", 0, 4 * 3600), wh)
+    before = {p.name: p.stat().st_ino for p in (wh / "lake").rglob("*.parquet")}
+    late = recording(tmp_path / "late.parquet", 3600 + 600, 1200, seed=7)  # 01:10–01:30, other values
+    report = ingest(wide10, late, wh, force=False)
+    after = {p.name: p.stat().st_ino for p in (wh / "lake").rglob("*.parquet")}
+    assert sorted(after) == ["part-h00.parquet", "part-h01.parquet", "part-h02.parquet", "part-h03.parquet"]
+    assert [n for n in after if after[n] != before[n]] == ["part-h01.parquet"]
+    assert report.lake_conflicts == 12_000 and report.rows_added == 0  # "last": the late file wins
+    got = lake(wh).filter(pl.col("timestamp_utc").dt.hour() == 1)
+    assert got.height == 36_000 and got["p1_pa"].slice(6000, 12_000).equals((pl.read_parquet(late)["MILL1.V017.P1"] * 1e5).cast(pl.Float32).alias("p1_pa"))
+
+
+def test_a_day_file_that_outgrows_its_limit_switches_to_hour_files(wide10, tmp_path, small):
+    wh = tmp_path / "wh"
+    ingest(wide10, recording(tmp_path / "a.parquet", 0, 1800), wh)  # 18,000 rows: the day file
+    assert [p.name for p in (wh / "lake").rglob("*.parquet")] == ["part-0.parquet"]
+    ingest(wide10, recording(tmp_path / "b.parquet", 1800, 3 * 3600), wh)
+    assert sorted(p.name for p in (wh / "lake").rglob("*.parquet")) == ["part-h00.parquet", "part-h01.parquet", "part-h02.parquet", "part-h03.parquet"]
+    assert lake(wh).height == 18_000 + 108_000
+    assert lake(wh)["timestamp_utc"].is_sorted() and lake(wh)["timestamp_utc"].n_unique() == 126_000
+
+
+CHILD = textwrap.dedent(
+    """
+    import json, os, signal, sys
+    sys.path.insert(0, {root!r})
+    import flows.common.lake, flows.ingest.batches, flows.ingest.staging
+    from flows.ingest.flow import run_ingest
+    small, kill_at, warm = json.loads(sys.argv[1]), int(sys.argv[2]), sys.argv[3]
+    for k, v in small.items():
+        setattr(flows.ingest.batches if k == "BATCH_SAMPLES" else flows.ingest.staging, k, v)
+    def hwm():  # VmHWM: ru_maxrss would carry pytest's own peak over fork + exec
+        return next(int(l.split()[1]) for l in open("/proc/self/status") if l.startswith("VmHWM:"))
+    run_ingest(sys.argv[4], [warm], sys.argv[6])  # imports, compiled kernels, first allocations
+    base = hwm()
+    real, calls = flows.common.lake._commit, []
+    def commit(tmp, path):
+        calls.append(path)
+        if len(calls) == kill_at:
+            os.kill(os.getpid(), signal.SIGKILL)
+        return real(tmp, path)
+    flows.common.lake._commit = commit
+    run_ingest(sys.argv[4], [sys.argv[5]], sys.argv[6])
+    print(json.dumps({{"growth_mb": (hwm() - base) / 1024}}))
+    """
+)
+
+
+def _child(config: Path, path: Path, wh: Path, warm: Path, small: dict, kill_at: int = 0) -> subprocess.CompletedProcess:
+    script = CHILD.format(root=str(ROOT))
+    env = dict(os.environ, POLARS_MAX_THREADS="1", PREFECT_SERVER_ANALYTICS_ENABLED="false")
+    return subprocess.run([sys.executable, "-c", script, json.dumps(small), str(kill_at), str(warm), str(config), str(path), str(wh)], capture_output=True, text=True, env=env)
+
+
+@pytest.mark.slow
+def test_memory_does_not_grow_with_the_file(wide10, tmp_path):
+    """A file of 600,000 rows (3.6 M samples, ~100 MB as float64 columns, ~17 h at 10 Hz)
+    ingests in a few tens of MB above the interpreter; taken whole, the same file needs far more."""
+    warm = recording(tmp_path / "warm.parquet", 0, 600)
+    big = recording(tmp_path / "big.parquet", 86_400, 600_000 / 10)
+    streamed = _child(wide10, big, tmp_path / "wh_stream", warm, SMALL)
+    assert streamed.returncode == 0, streamed.stderr
+    whole = _child(wide10, big, tmp_path / "wh_whole", warm, {**SMALL, "BATCH_SAMPLES": 10**9, "DAY_FILE_MAX_ROWS": 10**9, "BUFFER_ROWS": 10**9})
+    assert whole.returncode == 0, whole.stderr
+    grow_stream = json.loads(streamed.stdout.splitlines()[-1])["growth_mb"]
+    grow_whole = json.loads(whole.stdout.splitlines()[-1])["growth_mb"]
+    assert grow_stream < 60, (grow_stream, grow_whole)
+    assert grow_whole > 3 * grow_stream, (grow_stream, grow_whole)
+    assert_frame_equal(lake(tmp_path / "wh_stream"), lake(tmp_path / "wh_whole"))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("kill_at", [1, 3])
+def test_kill_9_during_a_continuous_ingest_then_rerun_gives_the_identical_lake(wide10, tmp_path, kill_at):
+    """SIGKILL while the staged files are put in place, in a day that switches from its day file
+    to hour files: readers see the old day; a rerun gives the lake of one clean run, byte for byte."""
+    first = recording(tmp_path / "first.parquet", 0, 1800)
+    rec = recording(tmp_path / "rec.parquet", 1800, 3 * 3600, seed=3)
+    clean, wh = tmp_path / "clean", tmp_path / "wh"
+    for w in (clean, wh):
+        ingest(wide10, first, w)
+    old = lake(wh)
+    ingest_small = {k: v for k, v in SMALL.items()}
+    done = _child(wide10, rec, clean, first, ingest_small)  # the warm-up file is already in the manifest: skipped
+    assert done.returncode == 0, done.stderr
+    killed = _child(wide10, rec, wh, first, ingest_small, kill_at=kill_at)
+    assert killed.returncode == -signal.SIGKILL
+    assert list((wh / "lake").rglob("part-0.parquet"))  # the switch did not commit: the day file is the day
+    assert_frame_equal(lake(wh), old)
+    assert table(wh, "ingest_manifest").height == 1
+    again = _child(wide10, rec, wh, first, ingest_small)
+    assert again.returncode == 0, again.stderr
+    assert_frame_equal(lake(wh), lake(clean))
+    assert _files(wh) == _files(clean)
+    assert not list((wh / "lake").rglob("*.tmp"))

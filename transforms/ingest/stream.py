@@ -1,0 +1,329 @@
+"""An export taken batch by batch → the same lake rows, quarantine, gaps and counts as the whole file.
+
+:class:`ExportStream` is fed the file's rows in consecutive batches (:meth:`ExportStream.feed`)
+and returns, per batch, the lake rows it can already give; the last batch (``final=True``)
+flushes the rest. Per tag it carries across a batch edge only what the whole-file rules
+(``docs/ingest.md``, "Rules") need to see on both sides:
+
+- the samples at the tag's latest time (a run of duplicates or conflicts may go on in the next
+  batch), held back unresolved, with their lines;
+- the last sample already put on the grid, the *anchor*: the next batch's first samples are
+  interpolated from it and a gap after it is found, and grid instants up to it are not produced
+  twice;
+- per valve, the grid rows beyond the point every signal of the valve has reached (a lake row
+  needs all required signals, ``x_ref`` where it has a value).
+
+So an export cut into any batches gives what the whole file gives, as long as every tag's times
+never go back across a batch edge and the valve's signals advance together (time-ordered
+exports, wide or long interleaved). Where that does not hold — times that go back across an
+edge, a signal that begins behind rows already given, a repeated autumn hour of local times
+near an edge — :class:`NotStreamable` is raised and the caller processes the file whole.
+Memory per batch is the batch plus the carry (a few samples per tag, rows of at most a batch).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from datetime import datetime, timedelta, timezone
+from zoneinfo import ZoneInfo
+
+import numpy as np
+import polars as pl
+
+from schemas.fields import REQUIRED_SIGNALS, SIGNAL_COLUMN
+from schemas.plant_config import PlantConfig
+from transforms.ingest.errors import IngestError
+from transforms.ingest.frames import assemble_valve, validate_raw_rows, validate_sensor_frame
+from transforms.ingest.grid import Grid, Gridded, prepare_tag, to_grid
+from transforms.ingest.samples import QUARANTINE_COLUMNS, TagTable, check_required_signals, empty_quarantine, samples_of, split_by_tag
+
+GAP_COLUMNS = {
+    "valve_id": pl.String,
+    "signal": pl.String,
+    "tag": pl.String,
+    "gap_start": pl.Datetime("us", "UTC"),
+    "gap_end": pl.Datetime("us", "UTC"),
+    "duration_s": pl.Float64,
+}
+_NONE = np.zeros(0, dtype=np.int64)
+_DONE = np.iinfo(np.int64).max
+
+
+class NotStreamable(Exception):
+    """The export's order does not allow batch-by-batch processing (module doc)."""
+
+
+@dataclass
+class ExportCounts:
+    """What an export held and what became of it (see ``docs/ingest.md``, "Counts")."""
+
+    rows_in: int = 0
+    samples_in: int = 0
+    quarantined: int = 0
+    duplicates: int = 0
+    conflicts: int = 0
+    gaps: int = 0
+    rows_out: int = 0
+    accepted: int = 0
+    """Samples left after quarantine and de-duplication (samples_in − quarantined − duplicates − conflicts)."""
+    time_start: datetime | None = None
+    time_end: datetime | None = None
+    valves: tuple[str, ...] = ()
+
+
+@dataclass
+class _TagCarry:
+    """What one tag carries into the next batch."""
+
+    last_ns: int
+    """Its latest time so far: the next batch's samples must not be earlier."""
+    held_t: np.ndarray
+    held_v: np.ndarray
+    held_line: np.ndarray
+    """The samples at ``last_ns``, file order, not yet resolved."""
+    anchor: tuple[int, float] | None = None
+    """The last sample on the grid already (time ns, value)."""
+
+
+@dataclass
+class _ValveRows:
+    """A valve's grid points not yet given as lake rows, per signal, and how far rows were given."""
+
+    pending: dict[str, list[tuple[np.ndarray, np.ndarray]]] = field(default_factory=dict)
+    reached: dict[str, int] = field(default_factory=dict)
+    """Signal → the instant (µs) up to which all its grid points are known."""
+    given_to: int = -_DONE
+    """Rows up to this instant (µs) were given."""
+
+
+def tags_by_column(config: PlantConfig, valve_id: str) -> dict[str, str]:
+    """Lake column → historian tag of one valve."""
+    v = config.valve(valve_id)
+    return {SIGNAL_COLUMN[s]: t.tag for s, t in v.tags.items()}
+
+
+class _Lines:
+    """The lines of one tag's samples in a batch: the held ones, then ``line_all[sel]``; built only
+    when asked (they are needed for the held samples and for a message)."""
+
+    def __init__(self, head: np.ndarray, line_all: np.ndarray, sel, keep: np.ndarray | None = None):
+        self.head, self.line_all, self.sel, self.keep = head, line_all, sel, keep
+
+    def __call__(self) -> np.ndarray:
+        lines = np.concatenate([self.head, self.line_all[self.sel]])
+        return lines if self.keep is None else lines[self.keep]
+
+    def at(self, idx: np.ndarray) -> np.ndarray:
+        """The lines of the samples ``idx`` (of all, before :meth:`only`)."""
+        h = len(self.head)
+        if len(idx) and idx[0] >= h:
+            rest = idx - h
+            return self.line_all[self.sel][rest] if isinstance(self.sel, slice) else self.line_all[self.sel[rest]]
+        return np.concatenate([self.head, self.line_all[self.sel]])[idx]
+
+    def only(self, keep: np.ndarray) -> _Lines:
+        return _Lines(self.head, self.line_all, self.sel, keep)
+
+
+def near_clock_change(t0_ns: int, t1_ns: int, tz: str) -> bool:
+    """Whether local times of ``tz`` change their UTC offset within an hour of ``[t0, t1]``."""
+    if tz == "UTC":
+        return False
+    zone = ZoneInfo(tz)
+    a = datetime.fromtimestamp(t0_ns / 1e9, timezone.utc) - timedelta(hours=1)
+    b = datetime.fromtimestamp(t1_ns / 1e9, timezone.utc) + timedelta(hours=1)
+    return a.astimezone(zone).utcoffset() != b.astimezone(zone).utcoffset()
+
+
+class ExportStream:
+    """One export, fed batch by batch (module doc).
+
+    Parameters
+    ----------
+    config : PlantConfig
+        The plant.
+    tags : TagTable, optional
+        ``TagTable.from_config(config)``, when the caller already has it.
+    """
+
+    def __init__(self, config: PlantConfig, tags: TagTable | None = None):
+        self.config = config
+        self.tags = tags or TagTable.from_config(config)
+        self.grid = Grid.from_export(config.export.sample_rate_hz, config.export.max_gap_s)
+        self.counts = ExportCounts()
+        self.quarantine: list[pl.DataFrame] = []
+        self.gaps: list[pl.DataFrame] = []
+        self._present: set[str] = set()
+        self._carry: dict[int, _TagCarry] = {}
+        self._valves: dict[str, _ValveRows] = {}
+        self._span: list[int] = []
+        self._batches = 0
+
+    def feed(self, df: pl.DataFrame, *, first_line: int, final: bool) -> list[pl.DataFrame]:
+        """The lake rows this batch completes: one validated sensor frame per valve, in time order.
+
+        Parameters
+        ----------
+        df : DataFrame
+            The batch, the file's next rows as read (columns as the file names them).
+        first_line : int
+            Line number of the batch's first row (CSV: the file's line; Parquet: its row).
+        final : bool
+            The last batch: everything carried is resolved and given.
+
+        Raises
+        ------
+        IngestError
+            What the file is refused for (as for the whole file).
+        NotStreamable
+            The export cannot be taken batch by batch (module doc).
+        """
+        self._batches += 1
+        export, tags = self.config.export, self.tags
+        samples = samples_of(df, self.config, tags, first_line=first_line)
+        c = self.counts
+        c.rows_in += samples.rows_in
+        c.samples_in += samples.samples_in
+        c.quarantined += samples.quarantine.height
+        if samples.quarantine.height:
+            self.quarantine.append(samples.quarantine)
+        self._present |= samples.tags_present
+        if final:
+            c.valves = tuple(check_required_signals(frozenset(self._present), self.config))
+        acc = samples.accepted
+        validate_raw_rows(acc)
+        tag_id = acc["tag"].to_physical().to_numpy()
+        t_all = acc["timestamp_utc"].to_physical().to_numpy()
+        v_all = acc["value_si"].to_numpy()
+        line_all = acc["line"].to_numpy()
+        if not (final and self._batches == 1) and len(t_all) and near_clock_change(int(t_all.min()), int(t_all.max()), self.config.timezone):
+            raise NotStreamable("local times near a change of the clocks")
+        seen = set()
+        for tid, t, v, sel in split_by_tag(tag_id, t_all, v_all):
+            seen.add(tid)
+            carry = self._carry.get(tid)
+            head = _NONE
+            if carry is not None:
+                if t.min() < carry.last_ns:
+                    raise NotStreamable(f"tag {tags.tags[tid]}: times go back across a batch edge")
+                t, v, head = np.concatenate([carry.held_t, t]), np.concatenate([carry.held_v, v]), carry.held_line
+            self._tag(tid, t, v, _Lines(head, line_all, sel), carry, final)
+        if final:
+            for tid in [k for k in self._carry if k not in seen]:
+                carry = self._carry[tid]
+                self._tag(tid, carry.held_t, carry.held_v, _Lines(carry.held_line, line_all, slice(0, 0)), carry, True)
+        frames = self._give(final)
+        if frames:  # every valve in one pass (one pandera call per valve costs more)
+            validate_sensor_frame(pl.concat(frames), {f["valve_id"][0]: tags_by_column(self.config, f["valve_id"][0]) for f in frames})
+        if final and self._span:
+            c.time_start, c.time_end = pl.Series([min(self._span), max(self._span)], dtype=pl.Int64).cast(pl.Datetime("ns", "UTC")).to_list()
+        return frames
+
+    def _tag(self, tid: int, t: np.ndarray, v: np.ndarray, lines, carry: _TagCarry | None, final: bool) -> None:
+        """One tag's samples of this batch (after the held ones): resolve, grid, carry."""
+        export, tags, c = self.config.export, self.tags, self.counts
+        tag, valve_id, signal = tags.tags[tid], tags.valve_ids[tid], tags.signals[tid]
+        held = None
+        if not final and len(t):
+            t_max = t.max()
+            at_max = t == t_max
+            idx_held = np.flatnonzero(at_max)
+            held = _TagCarry(int(t_max), t[idx_held], v[idx_held], lines.at(idx_held), carry.anchor if carry else None)
+            n = len(t) - len(idx_held)
+            if idx_held[0] == n:  # the usual case: the latest samples come last
+                t, v = t[:n], v[:n]
+            else:
+                keep = ~at_max
+                t, v, lines = t[keep], v[keep], lines.only(keep)
+        self._carry.pop(tid, None)
+        if held is not None:
+            self._carry[tid] = held
+        rows = self._valves.setdefault(valve_id, _ValveRows())
+        if len(t) == 0:
+            self._reach(rows, signal, held)
+            return
+        series = prepare_tag(t, v, lines, export.duplicate_rule, tag)
+        c.duplicates += series.duplicates
+        c.conflicts += series.conflicts
+        c.accepted += len(series.t_ns)
+        self._span += [int(series.t_ns[0]), int(series.t_ns[-1])]
+        anchor = carry.anchor if carry is not None else None
+        t_ns, values = series.t_ns, series.values
+        if anchor is not None:
+            t_ns, values = np.r_[anchor[0], t_ns], np.r_[anchor[1], values]
+        g = to_grid(t_ns, values, self.grid)
+        if anchor is not None:  # instants up to the anchor were given with the previous batch
+            first = int(np.searchsorted(g.t_us * 1000, anchor[0], side="right"))
+            g = Gridded(g.t_us[first:], g.values[first:], g.gap_start_ns, g.gap_end_ns)
+        if held is not None:
+            held.anchor = (int(series.t_ns[-1]), float(series.values[-1]))
+        if len(g.gap_start_ns):
+            n = len(g.gap_start_ns)
+            c.gaps += n
+            self.gaps.append(
+                pl.DataFrame(
+                    {
+                        "valve_id": [valve_id] * n,
+                        "signal": [signal] * n,
+                        "tag": [tag] * n,
+                        "gap_start": pl.Series(g.gap_start_ns // 1000).cast(pl.Datetime("us", "UTC")),
+                        "gap_end": pl.Series(g.gap_end_ns // 1000).cast(pl.Datetime("us", "UTC")),
+                        "duration_s": (g.gap_end_ns - g.gap_start_ns) / 1e9,
+                    },
+                    schema=GAP_COLUMNS,
+                )
+            )
+        if len(g.t_us):
+            if g.t_us[0] <= rows.given_to:
+                raise NotStreamable(f"tag {tag}: samples behind lake rows already given")
+            rows.pending.setdefault(signal, []).append((g.t_us, g.values))
+        self._reach(rows, signal, held)
+
+    @staticmethod
+    def _reach(rows: _ValveRows, signal: str, held: _TagCarry | None) -> None:
+        """How far the signal's grid instants are all known: later ones lie after its anchor (the
+        last sample on the grid), or, before it has one, at or after its held samples."""
+        if held is None:
+            rows.reached[signal] = _DONE
+        elif held.anchor is not None:
+            rows.reached[signal] = held.anchor[0] // 1000
+        else:
+            rows.reached[signal] = (held.last_ns - 1) // 1000
+
+    def _give(self, final: bool) -> list[pl.DataFrame]:
+        """Lake rows up to where every signal of a valve has reached (all of them when final)."""
+        frames = []
+        for valve in self.config.valves:
+            rows = self._valves.get(valve.id)
+            if rows is None or not all(s in rows.reached for s in REQUIRED_SIGNALS):
+                continue  # (final: every sample of a required signal was quarantined: no lake rows)
+            upto = _DONE if final else min(rows.reached.values())
+            if upto <= rows.given_to:
+                continue
+            signals = {}
+            for s, parts in rows.pending.items():
+                t = np.concatenate([p[0] for p in parts]) if len(parts) > 1 else parts[0][0]
+                v = np.concatenate([p[1] for p in parts]) if len(parts) > 1 else parts[0][1]
+                cut = int(np.searchsorted(t, upto, side="right"))
+                signals[s] = Gridded(t[:cut], v[:cut], _NONE, _NONE)
+                rows.pending[s] = [(t[cut:], v[cut:])] if cut < len(t) else []
+            rows.pending = {s: p for s, p in rows.pending.items() if p}
+            rows.given_to = upto
+            if all(s in signals for s in REQUIRED_SIGNALS):
+                frame = assemble_valve(valve.id, signals)
+                if frame.height:
+                    self.counts.rows_out += frame.height
+                    frames.append(frame)
+        return frames
+
+    def given_to(self) -> dict[str, int]:
+        """Valve → the instant (µs) up to which its lake rows were given: later rows come after it."""
+        return {v: r.given_to for v, r in self._valves.items()}
+
+    def quarantine_frame(self) -> pl.DataFrame:
+        """The quarantined samples of the batches so far (:data:`QUARANTINE_COLUMNS`)."""
+        return pl.concat(self.quarantine) if self.quarantine else empty_quarantine().select(QUARANTINE_COLUMNS)
+
+    def gap_frame(self) -> pl.DataFrame:
+        """The gaps found so far."""
+        return pl.concat(self.gaps) if self.gaps else pl.DataFrame(schema=GAP_COLUMNS)
