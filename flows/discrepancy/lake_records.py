@@ -43,10 +43,11 @@ def piece_table(warehouse: Path, valve_id: str, start: datetime | None, end: dat
     for chunk in span_chunks(warehouse, valve_id, settings.gap_limit_periods * dt, start, end, None, (), settings.window_s):
         ts = chunk["timestamp_utc"].to_physical().to_numpy().astype(np.int64)
         n_rows += ts.size
-        for a, b in record_pieces(ts, dt, settings):
-            lead = a - int(np.searchsorted(ts, ts[a], side="left"))  # equal time stamps just before the piece
-            out.append((ts[a], ts[b - 1], lead, b - a))
-    return np.array(out, dtype=np.int64).reshape(-1, 4), n_rows
+        ab = np.array(record_pieces(ts, dt, settings), dtype=np.int64).reshape(-1, 2)
+        a, b = ab[:, 0], ab[:, 1]
+        lead = a - np.searchsorted(ts, ts[a], side="left")  # equal time stamps just before a piece
+        out.append(np.column_stack([ts[a], ts[b - 1], lead, b - a]))  # 32 bytes a piece
+    return (np.concatenate(out) if out else np.empty((0, 4), dtype=np.int64)), n_rows
 
 
 def lake_records(warehouse: Path, valve_id: str, start: datetime | None, end: datetime | None, settings: DiscrepancySettings) -> tuple[list[Record], int]:
