@@ -22,7 +22,6 @@ from datetime import datetime, timedelta, timezone
 from pathlib import Path
 
 import numpy as np
-import polars as pl
 
 from flows.common.lake import read_lake
 from transforms.discrepancy.records import Record, pick_evenly, record_from_rows, record_pieces
