@@ -1,20 +1,25 @@
 """The ``valvemon`` command line (``../shared/spec/interfaces.md``).
 
 Every command takes ``--warehouse DIR`` (or ``$VALVEMON_WAREHOUSE``; default ``warehouse/``).
-Exit status 0 on success; otherwise non-zero with a one-line reason on stderr.
+Exit status 0 on success; otherwise non-zero with a one-line reason on stderr (:func:`main`).
+
+Start-up is kept short: a command imports its stage only inside its function, and the stages
+run without Prefect unless a Prefect API is configured (:mod:`flows.common.prefect_run`).
 """
 
 from __future__ import annotations
 
+import os
 import sys
+from contextlib import contextmanager
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated, Iterator, Optional
 
 import typer
 
-from flows.common.config import WAREHOUSE_ENV
+from flows.common.config import WAREHOUSE_ENV, warehouse_dir
 from flows.common.errors import ValvemonError
-from schemas.plant_config import ConfigError
+from schemas.errors import ConfigError
 
 app = typer.Typer(
     name="valvemon",
@@ -22,6 +27,7 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
+    rich_markup_mode=None,  # click's plain help: rendering it with rich imports ~0.3 s of modules
 )
 
 Warehouse = Annotated[
@@ -34,8 +40,27 @@ From = Annotated[Optional[str], typer.Option("--from", help="Start (ISO-8601 dat
 To = Annotated[Optional[str], typer.Option("--to", help="End, exclusive (ISO-8601).")]
 
 
-def _not_yet(what: str, issue: int) -> None:
-    raise ValvemonError(f"'valvemon {what}' is not implemented yet (issue {issue})")
+@contextmanager
+def publishing(config: Path, warehouse: Path) -> Iterator[None]:
+    """After the command's work, publish what it committed for ``valvemon query``
+    (:mod:`flows.report.publish`); after a failure too (e.g. the quarantine of a rejected file),
+    the command's own error then being the one reported. A publish that cannot get the database
+    (another writer holds it past the wait) is a warning, not a failure: the work is committed,
+    and that writer publishes it with its own when it ends."""
+    from flows.report.publish import publish
+
+    try:
+        yield
+    except Exception:
+        try:
+            publish(config, warehouse)
+        except Exception:  # noqa: BLE001 - the command's own error is the one to report
+            pass
+        raise
+    try:
+        publish(config, warehouse)
+    except ValvemonError as exc:
+        print(f"valvemon: warning: the snapshot for queries was not published: {_first_line(exc)}", file=sys.stderr)
 
 
 @app.command()
@@ -45,12 +70,10 @@ def demo(warehouse: Warehouse = None) -> None:
     from rich.table import Table
 
     import flows.demo as demo_flows
-    from flows.common.config import warehouse_dir
-    from flows.ingest.flow import quiet_prefect_console
+    from flows.common.prefect_run import run_flow
 
-    quiet_prefect_console()
     wh = warehouse_dir(warehouse)
-    result = demo_flows.demo_flow(warehouse=str(wh))
+    result = run_flow(demo_flows.demo_flow, warehouse=str(wh))
     report = result["report"]
     ranking = report.ranking if report.ranking is not None else None
     table = Table(title=f"Fleet condition, most urgent first ({result['config']})")
@@ -67,25 +90,25 @@ def demo(warehouse: Warehouse = None) -> None:
 def simulate(
     out: Annotated[Path, typer.Option("--out", help="Archive folder: plant.toml, truth.parquet, exports/.")],
     config: Annotated[Optional[Path], typer.Option("--config", help="Plant configuration (TOML); without it a plant is generated.")] = None,
-    n_valves: Annotated[Optional[int], typer.Option("--n-valves", help="Valves of a generated plant (V001…). \\[default: 3]")] = None,
-    plant: Annotated[Optional[str], typer.Option("--plant", help="Name of a generated plant. \\[default: SIM1]")] = None,
-    commissioned: Annotated[Optional[str], typer.Option("--commissioned", help="Commissioning of a generated plant's valves (ISO-8601). \\[default: 2025-01-01T00:00:00Z]")] = None,
-    start: Annotated[Optional[str], typer.Option("--from", help="Start (ISO-8601, UTC unless an offset is given). \\[default: the (latest) commissioning]")] = None,
+    n_valves: Annotated[Optional[int], typer.Option("--n-valves", help="Valves of a generated plant (V001…). [default: 3]")] = None,
+    plant: Annotated[Optional[str], typer.Option("--plant", help="Name of a generated plant. [default: SIM1]")] = None,
+    commissioned: Annotated[Optional[str], typer.Option("--commissioned", help="Commissioning of a generated plant's valves (ISO-8601). [default: 2025-01-01T00:00:00Z]")] = None,
+    start: Annotated[Optional[str], typer.Option("--from", help="Start (ISO-8601, UTC unless an offset is given). [default: the (latest) commissioning]")] = None,
     end: Annotated[Optional[str], typer.Option("--to", help="End, exclusive (ISO-8601).")] = None,
-    days: Annotated[Optional[float], typer.Option("--days", help="Length of the span instead of --to. \\[default: 1]")] = None,
+    days: Annotated[Optional[float], typer.Option("--days", help="Length of the span instead of --to. [default: 1]")] = None,
     hours: Annotated[Optional[str], typer.Option("--hours", help="Span in operating hours, END or START:END (instead of --from/--to).")] = None,
-    windows_per_day: Annotated[Optional[int], typer.Option("--windows-per-day", help="Snapshot windows per UTC day, evenly spaced from 00:00. \\[default: 24]")] = None,
-    window_s: Annotated[Optional[float], typer.Option("--window-s", help="Window length; a longer one than --segment-s is one back-to-back recording. \\[s] \\[default: 10]")] = None,
+    windows_per_day: Annotated[Optional[int], typer.Option("--windows-per-day", help="Snapshot windows per UTC day, evenly spaced from 00:00. [default: 24]")] = None,
+    window_s: Annotated[Optional[float], typer.Option("--window-s", help="Window length; a longer one than --segment-s is one back-to-back recording. [s] [default: 10]")] = None,
     recording: Annotated[str, typer.Option("--recording", help="snapshot (windows) | continuous (back to back over the whole span).")] = "snapshot",
-    segment_s: Annotated[float, typer.Option("--segment-s", help="Longer recordings are simulated in segments of this length (clock-aligned), each with its own operating inputs and condition. \\[s]")] = 60.0,
-    file_minutes: Annotated[Optional[float], typer.Option("--file-minutes", help="Split the exports into files of N minutes named <PLANT>_<YYYYMMDDTHHMMSS>. \\[default: continuous 60; snapshot one file a UTC day]")] = None,
-    scenario: Annotated[Optional[list[str]], typer.Option("--scenario", help="NAME for every valve, or VALVE=NAME (repeat); healthy, wear, broken_edge\\[:EDGE]\\[@HOURS]. \\[default: the valve's scenario key, else healthy]")] = None,
+    segment_s: Annotated[float, typer.Option("--segment-s", help="Longer recordings are simulated in segments of this length (clock-aligned), each with its own operating inputs and condition. [s]")] = 60.0,
+    file_minutes: Annotated[Optional[float], typer.Option("--file-minutes", help="Split the exports into files of N minutes named <PLANT>_<YYYYMMDDTHHMMSS>. [default: continuous 60; snapshot one file a UTC day]")] = None,
+    scenario: Annotated[Optional[list[str]], typer.Option("--scenario", help="NAME for every valve, or VALVE=NAME (repeat); healthy, wear, broken_edge[:EDGE][@HOURS]. [default: the valve's scenario key, else healthy]")] = None,
     seed: Annotated[int, typer.Option("--seed", help="Seed of everything random; the same seed gives the same bytes.")] = 0,
     fmt: Annotated[str, typer.Option("--format", help="long | wide (CSV in that layout) | parquet (in the plant's layout).")] = "long",
-    layout: Annotated[Optional[str], typer.Option("--layout", help="Layout of a generated plant's Parquet files: long | wide. \\[default: long]")] = None,
+    layout: Annotated[Optional[str], typer.Option("--layout", help="Layout of a generated plant's Parquet files: long | wide. [default: long]")] = None,
     gzip: Annotated[bool, typer.Option("--gzip", help="Compress CSV files (.csv.gz).")] = False,
     overwrite: Annotated[bool, typer.Option("--overwrite", help="Replace an archive already in --out.")] = False,
-    workers: Annotated[Optional[int], typer.Option("--workers", help="Simulator processes beside the writer (0: simulate in-process). \\[default: CPUs - 1, at most 8, for archives of 2000 valve-s or more; else 0]")] = None,
+    workers: Annotated[Optional[int], typer.Option("--workers", help="Simulator processes beside the writer (0: simulate in-process). [default: CPUs - 1, at most 8, for archives of 2000 valve-s or more; else 0]")] = None,
     quiet: Annotated[bool, typer.Option("--quiet", help="No progress bar.")] = False,
     warehouse: Warehouse = None,
 ) -> None:
@@ -115,17 +138,14 @@ def ingest(
 ) -> None:
     """Historian exports into the sensor lake."""
     import flows.ingest.flow as ingest_flows
-    from flows.common.config import warehouse_dir
+    from flows.common.prefect_run import run_flow
 
-    ingest_flows.preflight(config, paths)  # a bad configuration or path fails before Prefect starts
-    ingest_flows.quiet_prefect_console()
-    counts = ingest_flows.ingest_flow(
-        config_path=str(config),
-        paths=[str(p) for p in paths],
-        warehouse=str(warehouse_dir(warehouse)),
-        force=force,
-        show_progress=True,
-    )
+    ingest_flows.preflight(config, paths)  # a bad configuration or path fails before anything starts
+    wh = warehouse_dir(warehouse)
+    with publishing(config, wh):
+        counts = run_flow(
+            ingest_flows.ingest_flow, config_path=str(config), paths=[str(p) for p in paths], warehouse=str(wh), force=force, show_progress=True
+        )
     typer.echo(ingest_flows.summary_line(counts))
 
 
@@ -133,13 +153,11 @@ def ingest(
 def monitor(config: Config, valves: Valves = None, start: From = None, end: To = None, warehouse: Warehouse = None) -> None:
     """Lake to opening-area points and fits."""
     import flows.monitor.flow as monitor_flows
-    from flows.common.config import warehouse_dir
-    from flows.ingest.flow import quiet_prefect_console
+    from flows.common.prefect_run import run_flow
 
-    quiet_prefect_console()
-    reports = monitor_flows.monitor_flow(
-        config_path=str(config), warehouse=str(warehouse_dir(warehouse)), valve_ids=valves, start=start, end=end
-    )
+    wh = warehouse_dir(warehouse)
+    with publishing(config, wh):
+        reports = run_flow(monitor_flows.monitor_flow, config_path=str(config), warehouse=str(wh), valve_ids=valves, start=start, end=end)
     for r in reports:
         statuses = ", ".join(f"{s} {n}" for s, n in sorted(r.status_counts.items()))
         baseline = r.baseline_source + ("" if r.baseline_plausible else " (IMPLAUSIBLE: step 5a failed)")
@@ -155,11 +173,9 @@ def report(
 ) -> None:
     """Refresh the views, write the pictures and the HTML report."""
     import flows.report.flow as report_flows
-    from flows.common.config import warehouse_dir
-    from flows.ingest.flow import quiet_prefect_console
+    from flows.common.prefect_run import run_flow
 
-    quiet_prefect_console()
-    result = report_flows.report_flow(config_path=str(config), warehouse=str(warehouse_dir(warehouse)), detail=detail, valve_ids=valves)
+    result = run_flow(report_flows.report_flow, config_path=str(config), warehouse=str(warehouse_dir(warehouse)), detail=detail, valve_ids=valves)
     counts = result.ranking["state"].value_counts(sort=True) if result.ranking is not None else None
     summary = ", ".join(f"{n} {s}" for s, n in counts.iter_rows()) if counts is not None and counts.height else "no valves"
     typer.echo(f"{summary}; {len(result.pngs)} pictures, export in {result.exports.get('valve_condition', Path()).parent}")
@@ -171,12 +187,11 @@ def query(
     sql: Annotated[str, typer.Argument(help="SQL against the warehouse (tables and views; docs/warehouse.md).")],
     fmt: Annotated[str, typer.Option("--format", help="table | csv | json | parquet (parquet needs --out).")] = "table",
     out: Annotated[Optional[Path], typer.Option("--out", help="Write the result to this file instead of standard output.")] = None,
-    live: Annotated[bool, typer.Option("--live", help="Query the live database (read-only; waits while a writer holds it) instead of the snapshot of the last report.")] = False,
+    live: Annotated[bool, typer.Option("--live", help="Query the live database (read-only; waits while a writer holds it, and keeps writers out) instead of the snapshot every writing command publishes.")] = False,
     max_rows: Annotated[int, typer.Option("--max-rows", help="Rows shown by --format table (the others write all rows).")] = 200,
     warehouse: Warehouse = None,
 ) -> None:
     """An ad-hoc query against the warehouse, printed as a table."""
-    from flows.common.config import warehouse_dir
     from flows.report.query import run_query
 
     run_query(sql, warehouse_dir(warehouse), fmt=fmt, out=out, live=live, max_rows=max_rows)
@@ -195,9 +210,9 @@ def backfill(
     end: Annotated[str, typer.Option("--to", help="End, exclusive (ISO-8601).")],
     valves: Valves = None,
     exports: Annotated[Optional[Path], typer.Option("--exports", help="Historian exports to ingest first (a folder, searched recursively, or a file); files whose name carries a date outside the span are left out.")] = None,
-    concurrency: Annotated[Optional[int], typer.Option("--concurrency", help="Units in flight at once. \\[default: 2 on threads; twice the cluster's worker threads on Dask]")] = None,
+    concurrency: Annotated[Optional[int], typer.Option("--concurrency", help="Units in flight at once. [default: 2 on threads; twice the cluster's worker threads on Dask]")] = None,
     unit_days: Annotated[float, typer.Option("--unit-days", help="Days of one valve per monitor unit.")] = 7.0,
-    retries: Annotated[int, typer.Option("--retries", help="Prefect retries of a failed unit.")] = 2,
+    retries: Annotated[int, typer.Option("--retries", help="Retries of a failed unit (as Prefect task retries when a Prefect API is configured).")] = 2,
     force: Annotated[bool, typer.Option("--force", help="Redo every monitor unit and re-read every file (content already in the manifest is still skipped).")] = False,
     dask_address: DaskAddress = None,
     dask_workers: Annotated[Optional[int], typer.Option("--dask-workers", help="Run the tasks on a temporary local Dask cluster of N worker processes.")] = None,
@@ -207,14 +222,13 @@ def backfill(
     """Ingest + monitor over a span, resumable: rerun the same command to continue a stopped backfill."""
     from contextlib import ExitStack
 
-    from flows.common.config import warehouse_dir
-    from flows.ingest.flow import quiet_prefect_console
+    from flows.common.prefect_run import run_flow
     from flows.orchestration.backfill import CONCURRENCY, BackfillFailed, backfill_flow
     from flows.orchestration.dask_runner import cluster_threads, local_cluster, shared_api, task_runner
 
     if dask_address and dask_workers:
         raise ValvemonError("--dask-address and --dask-workers exclude each other")
-    quiet_prefect_console()
+    wh = warehouse_dir(warehouse)
     with ExitStack() as stack:
         address = dask_address
         if address or dask_workers:
@@ -227,10 +241,11 @@ def backfill(
             n = concurrency or CONCURRENCY
         if n < 1:
             raise ValvemonError("--concurrency must be at least 1")
-        run = backfill_flow.with_options(task_runner=task_runner(n, address))
+        stack.enter_context(publishing(config, wh))
         try:
-            summary = run(
-                config_path=str(config), warehouse=str(warehouse_dir(warehouse)), start=start, end=end, valve_ids=valves,
+            summary = run_flow(
+                backfill_flow, prefect_options=lambda: {"task_runner": task_runner(n, address)},
+                config_path=str(config), warehouse=str(wh), start=start, end=end, valve_ids=valves,
                 exports=str(exports) if exports else None, concurrency=n, unit_days=unit_days, retries=retries, force=force,
                 show_progress=not quiet, task_runner_name=f"dask {address}" if address else f"threads ({n})",
             )  # fmt: skip
@@ -245,15 +260,14 @@ def serve(
     config: Config,
     exports: Annotated[Path, typer.Option("--exports", help="The inbox of historian exports the nightly run ingests (new files only).")],
     cron: Annotated[str, typer.Option("--cron", help="When the nightly run starts (cron syntax, in --timezone).")] = "30 2 * * *",
-    tz: Annotated[Optional[str], typer.Option("--timezone", help="IANA time zone of the schedule and of 'the previous day'. \\[default: the plant's plant.timezone]")] = None,
+    tz: Annotated[Optional[str], typer.Option("--timezone", help="IANA time zone of the schedule and of 'the previous day'. [default: the plant's plant.timezone]")] = None,
     concurrency: Annotated[int, typer.Option("--concurrency", help="Units in flight at once in a nightly run.")] = 2,
     dask_address: DaskAddress = None,
     no_report: Annotated[bool, typer.Option("--no-report", help="Skip the report step.")] = False,
-    name: Annotated[Optional[str], typer.Option("--name", help="Deployment name. \\[default: PLANT-nightly]")] = None,
+    name: Annotated[Optional[str], typer.Option("--name", help="Deployment name. [default: PLANT-nightly]")] = None,
     warehouse: Warehouse = None,
 ) -> None:
     """The nightly deployment on a Prefect server (PREFECT_API_URL): serves it until stopped."""
-    from flows.common.config import warehouse_dir
     from flows.orchestration.nightly import serve_nightly
 
     serve_nightly(
@@ -267,19 +281,21 @@ def retention(
     config: Config,
     dry_run: Annotated[bool, typer.Option("--dry-run", help="Only print what would be dropped or thinned; write nothing.")] = False,
     valves: Valves = None,
-    as_of: Annotated[Optional[str], typer.Option("--as-of", help="Reference date (ISO): partitions older than keep_days before it are eligible. \\[default: today, UTC]")] = None,
+    as_of: Annotated[Optional[str], typer.Option("--as-of", help="Reference date (ISO): partitions older than keep_days before it are eligible. [default: today, UTC]")] = None,
     list_all: Annotated[bool, typer.Option("--list", help="Also print every partition's decision.")] = False,
     warehouse: Warehouse = None,
 ) -> None:
     """Thin or drop lake partitions older than retention.keep_days (plant TOML) once their fits exist."""
-    import flows.retention.flow as retention_flows
-    from flows.common.config import warehouse_dir
-    from flows.ingest.flow import quiet_prefect_console
+    from contextlib import nullcontext
 
-    quiet_prefect_console()
-    summary = retention_flows.retention_flow(
-        config_path=str(config), warehouse=str(warehouse_dir(warehouse)), valve_ids=valves, as_of=as_of, dry_run=dry_run
-    )
+    import flows.retention.flow as retention_flows
+    from flows.common.prefect_run import run_flow
+
+    wh = warehouse_dir(warehouse)
+    with nullcontext() if dry_run else publishing(config, wh):  # a dry run writes nothing, not even the snapshot
+        summary = run_flow(
+            retention_flows.retention_flow, config_path=str(config), warehouse=str(wh), valve_ids=valves, as_of=as_of, dry_run=dry_run
+        )
     if summary is None:
         typer.echo(f"{config}: no [retention] table: retention is off, nothing is deleted (docs/warehouse.md, Retention)")
         return
@@ -298,28 +314,59 @@ def discrepancy(
     start: From = None,
     end: To = None,
     warehouse: Warehouse = None,
-    max_records: Annotated[Optional[int], typer.Option("--max-records", help="Diagnose at most this many records (windows), evenly spaced over the span. \\[default: 48]")] = None,
+    max_records: Annotated[Optional[int], typer.Option("--max-records", help="Diagnose at most this many records (windows), evenly spaced over the span. [default: 48]")] = None,
     valve_condition: Annotated[str, typer.Option("--valve-condition", help="auto | design | commissioning: the valve's α and underlaps in the model; commissioning fits them on the configured baseline_window, auto does so when there is one.")] = "auto",
 ) -> None:
     """The model-discrepancy workflow: replay, name the missing effect, add it, its effect on monitoring."""
     import flows.discrepancy.flow as discrepancy_flows
-    from flows.common.config import warehouse_dir
-    from flows.ingest.flow import quiet_prefect_console
+    from flows.common.prefect_run import run_flow
 
-    discrepancy_flows.check_arguments(config, valve, start, end, valve_condition, max_records)  # fail fast, before Prefect starts
-    quiet_prefect_console()
-    report = discrepancy_flows.discrepancy_flow(
-        config_path=str(config), warehouse=str(warehouse_dir(warehouse)), valve_id=valve, start=start, end=end, max_records=max_records,
-        condition_mode=valve_condition,
-    )
+    discrepancy_flows.check_arguments(config, valve, start, end, valve_condition, max_records)  # fail fast, before anything starts
+    wh = warehouse_dir(warehouse)
+    with publishing(config, wh):
+        report = run_flow(
+            discrepancy_flows.discrepancy_flow, config_path=str(config), warehouse=str(wh), valve_id=valve, start=start, end=end,
+            max_records=max_records, condition_mode=valve_condition,
+        )
     for line in discrepancy_flows.summary_lines(report):
         typer.echo(line)
 
 
+TRACEBACK_ENV = "VALVEMON_TRACEBACK"
+"""Set to 1 to get the traceback of an unexpected failure instead of its one line."""
+
+
+def _first_line(exc: BaseException) -> str:
+    text = str(exc).strip()
+    return text.splitlines()[0] if text else type(exc).__name__
+
+
+def _fail(message: str, code: int = 1) -> None:
+    print(f"valvemon: error: {message}", file=sys.stderr)
+    sys.exit(code)
+
+
 def main() -> None:
-    """Entry point: known failures become one line on stderr and exit status 1."""
+    """Entry point: every failure is one line on stderr and a non-zero exit status: 1, or 2 for
+    a usage error (bad option or argument); an interrupt exits with 130, silently."""
     try:
-        app()
-    except (ValvemonError, ConfigError) as exc:
-        print(f"valvemon: error: {exc}", file=sys.stderr)
-        sys.exit(1)
+        code = app(standalone_mode=False, prog_name="valvemon")
+    except (ValvemonError, ConfigError) as exc:  # the reason, naming file, row, key …
+        _fail(_first_line(exc))
+    except typer.TyperException as exc:  # click's usage errors (click as vendored by typer)
+        from typer._click.exceptions import NoArgsIsHelpError
+
+        if isinstance(exc, NoArgsIsHelpError):  # `valvemon` alone: the help
+            exc.show()
+            sys.exit(exc.exit_code)
+        ctx = getattr(exc, "ctx", None)
+        _fail(_first_line(exc) + (f" (see '{ctx.command_path} --help')" if ctx is not None else ""), exc.exit_code)
+    except typer.Abort:
+        _fail("aborted")
+    except OSError as exc:  # the file system: permissions, a full disk, a vanished file
+        _fail(f"{exc.filename}: {exc.strerror}" if exc.filename and exc.strerror else _first_line(exc))
+    except Exception as exc:  # noqa: BLE001 - a bug or an unforeseen failure: still one line (the traceback on request)
+        if os.environ.get(TRACEBACK_ENV) == "1":
+            raise
+        _fail(f"unexpected {type(exc).__name__}: {_first_line(exc)} (set {TRACEBACK_ENV}=1 for the traceback)")
+    sys.exit(code if isinstance(code, int) else 0)

@@ -25,8 +25,8 @@ from datetime import datetime, timedelta, timezone
 from pathlib import Path
 
 import tomli_w
-from prefect import flow
 
+from flows.common.prefect_run import flow
 from flows.ingest.flow import run_ingest
 from flows.monitor.flow import run_monitor
 from flows.report.flow import run_report

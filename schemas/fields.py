@@ -3,15 +3,24 @@
 The polars, pyarrow and pandera schemas of each table are built from these definitions
 (:func:`polars_schema`, :func:`arrow_schema`, :func:`pandera_schema`), so a column cannot mean
 one thing in the lake and another in the warehouse.
+
+pandera and pyarrow are imported only when a schema of theirs is built: the registry itself is
+read by every command, ``valvemon --help`` and ``valvemon query`` included, and pandera alone
+takes seconds to import. The pandera schemas of the tables are built on first use
+(``SENSOR_SCHEMA`` …, :data:`PANDERA_SCHEMAS`).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cache
+from typing import TYPE_CHECKING
 
-import pandera.polars as pa
 import polars as pl
-import pyarrow as pa_arrow
+
+if TYPE_CHECKING:
+    import pandera.polars as pa
+    import pyarrow as pa_arrow
 
 EDGES: tuple[str, ...] = ("s1", "1r", "s2", "2r")
 """The four control edges, in the order every array and table uses."""
@@ -97,6 +106,8 @@ def polars_schema(fields: tuple[Field, ...]) -> pl.Schema:
 
 def arrow_schema(fields: tuple[Field, ...]) -> pa_arrow.Schema:
     """Pyarrow schema of a table, with units and descriptions as field metadata."""
+    import pyarrow as pa_arrow
+
     empty = pl.DataFrame(schema=polars_schema(fields)).to_arrow()
     return pa_arrow.schema(
         [
@@ -112,6 +123,8 @@ def arrow_schema(fields: tuple[Field, ...]) -> pa_arrow.Schema:
 
 
 def _checks(f: Field) -> list[pa.Check]:
+    import pandera.polars as pa
+
     checks = []
     if f.ge is not None:
         checks.append(pa.Check.ge(f.ge, name=f"{f.name} >= {f.ge:g} {f.unit}".rstrip()))
@@ -128,6 +141,8 @@ def pandera_schema(fields: tuple[Field, ...], name: str) -> pa.DataFrameSchema:
     Validate collected frames (``schema.validate(df, lazy=True)``): on a LazyFrame pandera
     checks only names and types.
     """
+    import pandera.polars as pa
+
     return pa.DataFrameSchema(
         {f.name: pa.Column(f.dtype, checks=_checks(f), nullable=f.nullable) for f in fields},
         name=name,
@@ -136,7 +151,6 @@ def pandera_schema(fields: tuple[Field, ...], name: str) -> pa.DataFrameSchema:
     )
 
 
-SENSOR_SCHEMA = pandera_schema(SENSOR_FIELDS, "sensor_frame")
 
 
 # --- ingest: raw rows, quarantine, gaps, manifest, runs ---------------------------------------
@@ -229,9 +243,25 @@ INGEST_RUN_FIELDS: tuple[Field, ...] = (
 )
 """One row per ``valvemon ingest`` run with its counts (table ``ingest_runs``)."""
 
-RAW_ROW_SCHEMA = pandera_schema(RAW_ROW_FIELDS, "raw_rows")
-QUARANTINE_SCHEMA = pandera_schema(QUARANTINE_FIELDS, "quarantine")
-GAP_SCHEMA = pandera_schema(GAP_FIELDS, "ingest_gaps")
+PANDERA_SCHEMAS: dict[str, tuple[tuple[Field, ...], str]] = {
+    "SENSOR_SCHEMA": (SENSOR_FIELDS, "sensor_frame"),
+    "RAW_ROW_SCHEMA": (RAW_ROW_FIELDS, "raw_rows"),
+    "QUARANTINE_SCHEMA": (QUARANTINE_FIELDS, "quarantine"),
+    "GAP_SCHEMA": (GAP_FIELDS, "ingest_gaps"),
+}
+"""The module's pandera schemas, by attribute name: (fields, schema name); built on first use."""
+
+
+@cache
+def _pandera_constant(attr: str) -> pa.DataFrameSchema:
+    return pandera_schema(*PANDERA_SCHEMAS[attr])
+
+
+def __getattr__(attr: str):
+    """``SENSOR_SCHEMA`` and the other :data:`PANDERA_SCHEMAS`, built (importing pandera) on first use."""
+    if attr in PANDERA_SCHEMAS:
+        return _pandera_constant(attr)
+    raise AttributeError(f"module {__name__!r} has no attribute {attr!r}")
 
 # --- monitoring (steps 2–6) ----------------------------------------------------------------
 

@@ -35,12 +35,9 @@ from datetime import datetime, timezone
 from typing import Any, Callable
 from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
 
+from schemas.errors import ConfigError
 from schemas.fields import EDGES, REQUIRED_SIGNALS, SIGNAL_KIND, SIGNALS
 from schemas.units import UnitError, si_factor
-
-
-class ConfigError(ValueError):
-    """An invalid plant configuration; the message names the key and the problem."""
 
 
 @dataclass(frozen=True)

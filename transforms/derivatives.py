@@ -1,7 +1,8 @@
 """Step 2: Savitzky–Golay smoothing and first derivatives as polars expressions.
 
 A Savitzky–Golay filter of length L = 2h + 1 and order p is a fixed weighted sum over the
-centred stencil (scipy's ``savgol_coeffs``), so over a uniform grid it is a weighted
+centred stencil (the least-squares weights of scipy's ``savgol_coeffs``, computed here with
+numpy: importing ``scipy.signal`` alone costs a command ~1 s), so over a uniform grid it is a weighted
 ``rolling_sum`` of the whole column. The stencil is never laid across a window boundary or an
 irregular step: a row gets null unless its stencil [i − h, i + h] holds no ``run_start``
 (:mod:`transforms.windows`) after its first sample, i.e. unless it has h samples of the same
@@ -20,13 +21,13 @@ Outputs for the lake's signals (:data:`DEFAULT_OUTPUTS`):
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from functools import lru_cache
 
 import numba
 import numpy as np
 import polars as pl
-from scipy.signal import savgol_coeffs
 
 __all__ = [
     "DEFAULT_OUTPUTS",
@@ -51,8 +52,17 @@ def _weights(window: int, order: int, deriv: int) -> tuple[float, ...]:
         raise ValueError(f"window must be odd and >= 3, got {window}")
     if not 0 <= order < window:
         raise ValueError(f"order must be in [0, window), got {order}")
-    # use="dot": w[0] multiplies the oldest sample of the stencil, as rolling_sum's weights do
-    return tuple(float(v) for v in savgol_coeffs(window, order, deriv=deriv, delta=1.0, use="dot"))
+    # scipy.signal.savgol_coeffs(window, order, deriv, delta=1.0, use="dot"): w[0] multiplies the
+    # oldest sample of the stencil, as rolling_sum's weights do. The least-squares polynomial of
+    # degree `order` through the stencil, evaluated (its deriv-th derivative) at the centre: the
+    # minimum-norm w with A w = deriv! e_deriv, A[k, j] = (j - h)^k.
+    if deriv > order:
+        return (0.0,) * window
+    h = window // 2
+    a = np.arange(-h, h + 1, dtype=float) ** np.arange(order + 1)[:, None]
+    y = np.zeros(order + 1)
+    y[deriv] = math.factorial(deriv)
+    return tuple(float(v) for v in np.linalg.lstsq(a, y, rcond=None)[0])
 
 
 def savgol_weights(window: int, order: int, deriv: int = 0) -> np.ndarray:

@@ -5,8 +5,12 @@ from __future__ import annotations
 import os
 import tomllib
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from schemas.plant_config import ConfigError, PlantConfig, parse_plant_config
+from schemas.errors import ConfigError
+
+if TYPE_CHECKING:
+    from schemas.plant_config import PlantConfig
 
 WAREHOUSE_ENV = "VALVEMON_WAREHOUSE"
 DEFAULT_WAREHOUSE = Path("warehouse")
@@ -14,6 +18,8 @@ DEFAULT_WAREHOUSE = Path("warehouse")
 
 def load_plant_config(path: str | Path) -> PlantConfig:
     """Read and validate a plant TOML file; errors name the file and the key."""
+    from schemas.plant_config import parse_plant_config  # the field registry imports polars: not for every command
+
     path = Path(path)
     try:
         with path.open("rb") as fh:

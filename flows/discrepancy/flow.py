@@ -31,14 +31,13 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 import polars as pl
-from prefect import flow, task
-from prefect.cache_policies import NO_CACHE
 
 from flows.common.config import load_plant_config
 from flows.common.errors import ValvemonError
 from flows.common.instants import utc_instant
-from flows.discrepancy.lake_records import lake_records
+from flows.common.prefect_run import flow, task
 from flows.common.warehouse_db import connect, ensure_tables, insert_frame, transaction
+from flows.discrepancy.lake_records import lake_records
 from model.params import PlantParams, ValveCondition
 from schemas.fields import (
     DISCREPANCY_CANDIDATE_FIELDS,
@@ -298,7 +297,7 @@ def run_discrepancy(config_path: str | Path, warehouse: str | Path, valve_id: st
     return runner(config, valve_id, Path(warehouse), t0, t1, settings, condition_mode)
 
 
-@task(name="discrepancy-valve", cache_policy=NO_CACHE, persist_result=False)
+@task(name="discrepancy-valve", persist_result=False)
 def discrepancy_valve_task(config, valve_id: str, warehouse: Path, start, end, settings=None, condition_mode: str = "auto") -> DiscrepancyReport:
     """One valve's discrepancy workflow as a Prefect task."""
     return discrepancy_valve(config, valve_id, warehouse, start, end, settings, condition_mode)

@@ -33,14 +33,13 @@ import polars as pl
 import pyarrow as pa
 import pyarrow.parquet as pq
 from blake3 import blake3
-from prefect import flow, task
-from prefect.cache_policies import NO_CACHE
 
 from flows.common.allocator import retain_freed_memory
 from flows.common.config import load_plant_config
 from flows.common.errors import ValvemonError
 from flows.common.lake import partition_path, read_partition, write_partition
 from flows.common.locks import file_lock
+from flows.common.prefect_run import flow, task
 from flows.common.warehouse_db import connect, ensure_ingest_tables, insert_frame, transaction
 from schemas.fields import GAP_FIELDS, GAP_SCHEMA, INGEST_RUN_FIELDS, MANIFEST_FIELDS, QUARANTINE_FIELDS, QUARANTINE_SCHEMA, polars_schema
 from schemas.plant_config import ConfigError, ExportSpec, PlantConfig
@@ -671,22 +670,7 @@ def _progress(files: list[Path], show: bool) -> Iterator[Callable[[Path], None]]
 # --- Prefect ---------------------------------------------------------------------------------
 
 
-def quiet_prefect_console() -> None:
-    """Keep Prefect's console log (run states, tracebacks) off the command line's stderr.
-
-    The command prints its own summary and a one-line error; the flow and task runs are still
-    recorded by the Prefect API. Applies to logging set up later (environment) and now.
-    """
-    import logging
-
-    os.environ["PREFECT_LOGGING_HANDLERS_CONSOLE_LEVEL"] = "CRITICAL"
-    for lg in [logging.getLogger(), *(v for v in logging.root.manager.loggerDict.values() if isinstance(v, logging.Logger))]:
-        for h in lg.handlers:
-            if type(h).__name__ == "PrefectConsoleHandler":
-                h.setLevel(logging.CRITICAL)
-
-
-@task(name="ingest-file", cache_policy=NO_CACHE, persist_result=False)
+@task(name="ingest-file", persist_result=False)
 def ingest_file_task(path: Path, config: PlantConfig, warehouse: Path, run_id: str, *, force: bool = False, tags: TagTable | None = None) -> FileReport:
     """One export file into the lake (:func:`ingest_file`)."""
     return ingest_file(path, config, warehouse, run_id, force=force, tags=tags)

@@ -35,8 +35,6 @@ from typing import Callable, Iterator
 import duckdb
 import numpy as np
 import polars as pl
-from prefect import flow, task
-from prefect.cache_policies import NO_CACHE
 
 from flows.common.allocator import retain_freed_memory
 from flows.common.batches import WriteBatch
@@ -44,6 +42,7 @@ from flows.common.config import load_plant_config
 from flows.common.errors import ValvemonError
 from flows.common.instants import utc_instant
 from flows.common.lake import list_partitions, read_lake
+from flows.common.prefect_run import flow, task
 from flows.common.warehouse_db import connect, ensure_tables, insert_frame, query_frame, transaction
 from model.area import edge_area
 from schemas.fields import BASELINE_FIELDS, EDGE_FIT_FIELDS, EDGES, SELECTION_FIELDS, polars_schema
@@ -566,7 +565,7 @@ def run_monitor(
     return [valve_runner(config, v, warehouse, t0, t1, chunk_days=chunk_days) for v in (valve_ids or known)]
 
 
-@task(name="monitor-valve", cache_policy=NO_CACHE, persist_result=False)
+@task(name="monitor-valve", persist_result=False)
 def monitor_valve_task(config: PlantConfig, valve_id: str, warehouse: Path, start: datetime | None, end: datetime | None) -> ValveReport:
     """One valve's steps 2–6 as a Prefect task."""
     return monitor_valve(config, valve_id, warehouse, start, end)

@@ -1,7 +1,10 @@
 """``valvemon backfill``: ingest + monitor over a span of years, in units, resumable (``docs/orchestration.md``).
 
-A backfill is cut into **units** that Prefect runs as tasks, at most ``concurrency`` in flight
-(on threads of this process, or on a Dask cluster: :mod:`flows.orchestration.dask_runner`):
+A backfill is cut into **units** that run as tasks, at most ``concurrency`` in flight: Prefect
+tasks on threads of this process or on a Dask cluster (:mod:`flows.orchestration.dask_runner`)
+when the backfill is a Prefect flow run; otherwise (no Prefect API configured) the same task
+functions, with the same retries, on a pool of threads of this process
+(:mod:`flows.common.prefect_run`):
 
 1. **ingest** — one unit per export file of ``--exports`` (files whose name carries a date
    outside the span are left out). The task reads and hashes the file; content the manifest
@@ -51,6 +54,7 @@ import queue
 import re
 import time
 import uuid
+from concurrent.futures import ThreadPoolExecutor
 from contextlib import AbstractContextManager, contextmanager
 from dataclasses import dataclass, field
 from datetime import date, datetime, timedelta, timezone
@@ -58,8 +62,6 @@ from pathlib import Path
 from typing import Any, Callable, Iterator
 
 import polars as pl
-from prefect import flow, task
-from prefect.cache_policies import NO_CACHE
 
 from flows.common.allocator import retain_freed_memory
 from flows.common.batches import WriteBatch
@@ -68,6 +70,7 @@ from flows.common.errors import ValvemonError
 from flows.common.instants import utc_instant
 from flows.common.lake import list_partitions
 from flows.common.locks import file_lock, partition_lock
+from flows.common.prefect_run import flow, in_flow_run, task
 from flows.common.warehouse_db import connect, ensure_ingest_tables, insert_frame, migrate_hash_column, query_frame
 from flows.ingest.flow import (
     LEGACY_HASH_PREFIX,
@@ -331,19 +334,19 @@ def baseline_rows(config: PlantConfig, valve_id: str, warehouse: str | Path, ver
 # --- Prefect tasks -----------------------------------------------------------------------------
 
 
-@task(name="backfill-ingest-file", cache_policy=NO_CACHE, persist_result=False, retries=RETRIES, retry_delay_seconds=list(RETRY_DELAY_S))
+@task(name="backfill-ingest-file", persist_result=False, retries=RETRIES, retry_delay_seconds=list(RETRY_DELAY_S))
 def ingest_export_task(path: str, config: PlantConfig, warehouse: str, known: KnownFiles, run_id: str) -> IngestOutcome:
     """One export file into the lake (:func:`ingest_export`)."""
     return ingest_export(path, config, warehouse, known, run_id)
 
 
-@task(name="backfill-baseline", cache_policy=NO_CACHE, persist_result=False, retries=RETRIES, retry_delay_seconds=list(RETRY_DELAY_S))
+@task(name="backfill-baseline", persist_result=False, retries=RETRIES, retry_delay_seconds=list(RETRY_DELAY_S))
 def baseline_task(config: PlantConfig, valve_id: str, warehouse: str, versions: dict[str, int]) -> pl.DataFrame:
     """One valve's new baseline rows (:func:`baseline_rows`)."""
     return baseline_rows(config, valve_id, warehouse, versions)
 
 
-@task(name="backfill-monitor-unit", cache_policy=NO_CACHE, persist_result=False, retries=RETRIES, retry_delay_seconds=list(RETRY_DELAY_S))
+@task(name="backfill-monitor-unit", persist_result=False, retries=RETRIES, retry_delay_seconds=list(RETRY_DELAY_S))
 def monitor_unit_task(config: PlantConfig, unit: MonitorUnit, baselines: dict[str, Baseline], warehouse: str) -> MonitorOutcome:
     """One valve × span of windows (:func:`monitor_unit`)."""
     return monitor_unit(config, unit, baselines, warehouse)
@@ -353,8 +356,12 @@ def monitor_unit_task(config: PlantConfig, unit: MonitorUnit, baselines: dict[st
 
 
 class Window:
-    """Submit Prefect tasks with at most ``limit`` in flight; completed ones are handed to
-    ``on_done(tag, result)`` / ``on_error(tag, exc)`` in the calling (flow) thread."""
+    """Submit tasks with at most ``limit`` in flight; completed ones are handed to
+    ``on_done(tag, result)`` / ``on_error(tag, exc)`` in the calling (flow) thread.
+
+    In a Prefect flow run a task is submitted to the flow's task runner; outside one (no Prefect
+    API configured, :mod:`flows.common.prefect_run`) it is called, with the task's retries, on a
+    pool of ``limit`` threads of this process."""
 
     def __init__(self, limit: int, on_done: Callable[[Any, Any], None], on_error: Callable[[Any, BaseException], None]):
         if limit < 1:
@@ -362,13 +369,18 @@ class Window:
         self.limit = limit
         self.on_done, self.on_error = on_done, on_error
         self._done: queue.Queue = queue.Queue()
+        self._pool: ThreadPoolExecutor | None = None
         self.in_flight = 0
         self.max_in_flight = 0
 
     def submit(self, tag: Any, task_, *args) -> None:
         while self.in_flight >= self.limit:
             self._take()
-        future = task_.submit(*args)
+        if in_flow_run():
+            future = task_.submit(*args)
+        else:
+            self._pool = self._pool or ThreadPoolExecutor(self.limit, thread_name_prefix="valvemon-unit")
+            future = self._pool.submit(task_, *args)
         self.in_flight += 1
         self.max_in_flight = max(self.max_in_flight, self.in_flight)
         future.add_done_callback(lambda f, tag=tag: self._done.put((tag, f)))
@@ -386,6 +398,9 @@ class Window:
     def drain(self) -> None:
         while self.in_flight:
             self._take()
+        if self._pool is not None:
+            self._pool.shutdown()
+            self._pool = None
 
 
 # --- the run ---------------------------------------------------------------------------------

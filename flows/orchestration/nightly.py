@@ -9,9 +9,11 @@
    ingested file that arrived late, one unit per valve and day (the backfill's machinery,
    :mod:`flows.orchestration.backfill`, so a failed night is simply continued by the next run);
 3. refreshes the report (:func:`flows.report.flow.report_flow`: views, snapshot, pictures, HTML);
+   with ``--no-report`` it only publishes the snapshot (:mod:`flows.report.publish`);
 4. applies the plant's ``[retention]``, if it has one (:func:`flows.retention.flow.retention_flow`,
    as of the day after the monitored one): after monitoring and the report, because a partition
    may go only once its windows are fitted and the report's standstill check has read it.
+   The snapshot is published again after retention, so its ``retention_log`` rows are queryable.
 
 :func:`serve_nightly` registers it as a deployment with a cron schedule on the Prefect server
 ``PREFECT_API_URL`` names and serves it: this process polls the server and runs each scheduled
@@ -107,6 +109,10 @@ def nightly_flow(
         result["report"] = str(refresh_report(config_path, warehouse))
     if config.retention is not None:
         result["retention"] = apply_retention(config_path, warehouse, d + timedelta(days=1))
+    if not report or config.retention is not None:  # the report published before retention; without it nothing did
+        from flows.report.publish import publish
+
+        publish(config, warehouse)
     if failure is not None:
         raise failure
     return result

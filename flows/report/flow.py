@@ -8,7 +8,8 @@
    :mod:`flows.report.standstill`; only windows from the latest one already checked onwards are read)
    and records how far it has read in ``standstill_progress`` (retention waits for it);
 3. creates or refreshes the ``sql/`` views (:mod:`flows.report.views`) and publishes the read-only
-   snapshot ``WAREHOUSE/snapshot/valvemon.duckdb`` that readers query;
+   snapshot ``WAREHOUSE/snapshot/valvemon.duckdb`` that readers query (:mod:`flows.report.publish`,
+   which every writing command ends with);
 4. reads the views from the snapshot and writes the BI hand-off (:mod:`flows.report.export`), the PNG
    pictures (:mod:`flows.report.figures`) and ``WAREHOUSE/reports/report.html``
    (:mod:`flows.report.html`), which also shows the latest ``valvemon discrepancy`` run of every
@@ -30,19 +31,20 @@ from pathlib import Path
 
 import numpy as np
 import polars as pl
-from prefect import flow
 
 from flows.common.config import load_plant_config
 from flows.common.errors import ValvemonError
+from flows.common.prefect_run import flow
 from flows.common.warehouse_db import connect, insert_frame, query_frame, transaction
 from flows.report.export import export_bi
 from flows.report.figures import characteristics_figure, fleet_figure, trends_figure
 from flows.report.html import render_report
-from flows.report.standstill import expected_residual, standstill_rows
-from flows.report.views import connect_snapshot, create_views, ensure_report_tables, publish_snapshot
+from flows.report.publish import publish
+from flows.report.standstill import standstill_rows
+from flows.report.views import connect_snapshot, ensure_report_tables
 from model.area import edge_area
-from schemas.fields import CONDITION_BOUNDS_FIELDS, EDGES, polars_schema
-from schemas.plant_config import BOUND_KEYS, PlantConfig
+from schemas.fields import EDGES
+from schemas.plant_config import PlantConfig
 
 REPORTS_DIR = "reports"
 REPORT_NAME = "report.html"
@@ -64,23 +66,6 @@ class ReportResult:
     views: list[str] = field(default_factory=list)
     standstill_rows: int = 0
     ranking: pl.DataFrame | None = None
-
-
-def bounds_frame(config: PlantConfig, now: datetime) -> pl.DataFrame:
-    """One ``condition_bounds`` row per configured valve."""
-    cache: dict[tuple, float] = {}
-    rows = []
-    for v in config.valves:
-        b = v.design.bounds
-        row = {k: getattr(b, k) for k in BOUND_KEYS}
-        if row["eq9_expected"] is None:
-            key = (v.design, v.piston_diameter_m, v.rod_diameter_m)
-            if key not in cache:
-                cache[key] = expected_residual(v, config.export)
-            row["eq9_expected"] = cache[key]
-        row |= {"valve_id": v.id, "valve_type": v.type, "x_max_mm": v.design.x_max_m * 1e3, "updated_at": now}
-        rows.append(row)
-    return pl.DataFrame(rows, schema=polars_schema(CONDITION_BOUNDS_FIELDS))
 
 
 def update_standstill(config: PlantConfig, warehouse: Path, now: datetime) -> int:
@@ -114,20 +99,6 @@ def mark_standstill_progress(con, valve_id: str, checked_through: datetime, now:
         "INSERT INTO standstill_progress SELECT ?, ?, ? WHERE NOT EXISTS (SELECT 1 FROM standstill_progress WHERE valve_id = ?)",
         [valve_id, checked_through, now, valve_id],
     )
-
-
-def refresh(config: PlantConfig, warehouse: Path, now: datetime) -> tuple[list[str], Path]:
-    """Bounds table, views and the published snapshot, in one short write connection."""
-    bounds = bounds_frame(config, now)
-    with connect(warehouse) as con:
-        ensure_report_tables(con)
-        with transaction(con):
-            con.execute("DELETE FROM condition_bounds")
-            insert_frame(con, "condition_bounds", bounds)
-        views = create_views(con)
-        con.execute("CHECKPOINT")
-        snapshot = publish_snapshot(con, warehouse)
-    return views, snapshot
 
 
 def _edge_curves(config: PlantConfig, valve_id: str, baselines: pl.DataFrame, latest: dict[str, dict]) -> dict[str, dict]:
@@ -197,7 +168,7 @@ def run_report(config_path: str | Path, warehouse: str | Path, *, detail: int = 
         raise ValvemonError(f"{config_path}: no valve {unknown[0]!r} in plant {config.name!r}")
     now = datetime.now(timezone.utc).replace(microsecond=0)
     n_standstill = update_standstill(config, warehouse, now)
-    views, snapshot = refresh(config, warehouse, now)
+    views, snapshot = publish(config, warehouse, now)
     out_dir = warehouse / REPORTS_DIR
     out_dir.mkdir(parents=True, exist_ok=True)
     con = connect_snapshot(warehouse)

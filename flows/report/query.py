@@ -1,6 +1,6 @@
 """``valvemon query``: an ad-hoc SQL query against the warehouse, printed or written to a file.
 
-Reads the read-only snapshot the last ``valvemon report`` published (``--live``: the live
+Reads the read-only snapshot the last writing command published (``--live``: the live
 database, read-only), so a query never waits for the nightly writer and never holds it up
 (:mod:`flows.report.views`). Output: a rich table (default), CSV, JSON (an array of objects, times as
 ISO-8601 UTC) or Parquet (``--out`` required).

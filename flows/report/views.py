@@ -13,11 +13,11 @@ Readers and the writer
 ----------------------
 DuckDB lets one process hold a database file read-write, and then no other process may open it
 at all (not even read-only); a read-only connection in turn keeps every writer out. So readers
-never touch the live ``valvemon.duckdb``: every ``valvemon report`` ends by publishing a
-consistent copy, ``WAREHOUSE/snapshot/valvemon.duckdb`` (:func:`publish_snapshot`): the
-writer, inside its own short-lived read-write connection, copies the whole database into a
-temporary file with ``COPY FROM DATABASE`` (one transaction, so the copy is consistent), closes
-it, then ``os.replace``-s it over the snapshot. Readers (``valvemon query``, the DuckDB CLI with
+never touch the live ``valvemon.duckdb``: every writing command ends by publishing a
+consistent copy, ``WAREHOUSE/snapshot/valvemon.duckdb`` (:func:`publish_snapshot`, called by
+:func:`flows.report.publish.publish`): the writer, inside its own short-lived read-write
+connection, checkpoints the database and copies the file's bytes into a temporary file (nothing
+writes meanwhile: the connection holds the write lock), then ``os.replace``-s it over the snapshot. Readers (``valvemon query``, the DuckDB CLI with
 ``-readonly``, BI tools) open the snapshot read-only (:func:`connect_snapshot`): a reader that
 has the old file open keeps reading the old file (the rename does not touch it), the next one
 gets the new file, and the writer never waits for a reader nor a reader for the writer.
@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import os
 import re
+import shutil
 import time
 import uuid
 from dataclasses import dataclass
@@ -149,25 +150,30 @@ def snapshot_path(warehouse: str | Path) -> Path:
 def publish_snapshot(con: duckdb.DuckDBPyConnection, warehouse: str | Path) -> Path:
     """Copy the database of the open read-write connection ``con`` to the snapshot, atomically.
 
-    The copy is made by DuckDB in one transaction (tables with their rows, then the views), into
-    a hidden temporary file beside the snapshot, which then replaces the snapshot by
-    ``os.replace``; a reader holding the previous snapshot keeps reading it undisturbed.
+    ``con`` holds the database's write lock, so no other process writes it meanwhile (and the
+    commands publish after their own work, so nothing in this process does either). A
+    ``CHECKPOINT`` moves everything committed into the database file, leaving the write-ahead
+    log empty; the file's bytes are then copied into a hidden temporary file beside the snapshot,
+    which is checked to open and then replaces the snapshot by ``os.replace``; a reader holding
+    the previous snapshot keeps reading it undisturbed. A byte copy costs a fraction of DuckDB's
+    ``COPY FROM DATABASE``, which re-encodes every row (``docs/warehouse.md``, "Readers and the writer").
     """
     target = snapshot_path(warehouse)
     target.parent.mkdir(parents=True, exist_ok=True)
     for stale in target.parent.glob(f".{DB_NAME}.*.tmp*"):
         stale.unlink(missing_ok=True)
     tmp = target.parent / f".{DB_NAME}.{uuid.uuid4().hex}.tmp"
-    alias = f"snap_{uuid.uuid4().hex[:8]}"
-    main = con.execute("SELECT current_database()").fetchall()[0][0]
+    source = con.execute("SELECT path FROM duckdb_databases() WHERE database_name = current_database()").fetchall()[0][0]
     try:
-        con.execute(f"ATTACH '{tmp}' AS {alias}")
-        try:
-            con.execute(f"COPY FROM DATABASE {main} TO {alias}")
-        finally:
-            con.execute(f"DETACH {alias}")
+        con.execute("CHECKPOINT")
+        shutil.copyfile(source, tmp)
         with open(tmp, "rb+") as fh:
             os.fsync(fh.fileno())
+        check = duckdb.connect(str(tmp), read_only=True)
+        try:
+            check.execute("SELECT count(*) FROM duckdb_tables()").fetchall()
+        finally:
+            check.close()
         os.replace(tmp, target)
         fd = os.open(target.parent, os.O_RDONLY)
         try:
@@ -190,7 +196,7 @@ def connect_snapshot(warehouse: str | Path, *, live: bool = False, wait_s: float
     """
     path = db_path(warehouse) if live else snapshot_path(warehouse)
     if not path.exists():
-        hint = "" if live else " (`valvemon report` publishes it; --live reads the live database)"
+        hint = "" if live else " (every writing command publishes it: ingest, monitor, backfill, report; --live reads the live database)"
         raise ValvemonError(f"{path}: no such database{hint}")
     deadline = time.monotonic() + wait_s
     delay = 0.05

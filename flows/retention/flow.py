@@ -33,25 +33,25 @@ from pathlib import Path
 
 import numpy as np
 import polars as pl
-from prefect import flow
 
 from flows.common.config import load_plant_config
 from flows.common.errors import ValvemonError
 from flows.common.lake import (
     PART_NAME,
-    dropped_folders,
     drop_partition,
+    dropped_folders,
     iter_file_batches,
     partition_bytes,
     partition_files,
     partition_folders,
     partition_rows,
     remove_dropped,
-    row_group_spans,
     remove_partition_file,
+    row_group_spans,
     write_partition_pieces,
 )
 from flows.common.locks import file_lock, partition_lock
+from flows.common.prefect_run import flow
 from flows.common.warehouse_db import connect, db_path, ensure_tables, insert_frame, query_frame
 from schemas.fields import RETENTION_LOG_FIELDS, polars_schema
 from schemas.plant_config import PlantConfig, RetentionSpec

@@ -1,5 +1,5 @@
 """``valvemon discrepancy`` end to end: a warehouse whose lake holds a valve with a hidden effect,
-the Prefect flow, the warehouse tables and the overlay pictures; the command line's checks."""
+the flow (its function, as a command runs it without a Prefect API), the warehouse tables and the overlay pictures; the command line's checks."""
 
 from datetime import datetime, timedelta, timezone
 from pathlib import Path
@@ -54,14 +54,14 @@ def test_plant_model_from_the_configuration():
     assert plant.sensors.sample_rate_hz == cfg.export.sample_rate_hz
 
 
-def test_flow_names_the_hidden_effect_and_stores_everything(tmp_path, prefect_server):
+def test_flow_names_the_hidden_effect_and_stores_everything(tmp_path):
     warehouse = tmp_path / "wh"
     # commissioning: 3 clean hourly windows; afterwards 3 windows with a leaking rod seal
     clean = simulate_lake(None, n_windows=3, seed=60, valve_id=VALVE, start=START)
     leak = simulate_lake(Effects(external_leakage_m3_s_pa=1e-12), n_windows=3, seed=61, valve_id=VALVE, start=START + timedelta(hours=6))
     _write_lake(warehouse, pl.concat([clean, leak]))
     config = _config(tmp_path, baseline_window=True)
-    report = discrepancy_flow(str(config), str(warehouse), VALVE, start=(START + timedelta(hours=5)).isoformat())
+    report = discrepancy_flow.fn(str(config), str(warehouse), VALVE, start=(START + timedelta(hours=5)).isoformat())
     assert report.condition_source == "commissioning" and report.n_records == 3
     assert [f["effect"] for f in report.findings] == ["external_leakage"]
     f = report.findings[0]
@@ -81,10 +81,10 @@ def test_flow_names_the_hidden_effect_and_stores_everything(tmp_path, prefect_se
         assert src == [("commissioning",)]
 
 
-def test_flow_without_effect_writes_none(tmp_path, prefect_server):
+def test_flow_without_effect_writes_none(tmp_path):
     warehouse = tmp_path / "wh"
     _write_lake(warehouse, simulate_lake(None, n_windows=2, seed=62, valve_id=VALVE, start=START))
-    report = discrepancy_flow(str(_config(tmp_path, False)), str(warehouse), VALVE)
+    report = discrepancy_flow.fn(str(_config(tmp_path, False)), str(warehouse), VALVE)
     assert report.condition_source == "design"
     assert [f["effect"] for f in report.findings] == ["none"]
     f = report.findings[0]

@@ -1,7 +1,7 @@
 """``valvemon ingest``: exit status, the summary on stdout, one line on stderr; the Prefect flow.
 
-Most tests replace the Prefect flow by the plain run it wraps (same code path, no server);
-two run the real flow on the session's Prefect test server.
+Without a Prefect API the command runs the flow's function directly (no server); two tests run
+the real flow on the session's Prefect test server.
 """
 
 from __future__ import annotations
@@ -11,19 +11,10 @@ import gzip
 import pytest
 from polars.testing import assert_frame_equal
 
-import flows.ingest.flow
 from tests.ingest.conftest import DATA, base_lake, lake, run_cli, table
 
 
-@pytest.fixture
-def no_prefect(monkeypatch):
-    def plain(config_path, paths, warehouse, force=False, show_progress=False):
-        return flows.ingest.flow.run_ingest(config_path, paths, warehouse, force=force, show_progress=show_progress).counts()
-
-    monkeypatch.setattr(flows.ingest.flow, "ingest_flow", plain)
-
-
-def test_success_prints_the_counts(plant, tmp_path, monkeypatch, capsys, no_prefect):
+def test_success_prints_the_counts(plant, tmp_path, monkeypatch, capsys):
     cfg, _ = plant()
     wh = tmp_path / "wh"
     code, out, err = run_cli(["ingest", "--config", str(cfg), "--warehouse", str(wh), str(DATA / "duplicates.csv")], monkeypatch, capsys)
@@ -36,7 +27,7 @@ def test_success_prints_the_counts(plant, tmp_path, monkeypatch, capsys, no_pref
     assert code == 0 and "(1 already ingested, skipped)" in out
 
 
-def test_warehouse_from_the_environment(plant, tmp_path, monkeypatch, capsys, no_prefect):
+def test_warehouse_from_the_environment(plant, tmp_path, monkeypatch, capsys):
     cfg, _ = plant()
     monkeypatch.setenv("VALVEMON_WAREHOUSE", str(tmp_path / "envwh"))
     code, _, _ = run_cli(["ingest", "--config", str(cfg), str(DATA / "base_long.csv")], monkeypatch, capsys)
@@ -56,7 +47,7 @@ def test_warehouse_from_the_environment(plant, tmp_path, monkeypatch, capsys, no
         (lambda d: DATA / "dst_spring.csv", "line 8: tag MILL1.V017.PS: local time 2025-03-30 02:30:00 does not exist"),
     ],
 )
-def test_errors_are_one_line_with_exit_status_1(plant, tmp_path, monkeypatch, capsys, no_prefect, make, expected):
+def test_errors_are_one_line_with_exit_status_1(plant, tmp_path, monkeypatch, capsys, make, expected):
     cfg, _ = plant()
     path = make(tmp_path)
     code, out, err = run_cli(["ingest", "--config", str(cfg), "--warehouse", str(tmp_path / "wh"), str(path)], monkeypatch, capsys)
@@ -65,7 +56,7 @@ def test_errors_are_one_line_with_exit_status_1(plant, tmp_path, monkeypatch, ca
     assert expected in err
 
 
-def test_configuration_error_is_one_line(tmp_path, monkeypatch, capsys, no_prefect):
+def test_configuration_error_is_one_line(tmp_path, monkeypatch, capsys):
     bad = tmp_path / "plant.toml"
     bad.write_text("[plant]\nname = 'X'\n")
     code, _, err = run_cli(["ingest", "--config", str(bad), str(DATA / "base_long.csv")], monkeypatch, capsys)

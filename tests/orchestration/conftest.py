@@ -80,13 +80,13 @@ def archive(tmp_path_factory) -> Path:
 
 
 @pytest.fixture(scope="session")
-def clean(prefect_server, archive, tmp_path_factory):
-    """One clean backfill of the archive (one-day units, two threads); returns (warehouse, summary)."""
+def clean(archive, tmp_path_factory):
+    """One clean backfill of the archive (one-day units, two threads, as a command runs it without
+    a Prefect API: the flow's function); returns (warehouse, summary)."""
     from flows.orchestration.backfill import backfill_flow
-    from flows.orchestration.dask_runner import task_runner
 
     wh = tmp_path_factory.mktemp("orch_clean") / "wh"
-    summary = backfill_flow.with_options(task_runner=task_runner(2))(
+    summary = backfill_flow.fn(
         config_path=str(archive / "plant.toml"), warehouse=str(wh), start=START, end=END,
         exports=str(archive / "exports"), concurrency=2, unit_days=1,
     )  # fmt: skip

@@ -27,8 +27,11 @@ from tests.orchestration.conftest import END, START, assert_same, copy_warehouse
 UTC = timezone.utc
 
 
-def run(archive: Path, wh: Path, *, concurrency: int = 2, threads: int | None = None, **kw):
-    return backfill_flow.with_options(task_runner=task_runner(threads or concurrency))(
+def run(archive: Path, wh: Path, *, concurrency: int = 2, threads: int | None = None, prefect: bool = False, **kw):
+    """The backfill as a command runs it without a Prefect API (the flow's function, units on a
+    thread pool), or with ``prefect`` as a Prefect flow run on a runner of ``threads`` threads."""
+    flow_ = backfill_flow.with_options(task_runner=task_runner(threads or concurrency)) if prefect else backfill_flow.fn
+    return flow_(
         config_path=str(archive / "plant.toml"), warehouse=str(wh), start=kw.pop("start", START), end=kw.pop("end", END),
         exports=str(archive / "exports"), concurrency=concurrency, unit_days=kw.pop("unit_days", 1), **kw,
     )  # fmt: skip
@@ -165,7 +168,11 @@ def test_a_stopped_backfill_is_continued_by_the_same_command(clean, archive, tmp
                 snapshot(clean[0], volatile=False, tables=("edge_fits", "selection_stats", "baselines", "ingest_manifest", "quarantine", "ingest_gaps")))  # fmt: skip
 
 
-def test_retries_absorb_a_transient_failure(archive, tmp_path, monkeypatch, prefect_server):
+@pytest.mark.parametrize("prefect", [False, True], ids=["plain", "prefect"])
+def test_retries_absorb_a_transient_failure(archive, tmp_path, monkeypatch, request, prefect):
+    """Each unit fails once and is retried: Prefect's task retries in a flow run, the same policy on the thread pool."""
+    if prefect:
+        request.getfixturevalue("prefect_server")
     real = bf.monitor_unit
     failed_once: set = set()
 
@@ -177,8 +184,15 @@ def test_retries_absorb_a_transient_failure(archive, tmp_path, monkeypatch, pref
 
     monkeypatch.setattr(bf, "monitor_unit", once)
     monkeypatch.setattr(bf, "RETRY_DELAY_S", (0.0, 0.0))
-    s = run(archive, tmp_path / "wh", retries=1)
+    s = run(archive, tmp_path / "wh", retries=1, prefect=prefect)
     assert s.units_done == 6 and s.units_failed == 0 and len(failed_once) == 6
+
+    def always(*a, **k):
+        raise OSError("always")
+
+    monkeypatch.setattr(bf, "monitor_unit", always)  # failing after its retry too: reported, the run fails
+    with pytest.raises(BackfillFailed, match=r"6 backfill units failed \(first: monitor V00\d/.*: always\)"):
+        run(archive, tmp_path / "wh", retries=1, prefect=prefect, force=True)
 
 
 def test_concurrency_is_bounded(archive, tmp_path, monkeypatch, prefect_server):
@@ -202,12 +216,12 @@ def test_concurrency_is_bounded(archive, tmp_path, monkeypatch, prefect_server):
 
     monkeypatch.setattr(bf, "ingest_export", tracked("ingest", bf.ingest_export))
     monkeypatch.setattr(bf, "monitor_unit", tracked("monitor", bf.monitor_unit))
-    s = run(archive, tmp_path / "wh", concurrency=2, threads=6)
+    s = run(archive, tmp_path / "wh", concurrency=2, threads=6, prefect=True)
     assert s.units_done == 6 and s.max_in_flight == 2
     assert peak == {"ingest": 2, "monitor": 2}
 
 
-def test_partitions_shared_by_two_files_are_merged_under_a_lock(archive, tmp_path, prefect_server):
+def test_partitions_shared_by_two_files_are_merged_under_a_lock(archive, tmp_path):
     """One day split into six files ingested six at a time: the lake is the one of the whole file."""
     exports = tmp_path / "exports"
     exports.mkdir()
@@ -220,7 +234,7 @@ def test_partitions_shared_by_two_files_are_merged_under_a_lock(archive, tmp_pat
         part = day.filter(pl.col(ts) >= cuts[i]) if cuts[i + 1] is None else day.filter((pl.col(ts) >= cuts[i]) & (pl.col(ts) < cuts[i + 1]))
         part.write_parquet(exports / f"part{i}.parquet")
     wh, ref = tmp_path / "wh", tmp_path / "ref"
-    backfill_flow.with_options(task_runner=task_runner(n))(
+    backfill_flow.fn(
         config_path=str(archive / "plant.toml"), warehouse=str(wh), start="2025-01-01", end="2025-01-02",
         exports=str(exports), concurrency=n, unit_days=1,
     )  # fmt: skip
@@ -231,12 +245,10 @@ def test_partitions_shared_by_two_files_are_merged_under_a_lock(archive, tmp_pat
     assert len(list((wh / "lake").rglob("part-0.parquet"))) == 2
 
 
-def test_killed_process_is_continued(clean, archive, tmp_path, prefect_server):
+def test_killed_process_is_continued(clean, archive, tmp_path):
     """SIGKILL of `valvemon backfill` mid-run (after some units are recorded); the rerun completes it."""
-    from prefect.settings import PREFECT_API_URL
-
     wh = tmp_path / "wh"
-    env = dict(os.environ, PREFECT_API_URL=PREFECT_API_URL.value(), VALVEMON_WAREHOUSE=str(wh))
+    env = {k: v for k, v in os.environ.items() if not k.startswith("PREFECT_API")} | {"VALVEMON_WAREHOUSE": str(wh)}
     cmd = [sys.executable, "-c", "from flows.cli import main; main()", "backfill", "--config", str(archive / "plant.toml"),
            "--exports", str(archive / "exports"), "--from", START, "--to", END, "--unit-days", str(1 / 24), "--concurrency", "1", "--quiet"]  # fmt: skip
     proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)

@@ -1,28 +1,22 @@
 """``valvemon retention``: the summary, --dry-run, --list, retention off, one-line errors.
 
-The Prefect flow is replaced by the function it wraps (same code path, no server)."""
+Without a Prefect API the command runs the flow's function (flows.common.prefect_run), no server."""
 
 from __future__ import annotations
 
 import pytest
 
-import flows.retention.flow as fr
 from flows.common.lake import partition_folders
 from tests.ingest.conftest import run_cli
 from tests.retention.conftest import write_config
 from schemas.plant_config import RetentionSpec
 
 
-@pytest.fixture
-def no_prefect(monkeypatch):
-    monkeypatch.setattr(fr, "retention_flow", fr.retention_flow.fn)
-
-
 def _cli(args, wh, cfg, monkeypatch, capsys):
     return run_cli(["retention", "--config", str(cfg), "--warehouse", str(wh), *args], monkeypatch, capsys)
 
 
-def test_dry_run_prints_the_summary_and_changes_nothing(base, wh, tmp_path, monkeypatch, capsys, no_prefect):
+def test_dry_run_prints_the_summary_and_changes_nothing(base, wh, tmp_path, monkeypatch, capsys):
     cfg = write_config(base[1] / "plant.toml", tmp_path / "plant.toml", RetentionSpec(keep_days=3, mode="drop"))
     parts = partition_folders(wh)
     code, out, err = _cli(["--dry-run", "--as-of", "2025-01-07", "--list"], wh, cfg, monkeypatch, capsys)
@@ -39,7 +33,7 @@ def test_dry_run_prints_the_summary_and_changes_nothing(base, wh, tmp_path, monk
     assert code == 0 and out.splitlines()[-1].startswith("freed ") and len(partition_folders(wh)) == 3
 
 
-def test_retention_off_deletes_nothing(base, wh, tmp_path, monkeypatch, capsys, no_prefect):
+def test_retention_off_deletes_nothing(base, wh, tmp_path, monkeypatch, capsys):
     cfg = write_config(base[1] / "plant.toml", tmp_path / "plant.toml", None)
     code, out, _ = _cli(["--as-of", "2030-01-01"], wh, cfg, monkeypatch, capsys)
     assert code == 0 and "no [retention] table: retention is off, nothing is deleted" in out
@@ -53,7 +47,7 @@ def test_retention_off_deletes_nothing(base, wh, tmp_path, monkeypatch, capsys, 
         (["--valves", "V009"], "valvemon: error: --valves: no valve 'V009' in plant"),
     ],
 )
-def test_errors_are_one_line(base, wh, tmp_path, monkeypatch, capsys, no_prefect, args, message):
+def test_errors_are_one_line(base, wh, tmp_path, monkeypatch, capsys, args, message):
     cfg = write_config(base[1] / "plant.toml", tmp_path / "plant.toml", RetentionSpec(keep_days=3))
     code, out, err = _cli(args, wh, cfg, monkeypatch, capsys)
     assert code == 1 and err.startswith(message) and len(err.strip().splitlines()) == 1
