@@ -2,7 +2,9 @@
 effect explains it, what adding it does to the gap and to the monitoring (issue 7).
 
 :func:`run_discrepancy` reads the valve's lake rows in [start, end), cuts them into records
-(:func:`transforms.discrepancy.records.split_records`), builds the plant model from the plant
+(:func:`flows.discrepancy.lake_records.lake_records`: the records are chosen from the time stamps,
+read in chunks, then only their rows are read; on a continuous recording no record straddles a
+monitoring window of the configuration's ``[monitor] window_s``, ``DiscrepancySettings.window_s``), builds the plant model from the plant
 configuration (:func:`plant_params_for`) with the valve's condition -- fitted on its commissioning
 window (the configuration's ``baseline_window``) when there is one, else its design data
 (:func:`valve_condition`) --, runs :func:`transforms.discrepancy.pipeline.diagnose` and stores, in one
@@ -33,9 +35,9 @@ import polars as pl
 from flows.common.config import load_plant_config
 from flows.common.errors import ValvemonError
 from flows.common.instants import utc_instant
-from flows.common.lake import read_lake
 from flows.common.prefect_run import flow, task
 from flows.common.warehouse_db import connect, ensure_tables, insert_frame, transaction
+from flows.discrepancy.lake_records import lake_records
 from model.params import PlantParams, ValveCondition
 from schemas.fields import (
     DISCREPANCY_CANDIDATE_FIELDS,
@@ -48,7 +50,6 @@ from schemas.fields import (
 )
 from schemas.plant_config import ValveSpec
 from transforms.discrepancy.pipeline import ConditionFit, Diagnosis, diagnose, fit_condition
-from transforms.discrepancy.records import split_records
 from transforms.discrepancy.settings import DiscrepancySettings
 
 DISCREPANCY_TABLES = {
@@ -135,8 +136,7 @@ def valve_condition(valve: ValveSpec, plant: PlantParams, warehouse: Path, mode:
     if valve.baseline_window is None:
         raise ValvemonError(f"valve {valve.id}: --valve-condition commissioning needs a baseline_window in the plant configuration")
     a, b = valve.baseline_window
-    rows = read_lake(warehouse, [valve.id], a, b).collect()
-    records = split_records(rows, replace(settings, max_records=max(settings.max_records, 12)))
+    records, _ = lake_records(warehouse, valve.id, a, b, replace(settings, max_records=max(settings.max_records, 12)))
     if not records:
         raise ValvemonError(f"valve {valve.id}: its baseline_window {a.isoformat()} – {b.isoformat()} holds no record of at least {settings.min_record_s:g} s in the lake")
     fit = fit_condition(records, plant, plant.nominal_condition, settings)
@@ -252,12 +252,12 @@ def discrepancy_valve(config, valve_id: str, warehouse: Path, start: datetime | 
     valve = config.valve(valve_id)
     fs = config.export.sample_rate_hz
     settings = replace(settings, sample_period_s=1.0 / fs) if settings.sample_period_s is None else settings
+    settings = replace(settings, window_s=config.monitor.window_s) if settings.window_s is None else settings
     run_at = datetime.now(timezone.utc)
     run_id = uuid.uuid4().hex
-    lake = read_lake(warehouse, [valve.id], start, end).collect()
-    if lake.height == 0:
+    records, n_rows = lake_records(warehouse, valve.id, start, end, settings)
+    if n_rows == 0:
         raise ValvemonError(f"valve {valve.id}: no lake data in the span; ingest its exports first")
-    records = split_records(lake, settings)
     if not records:
         raise ValvemonError(f"valve {valve.id}: no contiguous record of at least {settings.min_record_s:g} s in the span")
     plant = plant_params_for(valve, config.export)

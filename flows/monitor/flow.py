@@ -282,7 +282,7 @@ def lake_chunks(
     ``columns``: read only these (``timestamp_utc`` always; ``valve_id`` is then filled in
     rather than decoded from the files)."""
     if start is None and end is None:
-        yield from _gap_chunks(warehouse, valve_id, gap_s, None, None, days, columns, window_s)
+        yield from span_chunks(warehouse, valve_id, gap_s, None, None, days, columns, window_s)
         return
     length = timedelta(seconds=window_s) if window_s is not None else None
     back = timedelta(seconds=2 * gap_s) + (length * LONG_RUN_FRACTION if length else timedelta(0))
@@ -295,7 +295,7 @@ def lake_chunks(
         read_hi = _run_end(warehouse, valve_id, gap_s, end)
     lo_us = None if start is None else int((start - _EPOCH) / timedelta(microseconds=1))
     hi_us = None if end is None else int((end - _EPOCH) / timedelta(microseconds=1))
-    for rows in _gap_chunks(warehouse, valve_id, gap_s, read_lo, read_hi, days, columns, window_s):
+    for rows in span_chunks(warehouse, valve_id, gap_s, read_lo, read_hi, days, columns, window_s):
         # the windows starting in [start, end) are one contiguous slice of the time-sorted rows
         if rows.height == 0:
             continue
@@ -375,7 +375,7 @@ def _day_extent(warehouse: Path, valve_id: str, day: date) -> tuple[datetime, da
 def _read_spans(
     warehouse: Path, valve_id: str, start: datetime | None, end: datetime | None, days: int, window_s: float | None,
 ) -> Iterator[tuple[datetime, datetime]]:
-    """The [lo, hi) spans :func:`_gap_chunks` reads one at a time: whole days, up to ``days`` of
+    """The [lo, hi) spans :func:`span_chunks` reads one at a time: whole days, up to ``days`` of
     them holding at most :data:`CHUNK_ROWS` rows together (counted from the files' metadata); a
     day holding more in spans of :data:`CHUNK_SPAN_S` (whole windows of ``window_s``) over its
     first to its last sample."""
@@ -412,11 +412,12 @@ def _read_spans(
     yield from flush()
 
 
-def _gap_chunks(
+def span_chunks(
     warehouse: Path, valve_id: str, gap_s: float, start: datetime | None, end: datetime | None, days: int | None,
     columns: tuple[str, ...] | None, window_s: float | None = None,
 ) -> Iterator[pl.DataFrame]:
-    """:func:`lake_chunks` for rows in [start, end) (windows cut at the bounds)."""
+    """:func:`lake_chunks` for rows in [start, end) (windows cut at the bounds): the rows
+    ``read_lake(warehouse, [valve_id], start, end)`` holds, in chunks of whole windows."""
     select = None
     if columns is not None:
         names = list(dict.fromkeys(["timestamp_utc", *columns]))

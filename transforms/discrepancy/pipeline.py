@@ -647,7 +647,7 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
             measured={"p1": p.rec.raw["p1"], "p2": p.rec.raw["p2"], "X": p.rec.raw["X"]},
             replayed={f"stage{k}_{s}": kept_all[k][i][s] for k in range(len(stage_effects)) for s in ("p1", "p2", "X")},
         ))
-    mon = monitoring_bias([p.rec for p in prepared], plant, condition, stage_effects[-1]) if monitoring else []
+    mon = monitoring_bias([p.rec for p in prepared], plant, condition, stage_effects[-1], settings.window_s) if monitoring else []
     return Diagnosis(
         n_records=len(prepared), records=[(p.rec.start_us, p.rec.end_us) for p in prepared], named=named,
         candidates=candidates, gap_rows=gap_rows, residual_rows=residual_rows, stage_effects=stage_effects,
@@ -768,7 +768,7 @@ def valve_flows_for(x, p1, p2, ps, pr, plant, condition, effects):
 MONITORING_SUMMARY_COLUMNS = ("edge", "n_windows", "alpha_hat_recorded", "alpha_hat_corrected", "x_hat_m_recorded", "x_hat_m_corrected", "e_m2_recorded", "e_m2_corrected")
 
 
-def monitoring_bias(records: list[Record], plant: PlantParams, condition: ValveCondition | None, effects: Effects) -> list[dict]:
+def monitoring_bias(records: list[Record], plant: PlantParams, condition: ValveCondition | None, effects: Effects, window_s: float | None = None) -> list[dict]:
     """Step 4: the monitoring (steps 2–4b, ``transforms.monitor``) on the records as recorded and
     with ``effects`` accounted for, against the nominal baseline of ``condition``.
 
@@ -776,7 +776,9 @@ def monitoring_bias(records: list[Record], plant: PlantParams, condition: ValveC
     monitoring runs (exact); leakage and entrained air are added to the chamber flow of each Eq. 7
     point and a supply line replaces p_s by the pressure at the valve (exact for the points
     step 3 selects); friction and mass changes do not enter Eq. 7, so they leave the estimates
-    unbiased. Returns one dict per edge: the median over windows (status ``ok``) of α̂, x̂ and e,
+    unbiased. The windows are the monitor's with length ``window_s`` (``[monitor] window_s``;
+    None: whole runs), so back-to-back records of one clock window are monitored as the
+    monitor does. Returns one dict per edge: the median over windows (status ``ok``) of α̂, x̂ and e,
     as recorded and corrected (:data:`MONITORING_SUMMARY_COLUMNS`)."""
     from transforms.fit import fit_windows
     from transforms.monitor import monitor, monitor_points
@@ -785,7 +787,7 @@ def monitoring_bias(records: list[Record], plant: PlantParams, condition: ValveC
     if not records:
         return []
     vid = records[0].valve_id
-    mp = monitor_params_for(plant, condition, records[0].dt)
+    mp = replace(monitor_params_for(plant, condition, records[0].dt), window_s=window_s)
     base = {vid: nominal_baselines(plant, condition, mp.x_hat_bound_m)}
     recorded = monitor(_lake_frame(records), mp, base).fits
     sensor = any(getattr(effects, a) != getattr(Effects(), a) for a in SENSOR_ATTRIBUTES)

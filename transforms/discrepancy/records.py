@@ -2,9 +2,15 @@
 with Savitzky–Golay smoothed values and derivatives, and the operating regions of each sample.
 
 A *record* is a window of the monitoring (a contiguous run of samples, no step longer than the
-gap limit), cut into pieces of at most ``max_record_s``. Savitzky–Golay values use the weights
-of :func:`transforms.derivatives.savgol_weights` (the monitoring's filter); they are NaN within
-half a stencil of a record's ends.
+gap limit; with a window length ``settings.window_s``, a long run -- a continuous recording -- is cut by
+the clock as :func:`transforms.windows.window_starts` cuts it, a snapshot is one window), cut into
+pieces of at most ``max_record_s``. So a record never straddles a monitoring window's edge.
+Savitzky–Golay values use the weights of :func:`transforms.derivatives.savgol_weights` (the
+monitoring's filter); they are NaN within half a stencil of a record's ends.
+
+Which records a span holds is decided from its time stamps alone (:func:`record_pieces`,
+:func:`pick_evenly`), so a reader can choose them from the time column read in chunks of whole
+windows and then read only the chosen records' rows (``flows.discrepancy.lake_records``).
 """
 
 from __future__ import annotations
@@ -16,12 +22,16 @@ import polars as pl
 
 from transforms.derivatives import savgol_weights
 from transforms.discrepancy.settings import DiscrepancySettings
+from transforms.windows import window_starts
 
 __all__ = [
     "REGIONS",
     "Record",
     "operating_regions",
+    "pick_evenly",
     "prepare_record",
+    "record_from_rows",
+    "record_pieces",
     "savgol",
     "split_records",
 ]
@@ -76,28 +86,18 @@ class Record:
         return np.arange(self.n) * self.dt
 
 
-def split_records(lake_one_valve: pl.DataFrame, settings: DiscrepancySettings) -> list[Record]:
-    """Contiguous records of one valve's lake rows (sorted by time), at most
-    ``settings.max_records`` of them, evenly spaced over the rows when there are more."""
-    if lake_one_valve.height == 0:
+def record_pieces(ts_us: np.ndarray, dt: float, settings: DiscrepancySettings) -> list[tuple[int, int]]:
+    """Index ranges ``[a, b)`` of the records in one valve's sorted time stamps (µs since the
+    epoch, int64), in time order: the windows of :func:`transforms.windows.window_starts` (gap
+    limit ``gap_limit_periods`` · ``dt`` [s], length ``settings.window_s``, None: whole runs) cut
+    from their first sample into pieces of ``max_record_s``; pieces shorter than
+    ``min_record_s`` are left out. A window's pieces depend on its own time stamps only, so the
+    pieces of a run of whole windows are those the whole array gives there."""
+    ts_us = np.asarray(ts_us, dtype=np.int64)
+    if ts_us.size == 0:
         return []
-    frame = lake_one_valve.sort("timestamp_utc")
-    valve_ids = frame["valve_id"].unique().to_list()
-    if len(valve_ids) != 1:
-        raise ValueError(f"split_records needs the rows of one valve, got {valve_ids}")
-    ts = frame["timestamp_utc"].cast(pl.Datetime("us", "UTC")).to_physical().to_numpy().astype(np.int64)
-    steps = np.diff(ts)
-    if settings.sample_period_s is not None:
-        dt = float(settings.sample_period_s)
-    else:
-        pos = steps[steps > 0]
-        if pos.size == 0:
-            return []
-        dt = float(np.median(pos)) * 1e-6
-    cuts = np.flatnonzero(steps > settings.gap_limit_periods * dt * 1e6) + 1
-    starts = np.r_[0, cuts]
-    stops = np.r_[cuts, ts.size]
-    arrays = {k: frame[c].to_numpy().astype(float) for k, c in SIGNAL_COLUMNS.items()}
+    starts = window_starts(ts_us, settings.gap_limit_periods * dt * 1e6, settings.window_s)
+    stops = np.r_[starts[1:], ts_us.size]
     n_min = int(round(settings.min_record_s / dt))
     n_max = int(round(settings.max_record_s / dt))
     pieces: list[tuple[int, int]] = []
@@ -107,16 +107,51 @@ def split_records(lake_one_valve: pl.DataFrame, settings: DiscrepancySettings) -
             if e - a >= n_min:
                 pieces.append((int(a), int(e)))
             a = e
-    if len(pieces) > settings.max_records:
-        pick = np.unique(np.round(np.linspace(0, len(pieces) - 1, settings.max_records)).astype(int))
-        pieces = [pieces[i] for i in pick]
+    return pieces
+
+
+def pick_evenly(n_pieces: int, max_records: int) -> np.ndarray:
+    """Indices of the pieces diagnosed: all of them, or ``max_records`` evenly spaced over them."""
+    if n_pieces <= max_records:
+        return np.arange(n_pieces)
+    return np.unique(np.round(np.linspace(0, n_pieces - 1, max_records)).astype(int))
+
+
+def record_from_rows(rows: pl.DataFrame, valve_id: str, dt: float) -> Record | None:
+    """The record of some time-sorted lake rows (one piece), None if a signal is not finite."""
+    raw = {k: rows[c].to_numpy().astype(float) for k, c in SIGNAL_COLUMNS.items()}
+    if not all(np.all(np.isfinite(v)) for v in raw.values()):
+        return None
+    ts = rows["timestamp_utc"].cast(pl.Datetime("us", "UTC")).to_physical()
+    return Record(valve_id, int(ts[0]), int(ts[-1]), dt, raw)
+
+
+def split_records(lake_one_valve: pl.DataFrame, settings: DiscrepancySettings) -> list[Record]:
+    """Contiguous records of one valve's lake rows (:func:`record_pieces`), at most ``settings.max_records`` of them,
+    evenly spaced over the pieces when there are more (:func:`pick_evenly`)."""
+    if lake_one_valve.height == 0:
+        return []
+    frame = lake_one_valve.sort("timestamp_utc", maintain_order=True)
+    valve_ids = frame["valve_id"].unique().to_list()
+    if len(valve_ids) != 1:
+        raise ValueError(f"split_records needs the rows of one valve, got {valve_ids}")
+    ts = frame["timestamp_utc"].cast(pl.Datetime("us", "UTC")).to_physical().to_numpy().astype(np.int64)
+    if settings.sample_period_s is not None:
+        dt = float(settings.sample_period_s)
+    else:
+        steps = np.diff(ts)
+        pos = steps[steps > 0]
+        if pos.size == 0:
+            return []
+        dt = float(np.median(pos)) * 1e-6
+    pieces = record_pieces(ts, dt, settings)
     vid = str(valve_ids[0])
     out = []
-    for a, b in pieces:
-        raw = {k: v[a:b].copy() for k, v in arrays.items()}
-        if not all(np.all(np.isfinite(v)) for v in raw.values()):
-            continue
-        out.append(Record(vid, int(ts[a]), int(ts[b - 1]), dt, raw))
+    for i in pick_evenly(len(pieces), settings.max_records):
+        a, b = pieces[i]
+        rec = record_from_rows(frame.slice(a, b - a), vid, dt)
+        if rec is not None:
+            out.append(rec)
     return out
 
 

@@ -26,6 +26,12 @@ class DiscrepancySettings:
         into pieces of ``max_record_s``. [s]
     max_records : int
         At most this many records are diagnosed (evenly spaced over the span).
+    window_s : float | None
+        Length of the monitoring windows (``[monitor] window_s``): a run of samples at least
+        half as long (a continuous recording) is cut at every multiple of it since the epoch
+        before it is cut into records (:func:`transforms.windows.window_starts`), so a record
+        lies in one monitoring window; step 4 monitors with it. None: whole runs (snapshots are
+        whole runs either way). [s]
     savgol_window, savgol_order : int
         Savitzky-Golay stencil for smoothed signals, v_X = dX/dt, a = d^2X/dt^2 and dp/dt
         (the monitoring's 21/3, ``transforms.params``).
@@ -81,6 +87,7 @@ class DiscrepancySettings:
     min_record_s: float = 2.0
     max_record_s: float = 30.0
     max_records: int = 48
+    window_s: float | None = None
     savgol_window: int = 21
     savgol_order: int = 3
     interval_samples: int = 20
