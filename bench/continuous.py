@@ -13,6 +13,10 @@ pinned to one core (``taskset -c 0``, ``POLARS_MAX_THREADS=1``), it measures on 
 
 - ``bare``: ``pl.read_parquet`` / ``pl.read_csv`` of each file + ``write_parquet`` (LZ4) of the frame;
 - ``ingest``: ``flows.ingest.flow.run_ingest`` of the files into an empty warehouse;
+- ``monitor``: ``flows.monitor.flow.run_monitor`` of that lake (clock windows of the default
+  ``[monitor] window_s``, nominal baselines): lake → fits, with the fits' status counts (the
+  synthetic signals are not the valve model's, so many windows end ``not ok``: the figure is the
+  monitor's cost per lake row, not its accuracy, which ``docs/monitoring.md`` measures);
 
 wall time, CPU time (user + system of the child, after its imports) and peak RSS (the child's
 ``VmHWM``; its ``ru_maxrss`` would include the generator's peak, inherited over fork). The
@@ -139,6 +143,17 @@ def child_ingest(config: str, files: list[str], warehouse: str) -> dict:
     return {"rows": s.rows_written, "rows_read": s.rows_read, "partitions_written": s.partitions_written}
 
 
+def child_monitor(config: str, warehouse: str) -> dict:
+    from flows.monitor.flow import run_monitor
+
+    reports = run_monitor(config, warehouse)
+    status: dict[str, int] = {}
+    for r in reports:
+        for k, n in r.status_counts.items():
+            status[k] = status.get(k, 0) + n
+    return {"rows": sum(r.rows_read for r in reports), "windows": sum(r.windows for r in reports), "status": status}
+
+
 def peak_rss_mb() -> float:
     """This process's peak resident memory: ``VmHWM`` (``ru_maxrss`` would carry the parent's peak
     over ``fork`` + ``exec``: the generator's, here)."""
@@ -154,8 +169,10 @@ def _child(argv: list[str]) -> None:
 
     if kind == "ingest":
         import flows.ingest.flow  # noqa: F401
+    if kind == "monitor":
+        import flows.monitor.flow  # noqa: F401
     t0, c0 = time.perf_counter(), time.process_time()
-    r = child_bare(**payload) if kind == "bare" else child_ingest(**payload)
+    r = {"bare": child_bare, "ingest": child_ingest, "monitor": child_monitor}[kind](**payload)
     r.update(wall_s=time.perf_counter() - t0, cpu_s=time.process_time() - c0, peak_rss_mb=peak_rss_mb())
     print(json.dumps(r))
 
@@ -198,11 +215,13 @@ def main() -> None:
         wh = tmp / "wh"
         ing = run_child("ingest", {"config": str(config), "files": [str(f) for f in files], "warehouse": str(wh)})
         lake_bytes = du(wh / "lake")
+        mon = run_child("monitor", {"config": str(config), "warehouse": str(wh)})
         rows = ing["rows"]
         print(f"{'':<8}{'wall s':>9}{'CPU s':>9}{'peak RSS MB':>13}{'lake Mrows/s (CPU)':>20}")
-        for name, r in (("bare", bare), ("ingest", ing)):
+        for name, r in (("bare", bare), ("ingest", ing), ("monitor", mon)):
             print(f"{name:<8}{r['wall_s']:>9.1f}{r['cpu_s']:>9.1f}{r['peak_rss_mb']:>13.0f}{rows / r['cpu_s'] / 1e6:>20.2f}")
         print(f"ingest / bare: wall {ing['wall_s'] / bare['wall_s']:.2f}×, CPU {ing['cpu_s'] / bare['cpu_s']:.2f}×")
+        print(f"monitor: {mon['rows']:,} lake rows read, {mon['windows']:,} windows, fits {mon['status']}")
         print(f"lake: {rows:,} rows, {lake_bytes / 1e9:.2f} GB ({lake_bytes / max(rows, 1):.1f} bytes/row), {ing['partitions_written']} day-folder writes (summed over the files)")
         print(f"load after: {os.getloadavg()}")
 
