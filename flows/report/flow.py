@@ -12,7 +12,7 @@
    which every writing command ends with);
 4. reads the views from the snapshot and writes the BI hand-off (:mod:`flows.report.export`), the PNG
    pictures (:mod:`flows.report.figures`) and ``WAREHOUSE/reports/report.html``
-   (:mod:`flows.report.html`), which also shows the latest ``valvemon discrepancy`` run of every
+   (:mod:`flows.report.html`; the pictures drawn in a pool of processes, :func:`flows.report.figures.render_figures`), which also shows the latest ``valvemon discrepancy`` run of every
    valve analysed (:func:`discrepancy_results`; its overlay pictures are the workflow's own).
 
 Every write to ``valvemon.duckdb`` happens in a short-lived connection; the pictures and the
