@@ -11,9 +11,9 @@
    snapshot ``WAREHOUSE/snapshot/valvemon.duckdb`` that readers query (:mod:`flows.report.publish`,
    which every writing command ends with);
 4. reads the views from the snapshot and writes the BI hand-off (:mod:`flows.report.export`), the PNG
-   pictures (:mod:`flows.report.figures`) and ``WAREHOUSE/reports/report.html``
-   (:mod:`flows.report.html`; the pictures drawn in a pool of processes, :func:`flows.report.figures.render_figures`), which also shows the latest ``valvemon discrepancy`` run of every
-   valve analysed (:func:`discrepancy_results`; its overlay pictures are the workflow's own).
+   pictures (:mod:`flows.report.figures`, drawn in a pool of processes: :func:`render_figures`) and
+   ``WAREHOUSE/reports/report.html`` (:mod:`flows.report.html`), which also shows the latest
+   ``valvemon discrepancy`` run of every valve analysed (:func:`discrepancy_results`; its overlay pictures are the workflow's own).
 
 Every write to ``valvemon.duckdb`` happens in a short-lived connection; the pictures and the
 export are made from the snapshot, without holding the live database.
