@@ -21,6 +21,8 @@ replaces the archive and leaves the lake and the fits as they were (idempotent).
 from __future__ import annotations
 
 import dataclasses
+import multiprocessing
+from concurrent.futures import ProcessPoolExecutor
 from datetime import datetime, timedelta, timezone
 from pathlib import Path
 
@@ -98,43 +100,50 @@ def _part_config(config, valves, path: Path) -> Path:
     return path
 
 
+def _simulate_all(requests: list[SimulateRequest]) -> None:
+    """Write the archives of ``requests`` one after the other (in the demo's side process)."""
+    for req in requests:
+        run_simulate(req, show_progress=False)
+
+
 def run_demo(warehouse: Path, *, show_progress: bool = True) -> dict:
-    """Simulate, ingest, monitor and report the demo plant into ``warehouse``."""
+    """Simulate, ingest, monitor and report the demo plant into ``warehouse``.
+
+    The snapshot span is written here (with the simulator's default workers) while one spawned
+    side process writes the commissioning days and the recordings: the archives are
+    independent and each is the same, byte for byte, however it is run."""
     out = warehouse / "demo"
     config, config_path = demo_config(out)
     start = DEMO_END - timedelta(days=DEMO_DAYS)
+    side = []  # each valve's commissioning day, simulated for that valve alone, then the recordings
     archives = []
-    # each valve's commissioning day, simulated for that valve alone
     for v in config.valves:
         day = out / "commissioning" / v.id
         one = _part_config(config, [v], day / "plant.toml")
-        run_simulate(
-            SimulateRequest(
-                out=day / "archive", config_path=one, start=v.commissioned.isoformat(), days=1.0,
-                windows_per_day=COMMISSIONING_WINDOWS, format="parquet", overwrite=True, seed=DEMO_SEED, workers=0,
-            ),
-            show_progress=False,
-        )  # fmt: skip
+        side.append(SimulateRequest(
+            out=day / "archive", config_path=one, start=v.commissioned.isoformat(), days=1.0,
+            windows_per_day=COMMISSIONING_WINDOWS, format="parquet", overwrite=True, seed=DEMO_SEED, workers=0,
+        ))  # fmt: skip
         archives.append(day / "archive" / "exports")
-    span = out / "archive"
-    snapshot = _part_config(config, [v for v in config.valves if v.id not in CONTINUOUS_VALVES], out / "parts" / "snapshots.toml")
-    run_simulate(
-        SimulateRequest(
-            out=span, config_path=snapshot, start=start.isoformat(), days=float(DEMO_DAYS),
-            windows_per_day=WINDOWS_PER_DAY, format="parquet", overwrite=True, seed=DEMO_SEED,
-        ),
-        show_progress=show_progress,
-    )  # fmt: skip
     recorded = out / "recordings"
     continuous = _part_config(config, [v for v in config.valves if v.id in CONTINUOUS_VALVES], out / "parts" / "recordings.toml")
-    run_simulate(
-        SimulateRequest(
-            out=recorded, config_path=continuous, start=start.isoformat(), days=float(DEMO_DAYS), windows_per_day=1,
-            window_s=CONTINUOUS_MINUTES * 60.0, file_minutes=float(CONTINUOUS_MINUTES), format="parquet", overwrite=True,
-            seed=DEMO_SEED, workers=0,
-        ),
-        show_progress=show_progress,
-    )  # fmt: skip
+    side.append(SimulateRequest(
+        out=recorded, config_path=continuous, start=start.isoformat(), days=float(DEMO_DAYS), windows_per_day=1,
+        window_s=CONTINUOUS_MINUTES * 60.0, file_minutes=float(CONTINUOUS_MINUTES), format="parquet", overwrite=True,
+        seed=DEMO_SEED, workers=0,
+    ))  # fmt: skip
+    span = out / "archive"
+    snapshot = _part_config(config, [v for v in config.valves if v.id not in CONTINUOUS_VALVES], out / "parts" / "snapshots.toml")
+    with ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn")) as pool:
+        side_done = pool.submit(_simulate_all, side)
+        run_simulate(
+            SimulateRequest(
+                out=span, config_path=snapshot, start=start.isoformat(), days=float(DEMO_DAYS),
+                windows_per_day=WINDOWS_PER_DAY, format="parquet", overwrite=True, seed=DEMO_SEED,
+            ),
+            show_progress=show_progress,
+        )  # fmt: skip
+        side_done.result()
     ingest = run_ingest(config_path, [*archives, span / "exports", recorded / "exports"], warehouse, show_progress=show_progress)
     monitored = run_monitor(config_path, warehouse)
     report = run_report(config_path, warehouse)

@@ -11,9 +11,9 @@
    snapshot ``WAREHOUSE/snapshot/valvemon.duckdb`` that readers query (:mod:`flows.report.publish`,
    which every writing command ends with);
 4. reads the views from the snapshot and writes the BI hand-off (:mod:`flows.report.export`), the PNG
-   pictures (:mod:`flows.report.figures`) and ``WAREHOUSE/reports/report.html``
-   (:mod:`flows.report.html`), which also shows the latest ``valvemon discrepancy`` run of every
-   valve analysed (:func:`discrepancy_results`; its overlay pictures are the workflow's own).
+   pictures (:mod:`flows.report.figures`, drawn in a pool of processes: :func:`render_figures`) and
+   ``WAREHOUSE/reports/report.html`` (:mod:`flows.report.html`), which also shows the latest
+   ``valvemon discrepancy`` run of every valve analysed (:func:`discrepancy_results`; its overlay pictures are the workflow's own).
 
 Every write to ``valvemon.duckdb`` happens in a short-lived connection; the pictures and the
 export are made from the snapshot, without holding the live database.
@@ -37,10 +37,10 @@ from flows.common.errors import ValvemonError
 from flows.common.prefect_run import flow
 from flows.common.warehouse_db import connect, insert_frame, query_frame, transaction
 from flows.report.export import export_bi
-from flows.report.figures import characteristics_figure, fleet_figure, trends_figure
+from flows.report.figures import characteristics_figure, fleet_figure, render_figures, trends_figure
 from flows.report.html import render_report
 from flows.report.publish import publish
-from flows.report.standstill import standstill_rows
+from flows.report.standstill import STANDSTILL_COLUMNS, standstill_rows
 from flows.report.views import connect_snapshot, ensure_report_tables
 from model.area import edge_area
 from schemas.fields import EDGES
@@ -79,7 +79,7 @@ def update_standstill(config: PlantConfig, warehouse: Path, now: datetime) -> in
     for v in config.valves:
         start = last.get(v.id)
         window_s = config.monitor.window_s
-        for rows in lake_chunks(warehouse, v.id, config.export.max_gap_s, start, None, window_s=window_s):
+        for rows in lake_chunks(warehouse, v.id, config.export.max_gap_s, start, None, columns=("valve_id", *STANDSTILL_COLUMNS), window_s=window_s):
             frame = standstill_rows(rows, max_gap_s=config.export.max_gap_s, commissioned=v.commissioned, computed_at=now, window_s=window_s)
             lo, hi = rows["timestamp_utc"][0], rows["timestamp_utc"][-1]
             with connect(warehouse) as con:
@@ -178,8 +178,7 @@ def run_report(config_path: str | Path, warehouse: str | Path, *, detail: int = 
         conditions = query_frame(con, "SELECT * FROM valve_condition ORDER BY valve_id, edge_order")
         chosen = valve_ids or ranking["valve_id"].head(detail).to_list()
         chosen = [v for v in ranking["valve_id"].to_list() if v in set(chosen)]
-        pngs = [fleet_figure(ranking, conditions, out_dir / "fleet_overview.png")]
-        valve_pngs: dict[str, list[tuple[str, Path]]] = {}
+        jobs = [(fleet_figure, (ranking, conditions, out_dir / "fleet_overview.png"))]
         for vid in chosen:
             cond = conditions.filter(pl.col("valve_id") == vid)
             latest = {r["edge"]: r for r in cond.iter_rows(named=True)}
@@ -190,14 +189,15 @@ def run_report(config_path: str | Path, warehouse: str | Path, *, detail: int = 
             )
             trend = query_frame(con, "SELECT * FROM trend_operating_hours WHERE valve_id = ?", [vid])
             lines = query_frame(con, "SELECT * FROM parameter_trends WHERE valve_id = ?", [vid])
-            ch = characteristics_figure(vid, _edge_curves(config, vid, baselines, latest), latest, out_dir / f"characteristics_{vid}.png")
-            tr = trends_figure(vid, trend, lines, out_dir / f"trends_{vid}.png")
-            pngs += [ch, tr]
-            valve_pngs[vid] = [("Opening-area characteristics (nominal, baseline, current)", ch),
-                               ("α̂, x̂ and e over operating hours with bounds and end of life", tr)]  # fmt: skip
+            jobs += [(characteristics_figure, (vid, _edge_curves(config, vid, baselines, latest), latest, out_dir / f"characteristics_{vid}.png")),
+                     (trends_figure, (vid, trend, lines, out_dir / f"trends_{vid}.png"))]  # fmt: skip
         discrepancy = discrepancy_results(con, warehouse)
     finally:
         con.close()
+    pngs = render_figures(jobs)
+    valve_pngs = {vid: [("Opening-area characteristics (nominal, baseline, current)", ch),
+                        ("α̂, x̂ and e over operating hours with bounds and end of life", tr)]
+                  for vid, ch, tr in zip(chosen, pngs[1::2], pngs[2::2])}  # fmt: skip
     html_path = out_dir / REPORT_NAME
     _write_html(html_path, render_report(
         plant=config.name, generated_at=now, ranking=ranking, conditions=conditions,

@@ -42,6 +42,8 @@ SETTLE_S = 0.2
 """How long standstill must have lasted before samples count (pressure transients decay). [s]"""
 MIN_SAMPLES = 100
 """Fewest standstill samples for a window's row."""
+STANDSTILL_COLUMNS: tuple[str, ...] = ("ps_pa", "pr_pa", "p1_pa", "p2_pa", "x_spool_m", "x_cyl_m")
+"""The lake columns Eq. 9 reads (besides ``timestamp_utc`` and ``valve_id``)."""
 
 
 def _run_age(mask: np.ndarray) -> np.ndarray:
@@ -66,7 +68,7 @@ def standstill_rows(
     valve_id = frame["valve_id"][0]
     t_us = frame["timestamp_utc"].dt.epoch("us").to_numpy()
     starts = np.r_[window_starts(t_us, max_gap_s * 1e6, window_s), t_us.size]
-    cols = {c: frame[c].to_numpy() for c in ("ps_pa", "pr_pa", "p1_pa", "p2_pa", "x_spool_m", "x_cyl_m")}
+    cols = {c: frame[c].to_numpy() for c in STANDSTILL_COLUMNS}
     rows = []
     for a, b in zip(starts[:-1], starts[1:]):
         if b - a < MIN_SAMPLES:

@@ -332,3 +332,19 @@ def test_readers_and_the_writer_never_wait_for_each_other(built, tmp_path):
     finally:
         con.close()
     assert [p.name for p in snapshot_path(warehouse).parent.iterdir()] == ["valvemon.duckdb"]
+
+
+def test_pictures_drawn_in_worker_processes_are_the_files_drawn_here(built, tmp_path):
+    from flows.common.warehouse_db import query_frame
+    from flows.report.figures import fleet_figure, render_figures
+
+    _, warehouse, result, _ = built  # three valves: seven pictures, drawn in this process
+    con = connect_snapshot(warehouse)
+    try:
+        conditions = query_frame(con, "SELECT * FROM valve_condition ORDER BY valve_id, edge_order")
+    finally:
+        con.close()
+    jobs = [(fleet_figure, (result.ranking, conditions, tmp_path / f"fleet_{k}.png")) for k in range(3)]
+    assert render_figures(jobs, workers=2) == [tmp_path / f"fleet_{k}.png" for k in range(3)]
+    drawn_here = (warehouse / "reports" / "fleet_overview.png").read_bytes()
+    assert all((tmp_path / f"fleet_{k}.png").read_bytes() == drawn_here for k in range(3))
