@@ -10,7 +10,6 @@ quality text as codes), so that memory is bounded by the batch, not the file.
 from __future__ import annotations
 
 import gzip
-import mmap
 import zlib
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,10 +18,9 @@ from typing import IO, Iterator
 import polars as pl
 import pyarrow as pa
 import pyarrow.parquet as pq
-from blake3 import blake3
 
 from flows.common.errors import ValvemonError
-from flows.ingest.read import _NOT_BLANK, HASH_PREFIX, _is_text, _mapped, _value_columns, enum_column, read_csv_export, sniff_format
+from flows.ingest.read import _NOT_BLANK, _is_text, _mapped, _value_columns, content_hash, enum_column, read_csv_export, sniff_format
 from schemas.plant_config import ExportSpec
 from transforms.ingest import TagTable
 
@@ -44,12 +42,6 @@ class ExportSource:
     size_bytes: int
 
 
-HASH_BLOCK_BYTES = 16 * 1024 * 1024
-"""The content hash maps the file and hashes it in blocks of this size, dropping each block's pages
-from the process after it (a plain memory map keeps every page of a large file resident until it
-is unmapped)."""
-
-
 def open_export(path: Path, export: ExportSpec) -> ExportSource:
     """Hash one export file and check it is not empty (``read_export``'s checks before decoding).
 
@@ -68,15 +60,10 @@ def open_export(path: Path, export: ExportSpec) -> ExportSource:
             fmt = sniff_format(path, bytes(raw[:4]))
             if fmt == "csv" and _NOT_BLANK.search(raw) is None:
                 raise ValvemonError(empty)
-            hasher = blake3()
-            view = memoryview(raw)
-            for a in range(0, size, HASH_BLOCK_BYTES):
-                hasher.update(view[a : a + HASH_BLOCK_BYTES])
-                raw.madvise(mmap.MADV_DONTNEED, a, min(HASH_BLOCK_BYTES, size - a))
-            view.release()
+            digest = content_hash(raw, drop_pages=True)
     except (OSError, ValueError) as exc:
         raise ValvemonError(f"{path}: cannot read the file ({getattr(exc, 'strerror', None) or exc})") from None
-    return ExportSource(path, fmt, HASH_PREFIX + hasher.hexdigest(), size)
+    return ExportSource(path, fmt, digest, size)
 
 
 def export_batches(src: ExportSource, export: ExportSpec, tags: TagTable | None = None, batch_samples: int | None = None, csv_block_bytes: int | None = None) -> Iterator[tuple[pl.DataFrame, int, bool]]:
