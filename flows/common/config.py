@@ -7,6 +7,7 @@ import tomllib
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from flows.common.errors import ValvemonError
 from schemas.errors import ConfigError
 
 if TYPE_CHECKING:
@@ -40,3 +41,14 @@ def warehouse_dir(option: str | Path | None) -> Path:
         return Path(option)
     env = os.environ.get(WAREHOUSE_ENV)
     return Path(env) if env else DEFAULT_WAREHOUSE
+
+
+def plant_valves(config: PlantConfig, valve_ids, where: str | Path) -> list[str]:
+    """The valves a command works on: ``valve_ids`` (all of the plant's when empty), each checked
+    against the plant; an unknown one fails naming ``where`` (the file or option), the valve and
+    the plant's valves."""
+    known = [v.id for v in config.valves]
+    unknown = sorted(set(valve_ids or []) - set(known))
+    if unknown:
+        raise ValvemonError(f"{where}: no valve {unknown[0]!r} in plant {config.name!r} (valves: {', '.join(known)})")
+    return list(valve_ids or known)

@@ -32,7 +32,7 @@ from pathlib import Path
 
 import polars as pl
 
-from flows.common.config import load_plant_config
+from flows.common.config import load_plant_config, plant_valves
 from flows.common.errors import ValvemonError
 from flows.common.instants import utc_instant
 from flows.common.prefect_run import flow, task
@@ -276,9 +276,7 @@ def check_arguments(config_path: str | Path, valve_id: str, start=None, end=None
     """The checks that need no data: the configuration, the valve, the span and the options.
     Returns the configuration and the span (UTC)."""
     config = load_plant_config(config_path)
-    known = [v.id for v in config.valves]
-    if valve_id not in known:
-        raise ValvemonError(f"{config_path}: no valve {valve_id!r} in plant {config.name!r} (valves: {', '.join(known)})")
+    plant_valves(config, [valve_id], config_path)
     t0, t1 = utc_instant(start, "--from"), utc_instant(end, "--to")
     if t0 and t1 and t1 <= t0:
         raise ValvemonError("--to must be later than --from")

@@ -38,7 +38,7 @@ import polars as pl
 
 from flows.common.allocator import retain_freed_memory
 from flows.common.batches import WriteBatch
-from flows.common.config import load_plant_config
+from flows.common.config import load_plant_config, plant_valves
 from flows.common.errors import ValvemonError
 from flows.common.instants import utc_instant
 from flows.common.lake import list_partitions, read_lake
@@ -553,16 +553,13 @@ def run_monitor(
     depend on it)."""
     config = load_plant_config(config_path)
     warehouse = Path(warehouse)
-    known = [v.id for v in config.valves]
-    unknown = sorted(set(valve_ids or []) - set(known))
-    if unknown:
-        raise ValvemonError(f"{config_path}: no valve {unknown[0]!r} in plant {config.name!r} (valves: {', '.join(known)})")
+    valves = plant_valves(config, valve_ids, config_path)
     t0, t1 = utc_instant(start, "--from"), utc_instant(end, "--to")
     if t0 and t1 and t1 <= t0:
         raise ValvemonError("--to must be later than --from")
     if chunk_days is None:
-        return [valve_runner(config, v, warehouse, t0, t1) for v in (valve_ids or known)]
-    return [valve_runner(config, v, warehouse, t0, t1, chunk_days=chunk_days) for v in (valve_ids or known)]
+        return [valve_runner(config, v, warehouse, t0, t1) for v in valves]
+    return [valve_runner(config, v, warehouse, t0, t1, chunk_days=chunk_days) for v in valves]
 
 
 @task(name="monitor-valve", persist_result=False)

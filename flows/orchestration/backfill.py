@@ -65,7 +65,7 @@ import polars as pl
 
 from flows.common.allocator import retain_freed_memory
 from flows.common.batches import WriteBatch
-from flows.common.config import load_plant_config
+from flows.common.config import load_plant_config, plant_valves
 from flows.common.errors import ValvemonError
 from flows.common.instants import utc_instant
 from flows.common.lake import list_partitions
@@ -608,11 +608,7 @@ def backfill_flow(
         raise ValvemonError("--to must be later than --from")
     if unit_days <= 0:
         raise ValvemonError("--unit-days must be positive")
-    known_valves = [v.id for v in config.valves]
-    unknown = sorted(set(valve_ids or []) - set(known_valves))
-    if unknown:
-        raise ValvemonError(f"{config_path}: no valve {unknown[0]!r} in plant {config.name!r} (valves: {', '.join(known_valves)})")
-    valves = list(valve_ids or known_valves)
+    valves = plant_valves(config, valve_ids, config_path)
     files = discover_files([exports]) if exports is not None else []
 
     summary = BackfillSummary(run_id=f"{kind}-{started:%Y%m%dT%H%M%SZ}-{uuid.uuid4().hex[:8]}", span_start=t0, span_end=t1, files_seen=len(files))

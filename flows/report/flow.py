@@ -32,8 +32,7 @@ from pathlib import Path
 import numpy as np
 import polars as pl
 
-from flows.common.config import load_plant_config
-from flows.common.errors import ValvemonError
+from flows.common.config import load_plant_config, plant_valves
 from flows.common.prefect_run import flow
 from flows.common.warehouse_db import connect, insert_frame, query_frame, transaction
 from flows.report.export import export_bi
@@ -162,10 +161,7 @@ def run_report(config_path: str | Path, warehouse: str | Path, *, detail: int = 
     """The whole report (module docstring). ``detail`` most urgent valves (or ``valve_ids``) get pictures."""
     config = load_plant_config(config_path)
     warehouse = Path(warehouse)
-    known = [v.id for v in config.valves]
-    unknown = sorted(set(valve_ids or []) - set(known))
-    if unknown:
-        raise ValvemonError(f"{config_path}: no valve {unknown[0]!r} in plant {config.name!r}")
+    plant_valves(config, valve_ids, config_path)
     now = datetime.now(timezone.utc).replace(microsecond=0)
     n_standstill = update_standstill(config, warehouse, now)
     views, snapshot = publish(config, warehouse, now)

@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 import polars as pl
 
-from flows.common.config import load_plant_config
+from flows.common.config import load_plant_config, plant_valves
 from flows.common.errors import ValvemonError
 from flows.common.lake import (
     PART_NAME,
@@ -312,11 +312,7 @@ def run_retention(
     if spec is None:
         raise ValueError("run_retention: the plant configures no [retention]")
     warehouse = Path(warehouse)
-    known = [v.id for v in config.valves]
-    unknown = sorted(set(valve_ids or []) - set(known))
-    if unknown:
-        raise ValvemonError(f"--valves: no valve {unknown[0]!r} in plant {config.name!r} (valves: {', '.join(known)})")
-    ids = list(valve_ids or known)
+    ids = plant_valves(config, valve_ids, "--valves")
     as_of = as_of or datetime.now(timezone.utc).date()
     summary = RetentionSummary(as_of, spec, dry_run)
     # a dry run takes no lock either: even a lock file would be a write
