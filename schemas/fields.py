@@ -170,6 +170,15 @@ RAW_ROW_FIELDS: tuple[Field, ...] = (
 )
 """One accepted sample of one tag, as the ingest reads it from an export (long form)."""
 
+QUARANTINE_REASONS: tuple[str, ...] = (
+    "bad_quality", "non_numeric", "non_finite", "missing_value", "missing_tag", "bad_timestamp", "implausible_time", "out_of_range",
+)  # fmt: skip
+"""Why a sample is quarantined (``transforms.ingest.samples``; ``docs/ingest.md``)."""
+
+FAULT_REASONS: tuple[str, ...] = ("bad_timestamp", "implausible_time", "out_of_range")
+"""The quarantine reasons whose share per tag and file ``export.max_bad_share`` bounds; each is
+also a column of ``ingest_manifest``."""
+
 QUARANTINE_FIELDS: tuple[Field, ...] = (
     _FILE_HASH,
     _SOURCE_FILE,
@@ -178,7 +187,7 @@ QUARANTINE_FIELDS: tuple[Field, ...] = (
     Field("timestamp_raw", pl.Utf8, "", "Timestamp as written in the export.", nullable=True),
     Field("value_raw", pl.Utf8, "", "Value as written in the export (e.g. a PI digital state).", nullable=True),
     Field("quality", pl.Utf8, "", "Quality code as written in the export.", nullable=True),
-    Field("reason", pl.Utf8, "", "Why the sample was set aside.", isin=("bad_quality", "non_numeric", "non_finite", "missing_value", "missing_tag")),
+    Field("reason", pl.Utf8, "", "Why the sample was set aside.", isin=QUARANTINE_REASONS),
     Field("run_id", pl.Utf8, "", "Ingest run that read the file."),
     Field("ingested_at", UTC_US, "", "When the ingest read the file."),
 )
@@ -217,6 +226,12 @@ MANIFEST_FIELDS: tuple[Field, ...] = (
     Field("time_end", UTC_US, "", "Latest accepted sample (UTC).", nullable=True),
     Field("run_id", pl.Utf8, "", "Ingest run that ingested the file."),
     Field("ingested_at", UTC_US, "", "When the file was ingested."),
+    Field("bad_timestamp", pl.Int64, "", "Of quarantined: samples whose timestamp is missing or not in export.timestamp_format.", ge=0),
+    Field("implausible_time", pl.Int64, "", "Of quarantined: samples later than the ingest's time + 1 day or before their valve's commissioned.", ge=0),
+    Field("out_of_range", pl.Int64, "", "Of quarantined: samples outside the physical range of their lake column (e.g. 1e308).", ge=0),
+    Field("other_tags", pl.Int64, "", "Tags (long) or columns (wide) of the file that no valve has, read past (export.other_tags = 'ignore').", ge=0),
+    Field("other_samples", pl.Int64, "", "Rows (long) or non-empty cells (wide) of those tags, not in samples_in.", ge=0),
+    Field("other_tag_names", pl.Utf8, "", "Those tags, comma-separated in the order of the file (empty: none)."),
 )
 """One row per ingested export file (table ``ingest_manifest``)."""
 

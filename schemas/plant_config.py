@@ -12,6 +12,12 @@ Keys the project adds to the specification (all optional, documented in the READ
   nothing is interpolated across a gap. [s]
 - ``[export] duplicate_rule`` (default ``"last"``): the same tag and time with different
   values keeps the ``"last"`` row in file order, or ``"first"``, or is an ``"error"``.
+- ``[export] max_bad_share`` (default :data:`DEFAULT_MAX_BAD_SHARE`): the share of a tag's
+  samples in one file that may be quarantined as ``out_of_range``, ``bad_timestamp`` or
+  ``implausible_time`` before the file is refused (``docs/ingest.md``, "Quarantine or refusal").
+- ``[export] other_tags`` (default ``"ignore"``): tags (long) and columns (wide) of an export
+  that no valve of the plant has are read past and counted (``"ignore"``) or refuse the file
+  (``"error"``).
 - ``[valves] baseline_window = { start = ..., end = ... }`` (spec) and ``[valves] scenario``
   (written by ``valvemon simulate`` for the record; ignored by monitoring).
 - ``[valve_types.NAME.bounds]``: the condition bounds of step 5b (:class:`ConditionBounds`,
@@ -64,7 +70,20 @@ class ExportSpec:
     sample_rate_hz: float = 1000.0
     max_gap_s: float = 0.005
     duplicate_rule: str = "last"
+    max_bad_share: float = 0.05
+    """Share of a tag's samples in one file that may be quarantined as out of range or for their
+    time (:data:`DEFAULT_MAX_BAD_SHARE`); more refuses the file."""
+    other_tags: str = "ignore"
+    """Tags or columns no valve has: ``"ignore"`` (read past, counted) or ``"error"``."""
 
+
+DEFAULT_MAX_BAD_SHARE = ExportSpec.max_bad_share
+"""5 %: a configuration error (a wrong unit in the TOML, a wrong ``timestamp_format``, a recorder
+clock years off) faults nearly every sample of a tag, while transmitter glitches and short
+faults fault a few in a thousand (one 1e308 in 2,000 samples is 0.05 %; a transmitter out of
+range for a minute of an hour file 1.7 %); ``docs/ingest.md``, "Quarantine or refusal"."""
+
+OTHER_TAGS_RULES: tuple[str, ...] = ("ignore", "error")
 
 DEFAULT_WINDOW_S = 60.0
 """Default monitoring window length (docs/monitoring.md, "Continuous recordings", measured on
@@ -306,7 +325,7 @@ def _instant(value: Any, key: str, tz: ZoneInfo) -> datetime:
 _EXPORT_KEYS = {
     "layout", "timestamp_column", "timestamp_format", "tag_column", "value_column",
     "quality_column", "good_quality", "separator", "decimal", "sample_rate_hz", "max_gap_s",
-    "duplicate_rule",
+    "duplicate_rule", "max_bad_share", "other_tags",
 }  # fmt: skip
 
 
@@ -335,6 +354,8 @@ def _parse_export(raw: Any) -> ExportSpec:
     if kw["max_gap_s"] < 1.0 / kw["sample_rate_hz"]:
         raise ConfigError("export.max_gap_s: must be at least one sample period")
     kw["duplicate_rule"] = _str(t.get("duplicate_rule", "last"), "export.duplicate_rule", ("last", "first", "error"))
+    kw["max_bad_share"] = _number(t.get("max_bad_share", DEFAULT_MAX_BAD_SHARE), "export.max_bad_share", 0, 1, open_lo=True)
+    kw["other_tags"] = _str(t.get("other_tags", "ignore"), "export.other_tags", OTHER_TAGS_RULES)
     return ExportSpec(**kw)
 
 
@@ -644,6 +665,10 @@ def plant_config_to_dict(config: PlantConfig) -> dict:
         "max_gap_s": e.max_gap_s,
         "duplicate_rule": e.duplicate_rule,
     }
+    if e.max_bad_share != DEFAULT_MAX_BAD_SHARE:
+        export["max_bad_share"] = e.max_bad_share
+    if e.other_tags != ExportSpec.other_tags:
+        export["other_tags"] = e.other_tags
     valves = []
     for v in config.valves:
         d: dict[str, Any] = {"id": v.id, "type": v.type, "commissioned": _iso(v.commissioned)}

@@ -232,13 +232,28 @@ def ensure_tables(con: duckdb.DuckDBPyConnection, tables: Mapping[str, tuple[tup
 
 def ensure_ingest_tables(con: duckdb.DuckDBPyConnection) -> None:
     """Create the ingest's tables if they do not exist (and migrate an older warehouse's)."""
-    legacy = {r[0] for r in con.execute(
-        "SELECT table_name FROM duckdb_columns() WHERE database_name = current_database() AND column_name = 'file_sha256'"
-    ).fetchall()}  # fmt: skip
+    have: dict[str, set[str]] = {}
+    for table, column in con.execute(
+        "SELECT table_name, column_name FROM duckdb_columns() WHERE database_name = current_database()"
+    ).fetchall():  # fmt: skip
+        have.setdefault(table, set()).add(column)
     for name in INGEST_TABLES:
-        if name in legacy:
+        if "file_sha256" in have.get(name, ()):
             migrate_hash_column(con, name)
     ensure_tables(con, INGEST_TABLES)
+    for name, (fields, _) in INGEST_TABLES.items():
+        if name in have:
+            add_missing_columns(con, name, fields, have[name])
+
+
+def add_missing_columns(con: duckdb.DuckDBPyConnection, table: str, fields: tuple[Field, ...], have: set[str]) -> None:
+    """Columns the registry added to a table after the warehouse was created, appended with the
+    value that means "none" for the rows already there (0, '' or null)."""
+    for f in fields:
+        if f.name in have or f.name == "file_hash":
+            continue
+        default = "NULL" if f.nullable else ("''" if f.dtype == pl.Utf8 else "0")
+        con.execute(f'ALTER TABLE {table} ADD COLUMN "{f.name}" {duckdb_type(f.dtype)} DEFAULT {default}')
 
 
 def migrate_hash_column(con: duckdb.DuckDBPyConnection, table: str) -> None:

@@ -245,6 +245,12 @@ def file_records(path: Path, ef, result, report: FileReport, run_id: str, layout
         "time_end": c.time_end,
         "run_id": run_id,
         "ingested_at": now,
+        "bad_timestamp": c.bad_timestamp,
+        "implausible_time": c.implausible_time,
+        "out_of_range": c.out_of_range,
+        "other_tags": len(c.other_tags),
+        "other_samples": sum(c.other_tags.values()),
+        "other_tag_names": ",".join(c.other_tags),
     }
     return manifest, quarantine, gaps
 
