@@ -20,7 +20,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from flows.common.errors import ValvemonError
-from flows.ingest.read import _NOT_BLANK, _is_text, _mapped, _value_columns, content_hash, enum_column, read_csv_export, sniff_format
+from flows.ingest.read import _NOT_BLANK, RaggedLine, _is_text, _mapped, _value_columns, content_hash, enum_column, read_csv_export, sniff_format
 from schemas.plant_config import ExportSpec
 from transforms.ingest import TagTable
 
@@ -178,7 +178,10 @@ def _csv_batches(src: ExportSource, export: ExportSpec, tags: TagTable | None, b
         any_block = False
         for block, final in _lookahead(_blocks(fh, block_bytes)):
             any_block = True
-            df = read_csv_export(header + block, export, tags)
+            try:
+                df = read_csv_export(header + block, export, tags)
+            except RaggedLine as exc:
+                raise ValvemonError(f"{src.path}: {exc.at(first)}") from None
             yield df, first, final
             first += block.count(b"\n")
         if not any_block:

@@ -5,6 +5,7 @@ one (:mod:`flows.ingest.batches`)."""
 
 from __future__ import annotations
 
+import csv
 import gzip
 import hashlib
 import mmap
@@ -164,12 +165,53 @@ def read_csv_export(data: bytes | Path, export: ExportSpec, tags: TagTable | Non
         pass  # a value that is no number, a tag the plant does not have, bad UTF-8: the careful path
     opts = _csv_options(export, "utf8-lossy")
     overrides.pop(export.tag_column, None)
-    df = pl.read_csv(data, schema_overrides=overrides, ignore_errors=True, **opts)
+    try:
+        df = pl.read_csv(data, schema_overrides=overrides, ignore_errors=True, **opts)
+    except pl.exceptions.ComputeError as exc:
+        raise (ragged_line(data, export.separator) or exc) from None
     suspicious = [c for c in values if df[c].null_count()]
     if suspicious:
         text = pl.read_csv(data, columns=suspicious, **opts)
         df = df.with_columns([text[c] for c in suspicious])
     return df
+
+
+class RaggedLine(ValueError):
+    """A CSV line with more fields than the header; ``row`` counts the lines after the header
+    (the first data line is 1), blank ones included."""
+
+    def __init__(self, row: int, fields: int, expected: int):
+        self.row, self.fields, self.expected = row, fields, expected
+        super().__init__(f"{fields} fields where the header has {expected} (a separator too many?)")
+
+    def at(self, first_line: int) -> str:
+        """The message, with the file's line (``first_line``: the file's line of row 1)."""
+        return f"line {first_line + self.row - 1}: {self}"
+
+
+def ragged_line(data: bytes | Path, separator: str) -> RaggedLine | None:
+    """The first line of CSV text (header first) with more fields than the header, quotes
+    respected; None if there is none or the bytes are no text (NUL bytes: the caller's read failed
+    for another reason)."""
+    text = data.read_bytes() if isinstance(data, Path) else data
+    if b"\x00" in text[: 1 << 16]:
+        return None
+    sep = separator.encode()
+    lines = text.split(b"\n")
+
+    def fields(line: bytes) -> int:
+        if b'"' not in line:
+            return line.count(sep) + 1
+        try:
+            return len(next(csv.reader([line.decode("utf-8", "replace").rstrip("\r")], delimiter=separator)))
+        except csv.Error:  # not CSV at all (binary): not a ragged line
+            return 0
+
+    expected = fields(lines[0])
+    for row, line in enumerate(lines[1:], start=1):
+        if line.count(sep) >= expected and (n := fields(line)) > expected:
+            return RaggedLine(row, n, expected)
+    return None
 
 
 def _is_text(t: pa.DataType) -> bool:
@@ -286,6 +328,8 @@ def read_export(path: Path, export: ExportSpec, tags: TagTable | None = None) ->
             first_line = 2
     except ValvemonError:
         raise
+    except RaggedLine as exc:
+        raise ValvemonError(f"{path}: {exc.at(2)}") from None
     except (pl.exceptions.PolarsError, pa.ArrowException, OSError, ValueError) as exc:
         kind = "Parquet" if fmt == "parquet" else "CSV"
         reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__

@@ -71,11 +71,6 @@ def test_unreadable_parquet(plant, tmp_path):
     assert _error(cfg, DATA / "not_really.parquet", tmp_path / "wh").startswith(f"{DATA / 'not_really.parquet'}: not a readable Parquet export (")
 
 
-def test_unreadable_csv(plant, tmp_path):
-    cfg, _ = plant()
-    assert _error(cfg, DATA / "ragged.csv", tmp_path / "wh").startswith(f"{DATA / 'ragged.csv'}: not a readable CSV export (")
-
-
 def test_missing_file(plant, tmp_path):
     cfg, _ = plant()
     assert _error(cfg, tmp_path / "nope.csv", tmp_path / "wh") == f"{tmp_path / 'nope.csv'}: no such file or folder"
