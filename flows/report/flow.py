@@ -13,7 +13,8 @@
 4. reads the views from the snapshot and writes the BI hand-off (:mod:`flows.report.export`), the PNG
    pictures (:mod:`flows.report.figures`, drawn in a pool of processes: :func:`render_figures`) and
    ``WAREHOUSE/reports/report.html`` (:mod:`flows.report.html`), which also shows the latest
-   ``valvemon discrepancy`` run of every valve analysed (:func:`discrepancy_results`; its overlay pictures are the workflow's own).
+   ``valvemon discrepancy`` run of every valve analysed (:func:`discrepancy_results`; its overlay pictures are the workflow's own)
+   and the ingest's data quality (:mod:`flows.report.quality`).
 
 Every write to ``valvemon.duckdb`` happens in a short-lived connection; the pictures and the
 export are made from the snapshot, without holding the live database.
@@ -39,6 +40,7 @@ from flows.report.export import export_bi
 from flows.report.figures import characteristics_figure, fleet_figure, render_figures, trends_figure
 from flows.report.html import render_report
 from flows.report.publish import publish
+from flows.report.quality import data_quality
 from flows.report.standstill import STANDSTILL_COLUMNS, standstill_rows
 from flows.report.views import connect_snapshot, ensure_report_tables
 from model.area import edge_area
@@ -188,6 +190,7 @@ def run_report(config_path: str | Path, warehouse: str | Path, *, detail: int = 
             jobs += [(characteristics_figure, (vid, _edge_curves(config, vid, baselines, latest), latest, out_dir / f"characteristics_{vid}.png")),
                      (trends_figure, (vid, trend, lines, out_dir / f"trends_{vid}.png"))]  # fmt: skip
         discrepancy = discrepancy_results(con, warehouse)
+        quality = data_quality(con)
     finally:
         con.close()
     pngs = render_figures(jobs)
@@ -197,7 +200,7 @@ def run_report(config_path: str | Path, warehouse: str | Path, *, detail: int = 
     html_path = out_dir / REPORT_NAME
     _write_html(html_path, render_report(
         plant=config.name, generated_at=now, ranking=ranking, conditions=conditions,
-        fleet_png=pngs[0], valve_pngs=valve_pngs, discrepancy=discrepancy, snapshot=snapshot,
+        fleet_png=pngs[0], valve_pngs=valve_pngs, discrepancy=discrepancy, snapshot=snapshot, quality=quality,
     ))  # fmt: skip
     return ReportResult(html_path, snapshot, pngs, exports, views, n_standstill, ranking)
 

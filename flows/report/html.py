@@ -11,6 +11,7 @@ from pathlib import Path
 import polars as pl
 
 from flows.report.figures import STATE_COLOURS
+from flows.report.quality import DataQuality, quality_section
 
 CSS = """
 body { font-family: -apple-system, 'Segoe UI', Helvetica, Arial, sans-serif; margin: 24px; color: #212121; background: #fff; }
@@ -105,6 +106,7 @@ def render_report(
     valve_pngs: dict[str, list[tuple[str, Path]]],
     discrepancy: dict[str, list[dict]],
     snapshot: Path,
+    quality: DataQuality | None = None,
 ) -> str:
     """The report's HTML text.
 
@@ -121,6 +123,8 @@ def render_report(
         picture or None); a section "Model discrepancy" when not empty.
     snapshot : Path
         The database snapshot the report was made from (named for the reader's queries).
+    quality : DataQuality, optional
+        The ingest's ledger summed (:mod:`flows.report.quality`): a section "Data quality".
     """
     counts = {s: int((ranking["state"] == s).sum()) for s in STATE_COLOURS}
     parts = [
@@ -175,5 +179,7 @@ def render_report(
             parts.append(_img(png, f"{vid}: {caption}"))
     if discrepancy:
         parts += _discrepancy_section(discrepancy)
+    if quality is not None:
+        parts += quality_section(quality)
     parts.append("</body></html>")
     return "\n".join(parts)
