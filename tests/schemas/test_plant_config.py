@@ -37,8 +37,11 @@ def test_example_is_accepted_in_si():
     assert cfg.tag_index()["MILL1.V017.XREF"] == ("V017", "x_ref")
 
 
-def test_round_trip_through_toml_is_lossless(raw, tmp_path):
+@pytest.mark.parametrize("export", [{}, {"max_bad_share": 0.2, "other_tags": "error"}])
+def test_round_trip_through_toml_is_lossless(raw, tmp_path, export):
+    raw["export"].update(export)
     cfg = parse_plant_config(raw)
+    assert (cfg.export.max_bad_share, cfg.export.other_tags) == (export.get("max_bad_share", 0.05), export.get("other_tags", "ignore"))
     path = tmp_path / "plant.toml"
     path.write_bytes(tomli_w.dumps(plant_config_to_dict(cfg)).encode())
     assert load_plant_config(path) == cfg
@@ -93,6 +96,12 @@ _DELETE = object()
         ("valves.0.tags.x_spool.unit", "%", None),
         ("valves.0.tags.x_cyl.unit", "%", "valves[0].tags.x_cyl.unit: unknown position unit '%'"),
         ("export.good_quality", _DELETE, "export.good_quality: missing required key"),
+        ("export.max_bad_share", 0, "export.max_bad_share: 0 must be > 0"),
+        ("export.max_bad_share", 1.5, "export.max_bad_share: 1.5 must be <= 1"),
+        ("export.max_bad_share", "5%", "export.max_bad_share: expected a finite number, got '5%'"),
+        ("export.max_bad_share", 1, None),
+        ("export.other_tags", "skip", "export.other_tags: 'skip' is not one of 'ignore', 'error'"),
+        ("export.other_tags", "error", None),
     ],
 )
 def test_broken_configurations_name_the_key(raw, path, value, message):
