@@ -21,7 +21,7 @@ from polars.testing import assert_frame_equal
 import flows.ingest.batches
 from flows.common.errors import ValvemonError
 from flows.ingest.flow import ingest_lock
-from tests.ingest.conftest import BASE, COLUMN, DATA, EXAMPLE, FACTOR, base_lake, ingest, lake, run_cli, table
+from tests.ingest.conftest import BASE, DATA, FACTOR, base_lake, ingest, lake, run_cli, table
 
 T1 = datetime(2025, 3, 2, 0, 0, 0, tzinfo=timezone.utc)
 SECONDS = 334
