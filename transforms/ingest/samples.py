@@ -286,10 +286,10 @@ class _Faults:
         for tid, i in zip(ids, first):
             self.first.setdefault((int(tid), BAD_TIMESTAMP), f"line {lines[i]}: tag {self.tags.tags[tid]}: {unreadable_timestamp(raw[int(i)], fmt)}")
 
-    def checked(self, lines: pl.Series, tag: pl.Series, ts: pl.Series, values: pl.Series) -> tuple[np.ndarray, np.ndarray | None]:
-        """Values in SI, and the faults per sample (None: none) of accepted samples."""
+    def checked(self, lines: pl.Series, tag_id: np.ndarray, ts: pl.Series, values: pl.Series) -> tuple[np.ndarray, np.ndarray | None]:
+        """Values in SI, and the faults per sample (None: none) of accepted samples; ``tag_id``
+        per sample, or one for all (a wide column)."""
         t = ts.cast(UTC_NS).to_physical().to_numpy()
-        tag_id = tag.to_physical().to_numpy()
         tags = self.tags
         value_si, fault, bad = _to_si(values.to_numpy(), tag_id, t, tags.factors, tags.lo, tags.hi, tags.commissioned_ns, self.t_hi)
         if not bad:
@@ -422,7 +422,7 @@ def long_samples(df: pl.DataFrame, export: ExportSpec, timezone: str, tags: TagT
         ok = ~rejected
         kept = ok.arg_true()
         lines, tag, ts, values = lines.filter(ok), tag.filter(ok), ts.filter(ok), values.filter(ok)
-    value_si, fault = faults.checked(lines, tag, ts, values)
+    value_si, fault = faults.checked(lines, tag.to_physical().to_numpy(), ts, values)
     faulted = None
     if fault is not None:
         faulted = _faulted(fault, kept, raw)
@@ -469,6 +469,7 @@ def wide_samples(df: pl.DataFrame, export: ExportSpec, timezone: str, tags: TagT
     accepted, quarantined = [], []
     samples_in = 0
     tag_samples = np.zeros(len(tags.tags), dtype=np.int64)
+    code_dtype = pl.Series(dtype=tags.enum).to_physical().to_numpy().dtype  # as a long frame's codes: one compiled kernel
     for c in tag_columns:
         values, missing, non_numeric, non_finite = _value_checks(df[c], export.decimal)
         present = None if missing is None else ~missing
@@ -502,7 +503,7 @@ def wide_samples(df: pl.DataFrame, export: ExportSpec, timezone: str, tags: TagT
         sel = (lambda s: s) if k == n else (lambda s: s.filter(keep))
         tag = pl.repeat(c, k, dtype=tags.enum, eager=True)
         col_lines, col_ts = sel(lines), sel(ts)
-        value_si, fault = faults.checked(col_lines, tag, col_ts, sel(values))
+        value_si, fault = faults.checked(col_lines, np.array([tid], dtype=code_dtype), col_ts, sel(values))
         if fault is not None:
             quarantined.append(_faulted(fault, None if keep is None else keep.arg_true(), raw))
             ok = fault == 0
