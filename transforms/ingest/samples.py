@@ -237,18 +237,20 @@ def _tag_enum(col: pl.Series, tags: TagTable) -> pl.Series:
 def _to_si(values, tag_id, t_ns, factors, lo, hi, t_lo, t_hi):
     """``values * factors[tag_id]`` and each sample's fault in one pass (numpy's gather and
     multiply alone take ~3× as long): 0 none, 1 ``implausible_time`` (before ``t_lo[tag]`` or
-    after ``t_hi``), 2 ``out_of_range`` (outside ``[lo[tag], hi[tag]]`` in SI). A ``tag_id`` of
-    length 1 is the tag of every sample (a wide column). Returns (SI values, faults, how many)."""
+    after ``t_hi``; an empty ``t_ns``: no time is checked), 2 ``out_of_range`` (outside
+    ``[lo[tag], hi[tag]]`` in SI). A ``tag_id`` of length 1 is the tag of every sample (a wide
+    column). Returns (SI values, faults, how many)."""
     n = len(values)
     out = np.empty(n)
     fault = np.zeros(n, dtype=np.int8)
     bad = 0
     one = len(tag_id) == 1
+    timed = len(t_ns) == n
     for i in range(n):
         k = tag_id[0] if one else tag_id[i]
         v = values[i] * factors[k]
         out[i] = v
-        if t_ns[i] < t_lo[k] or t_ns[i] > t_hi:
+        if timed and (t_ns[i] < t_lo[k] or t_ns[i] > t_hi):
             fault[i] = 1
             bad += 1
         elif not (lo[k] <= v <= hi[k]):
@@ -286,11 +288,17 @@ class _Faults:
         for tid, i in zip(ids, first):
             self.first.setdefault((int(tid), BAD_TIMESTAMP), f"line {lines[i]}: tag {self.tags.tags[tid]}: {unreadable_timestamp(raw[int(i)], fmt)}")
 
-    def checked(self, lines: pl.Series, tag_id: np.ndarray, ts: pl.Series, values: pl.Series) -> tuple[np.ndarray, np.ndarray | None]:
+    def checked(self, lines: pl.Series, tag_id: np.ndarray, ts: pl.Series, values: pl.Series, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
         """Values in SI, and the faults per sample (None: none) of accepted samples; ``tag_id``
-        per sample, or one for all (a wide column)."""
-        t = ts.cast(UTC_NS).to_physical().to_numpy()
+        per sample, or one for all (a wide column); ``ids``: the tags of the frame. Times are
+        checked sample by sample only when the frame's earliest or latest is implausible for
+        one of its tags (else the times stay in polars: no copy of a chunked column)."""
         tags = self.tags
+        t_ns = ts.cast(UTC_NS).to_physical()
+        if len(t_ns) and (t_ns.min() < tags.commissioned_ns[ids].max() or t_ns.max() > self.t_hi):
+            t = t_ns.to_numpy()
+        else:
+            t = np.zeros(0, dtype=np.int64)
         value_si, fault, bad = _to_si(values.to_numpy(), tag_id, t, tags.factors, tags.lo, tags.hi, tags.commissioned_ns, self.t_hi)
         if not bad:
             return value_si, None
@@ -298,9 +306,14 @@ class _Faults:
         row_tags = tag_id[rows] if len(tag_id) > 1 else np.full(len(rows), tag_id[0])
         kinds = np.where(fault[rows] == 1, IMPLAUSIBLE_TIME, OUT_OF_RANGE)
         np.add.at(self.counts, (row_tags, kinds), 1)
+        if not len(t):
+            t = t_ns.gather(rows).to_numpy()
+            rows_t = np.arange(len(rows))
+        else:
+            rows_t = rows
         for (tid, kind), j in zip(*np.unique(np.c_[row_tags, kinds], axis=0, return_index=True)):
             r = rows[j]
-            self.first.setdefault((int(tid), int(kind)), self._what(int(tid), int(kind), int(lines[int(r)]), int(t[r]), float(value_si[r])))
+            self.first.setdefault((int(tid), int(kind)), self._what(int(tid), int(kind), int(lines[int(r)]), int(t[rows_t[j]]), float(value_si[r])))
         return value_si, fault
 
     def _what(self, tid: int, kind: int, line: int, t_ns: int, value_si: float) -> str:
@@ -422,7 +435,7 @@ def long_samples(df: pl.DataFrame, export: ExportSpec, timezone: str, tags: TagT
         ok = ~rejected
         kept = ok.arg_true()
         lines, tag, ts, values = lines.filter(ok), tag.filter(ok), ts.filter(ok), values.filter(ok)
-    value_si, fault = faults.checked(lines, tag.to_physical().to_numpy(), ts, values)
+    value_si, fault = faults.checked(lines, tag.to_physical().to_numpy(), ts, values, np.flatnonzero(counts))
     faulted = None
     if fault is not None:
         faulted = _faulted(fault, kept, raw)
@@ -503,7 +516,7 @@ def wide_samples(df: pl.DataFrame, export: ExportSpec, timezone: str, tags: TagT
         sel = (lambda s: s) if k == n else (lambda s: s.filter(keep))
         tag = pl.repeat(c, k, dtype=tags.enum, eager=True)
         col_lines, col_ts = sel(lines), sel(ts)
-        value_si, fault = faults.checked(col_lines, np.array([tid], dtype=code_dtype), col_ts, sel(values))
+        value_si, fault = faults.checked(col_lines, np.array([tid], dtype=code_dtype), col_ts, sel(values), np.array([tid]))
         if fault is not None:
             quarantined.append(_faulted(fault, None if keep is None else keep.arg_true(), raw))
             ok = fault == 0
