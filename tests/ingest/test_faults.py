@@ -166,6 +166,23 @@ def test_one_faulty_sample_in_a_wide_parquet_file(warehouse, tmp_path, plant):
     assert new_day(wh)["ps_pa"][7] == pytest.approx(_value("ps", 7) * 1e5)
 
 
+def test_an_unreadable_time_in_a_wide_csv_quarantines_the_samples_of_its_row(warehouse, tmp_path, plant):
+    _, wh = warehouse()
+    cfg, _ = plant(name="wide.toml", layout="wide", tag_column=None, value_column=None, quality_column=None, good_quality=None)
+    lines = ["timestamp," + ",".join(TAGS.values())]
+    for i in range(SECONDS):
+        t = "02.03.2025 00:00:11" if i == 11 else _iso(T1 + timedelta(seconds=i))
+        lines.append(t + "," + ",".join(repr(_value(s, i)) for s in TAGS))
+    path = tmp_path / "wide.csv"
+    path.write_text("\n".join(lines) + "\n")
+    ingest(cfg, path, wh)
+    row = file_row(wh, path)
+    assert (row["samples_in"], row["quarantined"], row["bad_timestamp"], row["rows_out"]) == (6 * SECONDS, 6, 6, SECONDS)
+    q = table(wh, "quarantine").filter(pl.col("source_file") == str(path)).sort("tag")
+    assert q.select("line", "timestamp_raw", "reason").unique().rows() == [(13, "02.03.2025 00:00:11", "bad_timestamp")]
+    assert sorted(q["tag"].to_list()) == sorted(TAGS.values())
+
+
 # --- mostly faulty: refused, naming the likely cause -------------------------------------------
 
 
