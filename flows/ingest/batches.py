@@ -182,6 +182,8 @@ def _csv_batches(src: ExportSource, export: ExportSpec, tags: TagTable | None, b
                 df = read_csv_export(header + block, export, tags)
             except RaggedLine as exc:
                 raise ValvemonError(f"{src.path}: {exc.at(first)}") from None
+            if tags is not None and export.tag_column in df.columns and not isinstance(df[export.tag_column].dtype, pl.Enum):
+                tags = None  # a tag no valve has (or a value that is no number): the next blocks read tags as text, not twice
             yield df, first, final
             first += block.count(b"\n")
         if not any_block:
