@@ -402,16 +402,14 @@ def long_samples(df: pl.DataFrame, export: ExportSpec, timezone: str, tags: TagT
             if export.other_tags == "error":
                 i = int(unknown.arg_true()[0])
                 raise IngestError(f"unknown tag {tag_raw[i]!r}: no valve of the plant configuration has it", line=int(lines[i]))
-            names = _text(tag_raw.filter(unknown)).value_counts(sort=False, name="n")
-            first = {t: i for i, t in enumerate(_text(tag_raw.filter(unknown)).unique(maintain_order=True).to_list())}
-            other = dict(sorted(zip(names[names.columns[0]].to_list(), names["n"].to_list()), key=lambda kv: first[kv[0]]))
+            other = dict(_text(tag_raw.filter(unknown)).to_frame("tag").group_by("tag", maintain_order=True).len().rows())
             keep = ~unknown
             df, lines, tag_raw, tag, missing_tag = df.filter(keep), lines.filter(keep), tag_raw.filter(keep), tag.filter(keep), missing_tag.filter(keep)
         if not missing_tag.any():
             missing_tag = None
     n = df.height
     tag_id = tag.to_physical()
-    faults = _Faults(tags, _now_ns() if now_ns is None else now_ns)
+    faults = _Faults(tags, time.time_ns() if now_ns is None else now_ns)
     ts_raw = df[export.timestamp_column]
     ts = parse_timestamps(ts_raw, export.timestamp_format, timezone, groups=tag_id, lines=lines, tags=tag, unreadable="null")
     bad_ts = None
@@ -444,10 +442,6 @@ def long_samples(df: pl.DataFrame, export: ExportSpec, timezone: str, tags: TagT
     return Samples(_accepted(lines, tag, ts, value_si), _concat([set_aside, faulted]), rows_in, n, tags_present, counts, faults.counts, faults.first, other)
 
 
-def _now_ns() -> int:
-    return time.time_ns()
-
-
 def _is_placeholder(df: pl.DataFrame, name: str) -> bool:
     """An unnamed column that a trailing separator creates and that holds nothing."""
     return (name == "" or name.startswith("_duplicated_")) and df[name].null_count() == df.height
@@ -477,7 +471,7 @@ def wide_samples(df: pl.DataFrame, export: ExportSpec, timezone: str, tags: TagT
     ts_raw = df[export.timestamp_column]
     ts = parse_timestamps(ts_raw, export.timestamp_format, timezone, lines=lines, unreadable="null")
     bad_ts = ts.is_null() if ts.null_count() else None
-    faults = _Faults(tags, _now_ns() if now_ns is None else now_ns)
+    faults = _Faults(tags, time.time_ns() if now_ns is None else now_ns)
     bad_quality = _bad_quality(df[export.quality_column], export.good_quality) if export.quality_column else None
     accepted, quarantined = [], []
     samples_in = 0
