@@ -342,14 +342,20 @@ def _empty_accepted(tags: TagTable) -> pl.DataFrame:
     return pl.DataFrame(schema={"line": pl.Int64, "tag": tags.enum, "timestamp_utc": UTC_NS, "value_si": pl.Float64})
 
 
+def _rows(raw: dict, sub: pl.Series, reason: pl.Series) -> pl.DataFrame:
+    """Quarantine rows of the samples at positions ``sub``; ``raw``: line, tag, timestamp, value
+    and quality (or None) of every sample, the tag a Series or one name for all."""
+    picked = [c if c is None else pl.repeat(c, len(sub), dtype=pl.String, eager=True) if isinstance(c, str) else c.gather(sub) for c in raw.values()]
+    return _quarantine_frame(*picked, reason)
+
+
 def _set_aside(rejected: pl.Series | None, masks: tuple, raw: dict) -> pl.DataFrame | None:
-    """The quarantine rows of the samples ``rejected`` marks, with the first reason that applies;
-    ``raw``: line, tag, timestamp, value and quality (or None) of every sample."""
+    """The quarantine rows of the samples ``rejected`` marks, with the first reason that applies
+    (``raw`` as :func:`_rows`)."""
     if rejected is None or not rejected.any():
         return None
     sub = rejected.arg_true()
-    reason = pl.select(_reason(*(None if m is None else m.gather(sub) for m in masks))).to_series()
-    return _quarantine_frame(*(None if c is None else c.gather(sub) for c in raw.values()), reason)
+    return _rows(raw, sub, pl.select(_reason(*(None if m is None else m.gather(sub) for m in masks))).to_series())
 
 
 def _faulted(fault: np.ndarray, kept: pl.Series | None, raw: dict) -> pl.DataFrame:
@@ -357,8 +363,7 @@ def _faulted(fault: np.ndarray, kept: pl.Series | None, raw: dict) -> pl.DataFra
     positions of the accepted samples among all, None: all)."""
     at = np.flatnonzero(fault)
     sub = pl.Series(at) if kept is None else kept.gather(at)
-    reason = pl.Series(np.where(fault[at] == 1, "implausible_time", "out_of_range"), dtype=pl.String)
-    return _quarantine_frame(*(None if c is None else c.gather(sub) for c in raw.values()), reason)
+    return _rows(raw, sub, pl.Series(np.where(fault[at] == 1, "implausible_time", "out_of_range"), dtype=pl.String))
 
 
 def _concat(frames: list[pl.DataFrame | None]) -> pl.DataFrame:
@@ -495,7 +500,7 @@ def wide_samples(df: pl.DataFrame, export: ExportSpec, timezone: str, tags: TagT
         rejected = _any(masks)
         raw = {
             "line": lines,
-            "tag": pl.repeat(c, n, dtype=pl.String, eager=True),
+            "tag": c,
             "ts": ts_raw,
             "value": df[c],
             "quality": df[export.quality_column] if export.quality_column else None,
