@@ -152,11 +152,13 @@ def test_a_unit_line_wider_than_the_tag_line_is_refused(tmp_path):
 
 def tdms_export(path, *, time_channel=False, units=None, group="rec", extra=(), lengths=None):
     """The reference data as a TDMS file: one channel per tag in ``group``; time from waveform
-    properties (1 s increment) or from a time channel ``Time`` of TDMS timestamps."""
+    properties (1 s increment) or from a time channel ``Time`` of TDMS timestamps (or epoch ms)."""
     units = UNIT | (units or {})
     start = np.datetime64(T0_US, "us")
     objects = [GroupObject(group)]
-    if time_channel:
+    if time_channel == "epoch_ms":
+        objects.append(ChannelObject(group, "Time", T0_US // 1000 + np.arange(5, dtype=np.int64) * 1000))
+    elif time_channel:
         objects.append(ChannelObject(group, "Time", start + np.arange(5) * np.timedelta64(1, "s")))
     for s, tag in TAG.items():
         props = {"unit_string": units[s]} if units[s] is not None else {}
@@ -170,9 +172,10 @@ def tdms_export(path, *, time_channel=False, units=None, group="rec", extra=(), 
     return path
 
 
-@pytest.mark.parametrize("time_channel", [False, True])
+@pytest.mark.parametrize("time_channel", [False, True, "epoch_ms"])
 def test_tdms_waveform_or_time_channel(tmp_path, time_channel):
-    cfg = plant_file(tmp_path)
+    """Time from the waveform properties, a channel of TDMS timestamps, or one of epoch ms."""
+    cfg = plant_file(tmp_path, **({"timestamp_format": "epoch_ms"} if time_channel == "epoch_ms" else {}))
     report = ingest(cfg, tdms_export(tmp_path / "rec.tdms", time_channel=time_channel), tmp_path / "wh")
     assert_frame_equal(lake(tmp_path / "wh"), base_lake())
     assert (report.rows_read, report.samples_read, report.rows_written) == (5, 30, 5)
