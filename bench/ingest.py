@@ -116,6 +116,17 @@ def timed(f, repeat: int) -> float:
     return min(times)
 
 
+def ingester(path: Path, config, tags: TagTable, wh: Path, n: int):
+    """The whole ingest of ``path`` into an empty warehouse ``wh`` (``n`` lake rows expected)."""
+
+    def ingest() -> None:
+        shutil.rmtree(wh, ignore_errors=True)
+        r = ingest_file(path, config, wh, "bench", tags=tags)
+        assert r.rows_out == n, r
+
+    return ingest
+
+
 def throughput(seconds: int, repeat: int) -> None:
     n = seconds * 1000
     config = load_plant_config(CONFIG)
@@ -130,13 +141,7 @@ def throughput(seconds: int, repeat: int) -> None:
         for kind, path in inputs.items():
             bare = (lambda: pl.read_csv(path)) if kind == "csv" else (lambda: pl.read_parquet(path))
             t_bare = timed(bare, repeat)
-            wh = tmp / f"wh_{kind}"
-
-            def ingest() -> None:
-                shutil.rmtree(wh, ignore_errors=True)
-                r = ingest_file(path, config, wh, "bench", tags=tags)
-                assert r.rows_out == n, r
-
+            ingest = ingester(path, config, tags, tmp / f"wh_{kind}", n)
             t_ing = timed(ingest, repeat)
             print(f"{kind:<10}{path.stat().st_size / 1e6:>9.1f}{t_bare:>13.3f}{t_ing:>10.3f}{t_ing / t_bare:>7.2f}{rows / t_bare / 1e6:>14.2f}{rows / t_ing / 1e6:>16.2f}{n:>11,}")
             stages[kind] = _stages(lambda: ingest(), repeat)
@@ -262,15 +267,7 @@ def recorder(seconds: int, repeat: int) -> None:
         print(f"{'file':<14}{'size MB':>9}{'bare read s':>13}{'ingest s':>10}{'ratio':>7}{'ingest lake rows/s':>20}")
         for kind, (path, bare, config) in inputs.items():
             t_bare = timed(bare, repeat)
-            tags = TagTable.from_config(config)
-            wh = tmp / f"wh_{kind.replace(' ', '_')}"
-
-            def ingest() -> None:
-                shutil.rmtree(wh, ignore_errors=True)
-                r = ingest_file(path, config, wh, "bench", tags=tags)
-                assert r.rows_out == n, r
-
-            t_ing = timed(ingest, repeat)
+            t_ing = timed(ingester(path, config, TagTable.from_config(config), tmp / f"wh_{kind.replace(' ', '_')}", n), repeat)
             print(f"{kind:<14}{path.stat().st_size / 1e6:>9.1f}{t_bare:>13.3f}{t_ing:>10.3f}{t_ing / t_bare:>7.2f}{n / t_ing / 1e6:>18.2f} M")
 
 
