@@ -32,6 +32,9 @@ EXPORT_SUFFIXES = (".csv", ".csv.gz", ".txt", ".tsv", ".tsv.gz", ".txt.gz", ".pa
 
 _GZIP_MAGIC = b"\x1f\x8b"
 _PARQUET_MAGIC = b"PAR1"
+_TDMS_MAGIC = b"TDSm"
+"""A TDMS file's first bytes (its first segment's lead-in); ``flows.ingest.tdms`` reads it (npTDMS is
+imported only then)."""
 _NOT_BLANK = re.compile(rb"\S")
 
 HASH_PREFIX = "blake3:"
@@ -114,11 +117,9 @@ def discover_files(paths: list[str | Path]) -> list[Path]:
 
 def sniff_format(path: Path, head: bytes) -> str:
     """``"parquet"``, ``"tdms"``, ``"csv.gz"`` or ``"csv"``, from the file's first bytes (then its name)."""
-    from flows.ingest.tdms import TDMS_MAGIC
-
     if head.startswith(_PARQUET_MAGIC):
         return "parquet"
-    if head.startswith(TDMS_MAGIC):
+    if head.startswith(_TDMS_MAGIC):
         return "tdms"
     if head.startswith(_GZIP_MAGIC):
         return "csv.gz"

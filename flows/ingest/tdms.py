@@ -32,9 +32,6 @@ from flows.common.errors import ValvemonError
 from schemas.plant_config import ExportSpec
 from transforms.ingest.units import FileUnits
 
-TDMS_MAGIC = b"TDSm"
-"""A TDMS file's first bytes (its first segment's lead-in)."""
-
 TDMS_EPOCH_S = -2_082_844_800
 """1904-01-01T00:00:00Z, the TDMS epoch, in Unix seconds."""
 
