@@ -40,8 +40,9 @@ def plant_file(folder, *, drop_units=(), **export):
     return path
 
 
-def ascii_export(path, rows=("skip", "tag", "name", "unit"), units=None, *, data=True):
-    """An iba-style ASCII export of the reference data: header lines as ``rows`` says, tab-separated."""
+def ascii_export(path, rows=("skip", "tag", "name", "unit"), units=None, *, values=BASE):
+    """An iba-style ASCII export of the reference data (or ``values``): header lines as ``rows``
+    says, tab-separated."""
     units = UNIT | (units or {})
     cells = {
         "skip": ["[ibaAnalyzer]", *(f"[0:{k}]" for k in range(6))],
@@ -50,9 +51,7 @@ def ascii_export(path, rows=("skip", "tag", "name", "unit"), units=None, *, data
         "unit": ["s", *(units[s] for s in TAG)],
     }
     lines = ["\t".join(cells[r]) for r in rows]
-    if data:
-        for i in range(5):
-            lines.append("\t".join([f"2025-03-01 13:00:0{i}.000", *(repr(BASE[s][i]) for s in TAG)]))
+    lines += ["\t".join([f"2025-03-01 13:00:0{i}.000", *(repr(values[s][i]) for s in TAG)]) for i in range(5)]
     path.write_text("\n".join(lines) + "\n")
     return path
 
@@ -108,13 +107,8 @@ def test_an_unknown_unit_in_the_file_refuses_it(tmp_path):
 def test_units_left_out_of_the_configuration_are_taken_from_the_file(tmp_path):
     """p1 in psi and x_spool in µm in the file, no unit for them in the TOML: converted by the file's."""
     cfg = plant_file(tmp_path, header_rows=["tag", "unit"], drop_units=["p1", "x_spool"])
-    psi = [v / (PSI_PA / 1e5) for v in BASE["p1"]]
-    um = [v * 1000 for v in BASE["x_spool"]]
-    path = ascii_export(tmp_path / "iba.txt", rows=("tag", "unit"), units={"p1": "psi", "x_spool": "µm"}, data=False)
-    with path.open("a") as fh:
-        for i in range(5):
-            vals = dict(BASE, p1=psi, x_spool=um)
-            fh.write("\t".join([f"2025-03-01 13:00:0{i}.000", *(repr(vals[s][i]) for s in TAG)]) + "\n")
+    values = dict(BASE, p1=[v / (PSI_PA / 1e5) for v in BASE["p1"]], x_spool=[v * 1000 for v in BASE["x_spool"]])
+    path = ascii_export(tmp_path / "iba.txt", rows=("tag", "unit"), units={"p1": "psi", "x_spool": "µm"}, values=values)
     ingest(cfg, path, tmp_path / "wh")
     assert_frame_equal(lake(tmp_path / "wh"), base_lake(), check_exact=False, rel_tol=1e-6)
     other = ascii_export(tmp_path / "plain.txt", rows=("tag", "unit"), units={"p1": ""})
@@ -150,7 +144,7 @@ def test_a_unit_line_wider_than_the_tag_line_is_refused(tmp_path):
 # --- TDMS -------------------------------------------------------------------------------------
 
 
-def tdms_export(path, *, time_channel=False, units=None, group="rec", extra=(), lengths=None):
+def tdms_export(path, *, time_channel=False, units=None, group="rec", extra=(), values=BASE):
     """The reference data as a TDMS file: one channel per tag in ``group``; time from waveform
     properties (1 s increment) or from a time channel ``Time`` of TDMS timestamps (or epoch ms)."""
     units = UNIT | (units or {})
@@ -161,11 +155,10 @@ def tdms_export(path, *, time_channel=False, units=None, group="rec", extra=(), 
     elif time_channel:
         objects.append(ChannelObject(group, "Time", start + np.arange(5) * np.timedelta64(1, "s")))
     for s, tag in TAG.items():
-        props = {"unit_string": units[s]} if units[s] is not None else {}
+        props = {"unit_string": units[s]}
         if not time_channel:
             props |= {"wf_start_time": start, "wf_increment": 1.0, "wf_start_offset": 0.0}
-        n = (lengths or {}).get(s, 5)
-        objects.append(ChannelObject(group, tag, np.array(BASE[s][:n]), properties=props))
+        objects.append(ChannelObject(group, tag, np.array(values[s]), properties=props))
     objects += list(extra)
     with TdmsWriter(str(path)) as w:
         w.write_segment(objects)
@@ -252,3 +245,23 @@ def test_tdms_files_need_the_wide_layout_and_a_time(tmp_path):
         w.write_segment([ChannelObject("rec", tag, np.array(BASE[s])) for s, tag in TAG.items()])
     with pytest.raises(ValvemonError, match=r"bare.tdms: channel 'rec'/'MILL1.V017.PS' has no time: neither a time channel 'Time' \(export.timestamp_column\) nor the waveform properties"):
         ingest(plant_file(tmp_path), bare, tmp_path / "wh")
+
+
+@pytest.mark.parametrize("fmt", ["ascii", "tdms"])
+def test_the_whole_file_read_of_backfill_gives_the_same_lake(tmp_path, fmt):
+    """``read_export`` (the backfill's read, and the fallback for exports that cannot be streamed)
+    reads both formats whole, with the file's units (p1 in psi, left out of the configuration)."""
+    from flows.common.config import load_plant_config
+    from flows.ingest.flow import merge_export
+    from flows.ingest.read import read_export
+    from transforms.ingest import TagTable
+
+    config = load_plant_config(plant_file(tmp_path, header_rows=["skip", "tag", "name", "unit"], drop_units=["p1"]))
+    psi = dict(BASE, p1=[v / (PSI_PA / 1e5) for v in BASE["p1"]])
+    make = ascii_export if fmt == "ascii" else tdms_export
+    path = make(tmp_path / f"rec.{'txt' if fmt == 'ascii' else 'tdms'}", units={"p1": "psi"}, values=psi)
+    ef = read_export(path, config.export, TagTable.from_config(config))
+    assert ef.first_line == (5 if fmt == "ascii" else 1) and ef.units[TAG["p1"]][0] == "psi"
+    report, _ = merge_export(path, ef, config, tmp_path / "wh", "run", TagTable.from_config(config))
+    assert report.rows_out == 5
+    assert_frame_equal(lake(tmp_path / "wh"), base_lake(), check_exact=False, rel_tol=1e-6)
