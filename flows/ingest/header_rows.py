@@ -67,7 +67,7 @@ def read_header_rows(fh: IO[bytes], export: ExportSpec, where: str) -> HeaderRow
     ------
     ValvemonError
         Naming the file and line: fewer lines than header rows, a header line holding data (the
-        header rows are missing), a header line with another number of fields than the tag line.
+        header rows are missing), a header line with more fields than the tag line.
     """
     kinds = export.header_rows
     expected = f"export.header_rows = {list(kinds)}"
