@@ -143,9 +143,11 @@ def open_tdms(path: Path) -> TdmsFile:
         tdms = TdmsFile.open(path, raw_timestamps=True)
     except (ValueError, EOFError, OSError, KeyError) as exc:
         raise ValvemonError(f"{path}: not a readable TDMS file ({str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__})") from None
-    segments = tdms._reader._segments  # npTDMS keeps no public record of where the last whole segment ends
+    # npTDMS keeps no public record of where the last whole segment ends (a cut in a segment's
+    # metadata ends its reading silently); without that record, its file_status alone is checked
+    segments = getattr(getattr(tdms, "_reader", None), "_segments", None)
     size = path.stat().st_size
-    end = segments[-1].next_segment_pos if segments else 0
+    end = size if segments is None else segments[-1].next_segment_pos if segments else 0
     if tdms.file_status.incomplete_final_segment or end != size:
         tdms.close()
         raise ValvemonError(f"{path}: truncated TDMS file (its last segment ends at byte {end:,} of {size:,} or is incomplete; expected whole segments)")
