@@ -66,8 +66,9 @@ def read_header_rows(fh: IO[bytes], export: ExportSpec, where: str) -> HeaderRow
     Raises
     ------
     ValvemonError
-        Naming the file and line: fewer lines than header rows, a header line holding data (the
-        header rows are missing), a header line with more fields than the tag line.
+        Naming the file and line: fewer lines than header rows, a tag line without the time
+        column, a header line holding data (the header rows are missing), a header line with more
+        fields than the tag line.
     """
     kinds = export.header_rows
     expected = f"export.header_rows = {list(kinds)}"
@@ -80,6 +81,12 @@ def read_header_rows(fh: IO[bytes], export: ExportSpec, where: str) -> HeaderRow
     fields = [_fields(line, export.separator) for line in raw]
     t = kinds.index("tag")
     names = fields[t]
+    if export.timestamp_column not in names:
+        found = ", ".join(repr(c) for c in names[:4])
+        raise ValvemonError(
+            f"{where}: line {t + 1}: expected the header line 'tag' ({expected}) with the time column {export.timestamp_column!r} "
+            f"(export.timestamp_column), found {found}{', …' if len(names) > 4 else ''}"
+        )
     for i, (kind, row) in enumerate(zip(kinds, fields)):
         if kind == "skip":
             continue

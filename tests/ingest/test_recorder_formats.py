@@ -124,6 +124,14 @@ def test_header_rows_missing_is_one_clear_line(tmp_path):
     assert str(err.value) == (
         f"{path}: line 2: expected the header line 'name' (export.header_rows = ['tag', 'name', 'unit']), found numbers (data): the header rows are missing"
     )
+    bare = tmp_path / "no_header.txt"
+    bare.write_text("\n".join(path.read_text().splitlines()[1:]) + "\n")
+    with pytest.raises(ValvemonError) as err:
+        ingest(cfg, bare, tmp_path / "wh")
+    assert str(err.value) == (
+        f"{bare}: line 1: expected the header line 'tag' (export.header_rows = ['tag', 'name', 'unit']) with the time column 'Time' "
+        "(export.timestamp_column), found '2025-03-01 13:00:00.000', '210.0', '2.0', '100.0', …"
+    )
     short = tmp_path / "short.txt"
     short.write_text("Time\tMILL1.V017.PS\n")
     with pytest.raises(ValvemonError, match=r"short.txt: expected 3 header lines \(export.header_rows = \['tag', 'name', 'unit'\]\), the file has 1$"):
