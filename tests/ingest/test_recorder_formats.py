@@ -273,3 +273,27 @@ def test_the_whole_file_read_of_backfill_gives_the_same_lake(tmp_path, fmt):
     report, _ = merge_export(path, ef, config, tmp_path / "wh", "run", TagTable.from_config(config))
     assert report.rows_out == 5
     assert_frame_equal(lake(tmp_path / "wh"), base_lake(), check_exact=False, rel_tol=1e-6)
+
+
+@pytest.mark.parametrize(
+    "make, expected",
+    [
+        (lambda d: ascii_export(d / "mismatch.txt", rows=("tag", "name", "unit"), units={"p2": "psi"}), "unit 'psi' in the file, 'bar' in the configuration (valves[0].tags.p2.unit)"),
+        (lambda d: ascii_export(d / "one_header.txt", rows=("tag",)), "line 2: expected the header line 'name'"),
+        (lambda d: _cut(tdms_export(d / "cut.tdms"), 8), "truncated TDMS file"),
+    ],
+)
+def test_bad_recorder_files_are_one_line_with_exit_status_1(tmp_path, monkeypatch, capsys, make, expected):
+    from tests.ingest.conftest import run_cli
+
+    cfg = plant_file(tmp_path, header_rows=["tag", "name", "unit"])
+    path = make(tmp_path)
+    code, out, err = run_cli(["ingest", "--config", str(cfg), "--warehouse", str(tmp_path / "wh"), str(path)], monkeypatch, capsys)
+    assert code == 1 and out == ""
+    assert err.count("\n") == 1 and err.startswith(f"valvemon: error: {path}: ") and expected in err
+    assert not (tmp_path / "wh" / "lake").exists()
+
+
+def _cut(path, n):
+    path.write_bytes(path.read_bytes()[:-n])
+    return path
