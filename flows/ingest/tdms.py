@@ -19,6 +19,7 @@ is bounded by the batch, not by the file.
 
 from __future__ import annotations
 
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterator
@@ -131,27 +132,34 @@ def tdms_layout(tdms: TdmsFile, export: ExportSpec, where: str) -> TdmsLayout:
     return TdmsLayout(channels, [ch.name for ch in channels], time, start_ns, step_ns, length, units)
 
 
-def open_tdms(path: Path) -> TdmsFile:
-    """The file's metadata (no data read); refuses a file whose last segment was cut off.
+@contextmanager
+def open_tdms(path: Path) -> Iterator[TdmsFile]:
+    """The file's metadata (no data read), open for reading slices; refuses a file whose last
+    segment was cut off.
+
+    The file is given to npTDMS as an open file, not a path, so that it reads the metadata from
+    the ``.tdms`` itself and not from a ``.tdms_index`` beside it (which the content hash does not
+    cover and which may be stale).
 
     Raises
     ------
     ValvemonError
         Not a TDMS file, or truncated (npTDMS itself only warns and reads what is there).
     """
-    try:
-        tdms = TdmsFile.open(path, raw_timestamps=True)
-    except (ValueError, EOFError, OSError, KeyError) as exc:
-        raise ValvemonError(f"{path}: not a readable TDMS file ({str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__})") from None
-    # npTDMS keeps no public record of where the last whole segment ends (a cut in a segment's
-    # metadata ends its reading silently); without that record, its file_status alone is checked
-    segments = getattr(getattr(tdms, "_reader", None), "_segments", None)
-    size = path.stat().st_size
-    end = size if segments is None else segments[-1].next_segment_pos if segments else 0
-    if tdms.file_status.incomplete_final_segment or end != size:
-        tdms.close()
-        raise ValvemonError(f"{path}: truncated TDMS file (its last segment ends at byte {end:,} of {size:,} or is incomplete; expected whole segments)")
-    return tdms
+    with open(path, "rb") as fh:
+        try:
+            tdms = TdmsFile.open(fh, raw_timestamps=True)
+        except (ValueError, EOFError, OSError, KeyError) as exc:
+            raise ValvemonError(f"{path}: not a readable TDMS file ({str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__})") from None
+        with tdms:
+            # npTDMS keeps no public record of where the last whole segment ends (a cut in a segment's
+            # metadata ends its reading silently); without that record, its file_status alone is checked
+            segments = getattr(getattr(tdms, "_reader", None), "_segments", None)
+            size = path.stat().st_size
+            end = size if segments is None else segments[-1].next_segment_pos if segments else 0
+            if tdms.file_status.incomplete_final_segment or end != size:
+                raise ValvemonError(f"{path}: truncated TDMS file (its last segment ends at byte {end:,} of {size:,} or is incomplete; expected whole segments)")
+            yield tdms
 
 
 def tdms_units(path: Path, export: ExportSpec) -> FileUnits:

@@ -297,3 +297,16 @@ def test_bad_recorder_files_are_one_line_with_exit_status_1(tmp_path, monkeypatc
 def _cut(path, n):
     path.write_bytes(path.read_bytes()[:-n])
     return path
+
+
+def test_a_tdms_index_beside_the_file_is_not_read(tmp_path):
+    """npTDMS given a path prefers ``rec.tdms_index`` for the metadata; the ingest reads the
+    ``.tdms`` itself (the content hash covers only it), so a stale index changes nothing."""
+    other = tmp_path / "other"
+    other.mkdir()
+    with TdmsWriter(str(other / "rec.tdms"), index_file=True) as w:  # an index of other data: 2 samples
+        w.write_segment([ChannelObject("rec", tag, np.array(BASE[s][:2])) for s, tag in TAG.items()])
+    path = tdms_export(tmp_path / "rec.tdms")
+    (tmp_path / "rec.tdms_index").write_bytes((other / "rec.tdms_index").read_bytes())
+    ingest(plant_file(tmp_path), path, tmp_path / "wh")
+    assert_frame_equal(lake(tmp_path / "wh"), base_lake())
