@@ -223,6 +223,35 @@ def test_max_bad_share_1_keeps_a_mostly_faulty_file_in_quarantine(warehouse, tmp
     assert table(wh, "quarantine").filter(pl.col("source_file") == str(path))["reason"].unique().to_list() == ["implausible_time"]
 
 
+@pytest.mark.parametrize("max_bad_share, refused_", [(1.0, False), (0.5, True)])
+def test_quarantine_rows_beyond_the_bound_wait_on_disk_and_are_removed(warehouse, tmp_path, monkeypatch, max_bad_share, refused_):
+    """Memory does not grow with the quarantined samples: past ``SPILL_ROWS`` they go to temporary
+    Parquet files, inserted with the file's ledger in file order, then deleted (also when refused)."""
+    import tempfile
+
+    import flows.ingest.spill
+
+    cfg, wh = warehouse(max_bad_share=max_bad_share)
+    small_batches(monkeypatch, 1024)
+    monkeypatch.setattr(flows.ingest.spill, "SPILL_ROWS", 20)
+    spill_dir = tmp_path / "tmp"
+    spill_dir.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(spill_dir))
+    written = []
+    real = pl.DataFrame.write_parquet
+    monkeypatch.setattr(pl.DataFrame, "write_parquet", lambda self, path, **kw: (written.append(self.height), real(self, path, **kw))[1])
+    path = write_csv(tmp_path / "2099.csv", long_rows(seconds=40, start=datetime(2099, 3, 2, tzinfo=timezone.utc)))
+    if refused_:
+        assert "40 of 40 samples of tag MILL1.V017.PS in the file (100.0%) are at implausible times" in refused(cfg, path, wh)
+    else:
+        ingest(cfg, path, wh)
+        q = table(wh, "quarantine").filter(pl.col("source_file") == str(path))
+        assert q["line"].to_list() == list(range(2, 242)) and set(q["reason"]) == {"implausible_time"}
+        assert file_row(wh, path)["quarantined"] == 240
+    assert len(written) >= 5 and all(n >= 20 for n in written[:5])  # spilled, in parts of >= SPILL_ROWS rows
+    assert list(spill_dir.iterdir()) == []
+
+
 @pytest.mark.parametrize("faulty, accepted", [(10, True), (30, False)])
 def test_the_share_is_per_file_over_all_its_batches(warehouse, tmp_path, monkeypatch, faulty, accepted):
     """Faults bunched in one batch of ~80 rows: 10 of a tag's 334 samples (3 %) are quarantined
