@@ -323,7 +323,7 @@ class _Faults:
             column = SIGNAL_COLUMN[tags.signals[tid]]
             return f"tag {tag}: valve {valve}, column {column} at {_iso(t_ns)}: value {value_si!r} fails check {tags.check_name(tid, value_si)!r} (line {line})"
         if t_ns > self.t_hi:
-            return f"line {line}: tag {tag}: time {_iso(t_ns)} is more than a day after the ingest's time {_iso(self.t_hi - FUTURE_TOLERANCE_NS)}"
+            return f"line {line}: tag {tag}: time {_iso(t_ns)} is more than a day after the ingest's time {_iso((self.t_hi - FUTURE_TOLERANCE_NS) // 10**9 * 10**9)}"
         return f"line {line}: tag {tag}: time {_iso(t_ns)} is before valve {valve} was commissioned ({_iso(int(tags.commissioned_ns[tid]))})"
 
 
