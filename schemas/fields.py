@@ -285,6 +285,10 @@ EDGE_FIT_FIELDS: tuple[Field, ...] = (
     Field("u_max_mm", pl.Float64, "mm", "Largest opening coordinate among the points.", nullable=True),
     Field("baseline_version", pl.Int32, "", "Version of the baseline characteristic fitted against.", nullable=True),
     Field("monitored_at", UTC_US, "", "When this row was computed."),
+    Field("leak_scale", pl.Float64, "", "The edge's closed-edge leakage in this window over Eq. 3's, 1 mm inside the edge (0 = none).",
+          nullable=True, ge=0.0),
+    Field("leak_scale_ci_low", pl.Float64, "", "Lower bound of the 95 % confidence interval of leak_scale.", nullable=True),
+    Field("leak_scale_ci_high", pl.Float64, "", "Upper bound of the 95 % confidence interval of leak_scale.", nullable=True),
 )
 """One row per valve, edge and monitoring window (table ``edge_fits``, interfaces.md)."""
 
@@ -302,6 +306,11 @@ BASELINE_FIELDS: tuple[Field, ...] = (
     Field("alpha_vs_nominal", pl.Float64, "", "Scale of the baseline against the nominal characteristic.", nullable=True),
     Field("x_vs_nominal_mm", pl.Float64, "mm", "Shift of the baseline against the nominal characteristic.", nullable=True),
     Field("created_at", UTC_US, "", "When this version was stored."),
+    Field("leak_branch_scale", pl.Float64, "", "λ₁: the closed edge's leakage, Eq. 3's branch scaled by this (1 = Eq. 3) ...", nullable=True, ge=0.0),
+    Field("leak_gap_scale", pl.Float64, "", "... plus λ₂ × its value at the closing point (a constant gap flow; 0 = none).", nullable=True, ge=0.0),
+    Field("leak_scale", pl.Float64, "", "Identified leakage over Eq. 3's 1 mm inside the closed edge (1 = Eq. 3, 0 = none).", nullable=True, ge=0.0),
+    Field("leak_scale_ci_low", pl.Float64, "", "Lower bound of the 95 % interval of leak_scale (NULL: not identified, Eq. 3 kept).", nullable=True),
+    Field("leak_scale_ci_high", pl.Float64, "", "Upper bound of the 95 % interval of leak_scale.", nullable=True),
 )
 """Versioned baseline characteristics per valve and edge (table ``baselines``)."""
 
