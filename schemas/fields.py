@@ -406,6 +406,8 @@ VALVE_CONDITION_FIELDS: tuple[Field, ...] = (
     Field("n_recent_alarms", pl.Int64, "", "Alarm windows within fault_hold_hours of the latest ok window.", ge=0),
     Field("eq9_ok", pl.Boolean, "", "Latest Eq. 9 standstill check of the valve passed (null: no standstill data).", nullable=True),
     Field("edge_order", pl.Int32, "", "1..4 for s1, 1r, s2, 2r (for sorting)."),
+    Field("leak_scale", pl.Float64, "", "Closed-edge leakage over Eq. 3's (0 = none), median over the ok windows (wear signal).", nullable=True),
+    Field("leak_scale_baseline", pl.Float64, "", "The same at commissioning (1 for a nominal baseline: Eq. 3 assumed).", nullable=True),
 )
 """View ``valve_condition`` (interfaces.md), as exported to ``export/valve_condition.parquet``."""
 
