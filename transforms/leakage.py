@@ -33,12 +33,14 @@ __all__ = ["LEAK_REF_M", "closed_leakage", "effective_scale", "inflation", "leak
 
 
 @numba.njit(cache=True)
-def leak_scale_step(u, area, leak, offsets, ok, alpha, xhat, kstart, kend, kn, kv, ks):
+def leak_scale_step(u, area, leak, offsets, ok, alpha, xhat, kstart, kend, kn, kv, ks, block):
     """Per population g (points offsets[g]:offsets[g+1] of ``u``, ``area`` = plain − λ_g ℓ and
     ``leak`` = ℓ; Â on kn[kstart[g]:kend[g]] with slopes ``ks``; (α̂, x̂) = (alpha[g], xhat[g]) where
-    ``ok[g]``): (step, info, sigma2, rho) — the Gauss–Newton step Δλ = ⟨ℓ⊥, r⟩ / ‖ℓ⊥‖², the
-    information ‖ℓ⊥‖² [m⁴], the residual variance σ² = (‖r‖² − ⟨ℓ⊥, r⟩²/‖ℓ⊥‖²)/(N − 3) [m⁴] and
-    the residuals' lag-1 autocorrelation ρ. NaN where there is no estimate."""
+    ``ok[g]``), on the means of ``block`` consecutive points' equations (the load's ringing
+    filtered out, as at commissioning): (step, info, sigma2, rho) — the Gauss–Newton step
+    Δλ = ⟨ℓ⊥, r⟩ / ‖ℓ⊥‖², the information ‖ℓ⊥‖² [m⁴], the residual variance
+    σ² = (‖r‖² − ⟨ℓ⊥, r⟩²/‖ℓ⊥‖²)/(M − 3) [m⁴] (M block means) and the lag-1 autocorrelation ρ of
+    the block residuals. NaN where there is no estimate."""
     g_n = offsets.shape[0] - 1
     step = np.full(g_n, np.nan)
     info = np.full(g_n, np.nan)
@@ -47,22 +49,32 @@ def leak_scale_step(u, area, leak, offsets, ok, alpha, xhat, kstart, kend, kn, k
     for g in range(g_n):
         s = offsets[g]
         e = offsets[g + 1]
-        if not ok[g] or e - s < 4:
+        if not ok[g] or (e - s) // block < 4:
             continue
         k0 = kstart[g]
         k1 = kend[g]
         al = alpha[g]
         x = xhat[g]
         s11 = s12 = s22 = l1 = l2 = ll = lr = r1 = r2 = rr = r11 = 0.0
+        mb = md = mr = ml = 0.0
+        cnt = 0
+        m = 0
         prev = 0.0
         j = k0
         for i in range(s, e):
             t = u[i] + x
             j = walk_segment(kn, k0, k1, j, t)
             b = kv[j] + ks[j] * (t - kn[j])
-            d = al * ks[j]
-            r = area[i] - al * b
-            lk = leak[i]
+            mb += b
+            md += al * ks[j]
+            mr += area[i] - al * b
+            ml += leak[i]
+            cnt += 1
+            if cnt < block and i < e - 1:
+                continue
+            b, d, r, lk = mb / cnt, md / cnt, mr / cnt, ml / cnt
+            mb = md = mr = ml = 0.0
+            cnt = 0
             s11 += b * b
             s12 += b * d
             s22 += d * d
@@ -73,9 +85,10 @@ def leak_scale_step(u, area, leak, offsets, ok, alpha, xhat, kstart, kend, kn, k
             r1 += b * r
             r2 += d * r
             rr += r * r
-            if i > s:
+            if m > 0:
                 r11 += r * prev
             prev = r
+            m += 1
         det = s11 * s22 - s12 * s12
         if not det > 0.0:
             continue
@@ -88,7 +101,7 @@ def leak_scale_step(u, area, leak, offsets, ok, alpha, xhat, kstart, kend, kn, k
             continue
         step[g] = lrp / llp
         info[g] = llp
-        sigma2[g] = max(rr - lrp * lrp / llp, 0.0) / (e - s - 3)
+        sigma2[g] = max(rr - lrp * lrp / llp, 0.0) / (m - 3)
         rho[g] = r11 / rr if rr > 0.0 else 0.0
     return step, info, sigma2, rho
 

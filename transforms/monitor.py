@@ -345,6 +345,7 @@ def monitor(
     *,
     leakage: Mapping[str, Mapping[str, Characteristic]] | None = None,
     leak_scale: Mapping[str, Mapping[str, float]] | None = None,
+    leak_reference: Mapping[str, Mapping[str, Characteristic]] | None = None,
     leakage_passes: int | None = None,
     engine: str = "numba",
     points: bool = True,
@@ -358,18 +359,20 @@ def monitor(
     empty; the fits are the same): what the flows do, which store only fits and counts.
 
     ``leakage[valve][edge]``: α·A of each edge *at its baseline state* over the whole stroke
-    (closed branch included: the nominal Eq. 3 characteristic for a nominal baseline,
-    α_b·nominal(u + x_b) for a commissioning baseline, :class:`BaselineFit`). When given, every
-    point is corrected for the flow through the closed edge o of its port
-    (:mod:`transforms.points`), λ_o times that characteristic's closed branch (λ_o the
-    commissioning value ``leak_scale[valve][edge]``, default 1: Eq. 3's leakage), and the
+    (closed branch included: the nominal Eq. 3 characteristic for a nominal baseline, the
+    identified leakage for a commissioning baseline, :class:`BaselineFit` ``leakage``). When
+    given, every point is corrected for the flow through the closed edge o of its port
+    (:mod:`transforms.points`) by that characteristic's closed branch, and the
     correction follows each window's own state of o (:mod:`transforms.leakage`): after a first
     fit with o at its baseline state, o's leakage is rebuilt from o's estimate in the same
     window, α̂_o·L_o(u + x̂_o) (a fit that is not ``ok`` but has ≥ 50 points gives a scale-only
     estimate, none the baseline state), and the window is fitted again, warm-started;
     ``leakage_passes`` times (default: the largest ``leakage_passes`` of the valves' params).
-    Each fit row carries its edge's own λ̂ in the window and its interval (``leak_scale*``,
-    identified from the other edge of the port, :func:`_leak_columns`): reported, not used. The returned points carry the
+    Each fit row carries its edge's own leakage in the window and its interval (``leak_scale*``,
+    identified from the other edge of the port, :func:`_leak_columns`; reported, not used): the
+    commissioning value ``leak_scale[valve][edge]`` (default 1) plus the scale of an extra
+    Eq. 3-shaped leakage ``leak_reference[valve][edge]`` (Eq. 3's branch at the baseline state;
+    default ``leakage``) that the window asks for. The returned points carry the
     corrected areas. The baselines must have been built with the same correction
     (:func:`commissioning_baseline`).
     """
@@ -418,27 +421,32 @@ def monitor(
     leak = np.empty_like(plain)
     _leak_correct(u, plain, ratio, offsets, scale, shift, lam, *lk, area, leak)
     fits = fit_groups(groups, u, area, offsets, baselines, pmap, x_start_m=x0, sort=False)
+    if leak_reference is not None:  # the window's extra leakage in units of Eq. 3's branch
+        ref = _LeakPacked([leak_reference.get(v, {}).get(OPPOSITE_EDGE[e]) for v, e in zip(valve_ids, edge_ids, strict=True)])
+        _leak_correct(u, plain, ratio, offsets, scale, shift, np.zeros(g_n), ref.kstart, ref.kend, ref.kn, ref.kv, ref.ks,
+                      np.empty_like(plain), leak)  # fmt: skip
     fits = fits.with_columns(_leak_columns(fits, u, area, leak, offsets, lam_b, opposite, bk, pmap, valve_ids))
     out_points = res.points.with_columns(pl.Series("area_m2", area)) if points else res.points
     return MonitorResult(points=out_points, selection=res.selection, fits=sorted_fits(fits), windows=res.windows)
 
 
 def _leak_columns(fits, u, area, leak, offsets, lam_b, opposite, bk, pmap, valve_ids) -> list[pl.Series]:
-    """Each row's edge's λ̂_eff in the window: its commissioning λ_eff times the scale of the
-    commissioning leakage that the port's other population's final fit asks for (one
-    Gauss–Newton step from 1, all points), clipped to ≥ 0, and its interval (Student's t, the
-    serial-correlation factor); NaN where that fit is not ``ok``."""
+    """Each row's edge's leakage in the window: its commissioning λ_eff plus the scale of the
+    Eq. 3-shaped regressor ``leak`` that the port's other population's final fit asks for (one
+    Gauss–Newton step on block means, all points), clipped to ≥ 0, and its interval (Student's t,
+    the serial-correlation factor); NaN where that fit is not ``ok``."""
     ok = (fits["status"] == "ok").to_numpy()
     alpha = fits["alpha_hat"].to_numpy()
     xhat = fits["x_hat_m"].to_numpy()
-    step, info, sigma2, rho = leak_scale_step(u, area, leak, offsets, ok, alpha, xhat, *bk)
-    se = lam_b * np.sqrt(sigma2 / info) * inflation(rho)
-    lam = np.maximum(lam_b * (1.0 + step), 0.0)
-    n = np.diff(offsets)
+    block = np.int64(max(pmap[v].leak_block_points for v in set(valve_ids))) if valve_ids else np.int64(1)
+    step, info, sigma2, rho = leak_scale_step(u, area, leak, offsets, ok, alpha, xhat, *bk, block)
+    se = np.sqrt(sigma2 / info) * inflation(rho)
+    lam = np.maximum(lam_b + step, 0.0)
+    m = np.diff(offsets) // block  # block means
     levels = np.array([pmap[v].ci_level for v in valve_ids]) if len(valve_ids) else np.zeros(0)
     with np.errstate(invalid="ignore"):
-        half = stdtrit(np.maximum(n - 3, 1), 0.5 + levels / 2) * se
-    half = np.where(n > 3, half, np.nan)
+        half = stdtrit(np.maximum(m - 3, 1), 0.5 + levels / 2) * se
+    half = np.where(m > 3, half, np.nan)
     lam_row, half_row = lam[opposite], half[opposite]
     return [
         pl.Series("leak_scale", lam_row),
@@ -608,6 +616,9 @@ class BaselineFit:
     leak_scale_se: float = float("nan")
     """Standard error of λ_eff (with the serial-correlation factor); NaN: not identified (too
     few points on the other edge: Eq. 3's leakage kept)."""
+    leak_reference: Characteristic | None = None
+    """α_b·nominal(u + x_b): Eq. 3's leakage at the commissioning state, the unit in which the
+    windows report theirs (the ``leak_reference`` argument of :func:`monitor`)."""
 
 
 LEAK_ITERATIONS = 3
@@ -697,5 +708,6 @@ def commissioning_baseline(
             )  # fmt: skip
             check = plausibility(char, nominal[e], u_range=rng, x_search_m=params.x_hat_bound_m)
         eff, se = effective_scale(scaled_shifted(nominal[e], ab, xb), closing(e), lam[e], cov[e]) if leakage else (1.0, float("nan"))
-        out[e] = BaselineFit(e, char, n, rng, ab, xb, own, check, (float(lam[e][0]), float(lam[e][1])), eff, se)
+        out[e] = BaselineFit(e, char, n, rng, ab, xb, own, check, (float(lam[e][0]), float(lam[e][1])), eff, se,
+                             scaled_shifted(nominal[e], ab, xb))  # fmt: skip
     return out

@@ -171,6 +171,8 @@ class Baseline:
     :func:`transforms.leakage.closed_leakage`)."""
     leak_scale: float = 1.0
     """The identified leakage over Eq. 3's 1 mm inside the edge (``baselines.leak_scale``)."""
+    leak_reference: Characteristic | None = None
+    """Eq. 3's α·A at the baseline state (the unit of the windows' ``leak_scale``)."""
 
     @classmethod
     def from_row(cls, valve: ValveSpec, params: MonitorParams, row: dict) -> Baseline:
@@ -188,7 +190,7 @@ class Baseline:
             Characteristic.from_arrays(np.array(row["knots_u_mm"]) * 1e-3, np.array(row["values_mm2"]) * 1e-6),
             row["version"], row["source"], row["plausible"], row["plausibility_reasons"],
             closed_leakage(state, -params.underlap(row["edge"]) - x_mm * 1e-3, lam),
-            1.0 if eff is None or not np.isfinite(eff) else float(eff),
+            1.0 if eff is None or not np.isfinite(eff) else float(eff), state,
         )  # fmt: skip
 
 
@@ -284,7 +286,8 @@ def monitor_rows(valve: ValveSpec, params: MonitorParams, baselines: dict[str, B
         leaks = {e: scaled_shifted(nominal_characteristic(valve, e, params.x_hat_bound_m), 1.0, 0.0) if v is None else v
                  for e, v in leaks.items()}  # fmt: skip
     scales = {valve.id: {e: b.leak_scale for e, b in baselines.items()}}
-    return monitor(rows, params, chars, leakage={valve.id: leaks}, leak_scale=scales, points=False)
+    refs = {valve.id: {e: b.leak_reference if b.leak_reference is not None else leaks[e] for e, b in baselines.items()}}
+    return monitor(rows, params, chars, leakage={valve.id: leaks}, leak_scale=scales, leak_reference=refs, points=False)
 
 
 def lake_chunks(

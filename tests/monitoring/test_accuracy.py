@@ -92,6 +92,7 @@ def wear_study(seed: int, scatter_seed: int, trajectory=None, sensors=None, geom
         lake, params, {"V1": {e: b.characteristic for e, b in fitted.items()}},
         leakage={"V1": {e: b.leakage for e, b in fitted.items()}},
         leak_scale={"V1": {e: b.leak_scale for e, b in fitted.items()}},
+        leak_reference={"V1": {e: b.leak_reference for e, b in fitted.items()}},
     )  # fmt: skip
     w = res.fits["window_id"].to_numpy().astype(int)
     i = np.array([EDGES.index(e) for e in res.fits["edge"]])
