@@ -1,24 +1,23 @@
-"""Closed-edge leakage identified from the data: a leakage scale λ ≥ 0 per closed edge.
+"""Closed-edge leakage identified from the data (docs/monitoring.md, "Closed-edge leakage identified").
 
-Eq. 7 with the closed edge (docs/monitoring.md) subtracts, at every point of edge e, the flow
-through the other edge o of its port. With λ that flow is λ·ℓ_i,
+Eq. 7 with the closed edge subtracts, at every point of edge e, the flow through the other edge o
+of its port: o's closed-branch area at −u_i times the pressure ratio
 
-    ℓ_i = α_o L_o(x_o − u_i) · ratio_i,     ratio_i = sign(Δp_o) sqrt|Δp_o| / (sign(Δp_e) sqrt|Δp_e|),
+    ratio_i = sign(Δp_o) sqrt|Δp_o| / (sign(Δp_e) sqrt|Δp_e|).
 
-L_o the closed branch of Eq. 3 at o's state (α_o, x_o) and λ = 1 Eq. 3's leakage, λ = 0 none (a
-sharp-edged valve), λ = 4 worn lands. A point is then plain_i − λ ℓ_i, and Eq. 8 becomes
+The closed branch is a two-term family (:func:`closed_leakage`): Eq. 3's leakage branch at o's
+state times λ₁ plus λ₂ times o's area at its closing point (a constant gap flow, which worn lands
+tend to), λ₁, λ₂ ≥ 0; (1, 0) is Eq. 3's, (0, 0) no leakage (sharp edges). The two regressors at the
+points are :func:`leak_columns`; the coefficients are fitted at commissioning together with the
+characteristic (:func:`transforms.baseline.leak_scale_lstsq`, called by
+:func:`transforms.monitor.commissioning_baseline`), and reported as one number,
+:func:`effective_scale`: the leakage over Eq. 3's :data:`LEAK_REF_M` inside the edge.
 
-    min over (α̂, x̂, λ ≥ 0) of Σ (plain_i − λ ℓ_i − α̂ Â(u_i + x̂))²,
-
-linear in α̂ and λ. λ is identifiable when ℓ is not a combination of the fit's own Jacobian
-columns Â(u + x̂) and α̂ Â'(u + x̂): by the pressure ratio's variation at the same spool position
-(loads and speeds that differ between moves) and by the 1/|u| shape of the leakage over a wide
-u-range. :func:`leak_scale_step` is the Gauss–Newton step for λ at the (α̂, x̂) optimum of the
-current λ (the residual projected off the Jacobian), with its information ‖ℓ⊥‖²: the
-standard error of λ is σ/‖ℓ⊥‖, σ² the residual variance, widened like the fit's intervals for the
-serial correlation of the residuals. :func:`shrunk_scale` combines that step with the commissioning
-value as a prior (``MonitorParams.leak_scale_prior_sd``), so a window that barely identifies λ
-keeps the commissioning leakage instead of trading it against α̂ and x̂.
+In a window, :func:`leak_scale_step` is the Gauss–Newton step of an extra leakage ℓ at the
+(α̂, x̂) optimum (the residual projected off the fit's Jacobian Â(u + x̂), α̂ Â'(u + x̂)), on means
+of consecutive equations, with its information ‖ℓ⊥‖²: its standard error is σ/‖ℓ⊥‖, widened like
+the fit's intervals for the serial correlation of the residuals (:func:`inflation`). The monitor
+reports it; it does not correct with it (a window confounds it with α̂ and x̂).
 """
 
 from __future__ import annotations
