@@ -396,9 +396,8 @@ def monitor(
     lk = (packed.kstart, packed.kend, packed.kn, packed.kv, packed.ks)
     base = _LeakPacked([baselines.get(v, {}).get(e) for v, e in zip(valve_ids, edge_ids, strict=True)])
     bk = (base.kstart, base.kend, base.kn, base.kv, base.ks)
-    # the leakage is the commissioning one (the leakage characteristics); the window's own scale
-    # of it is reported, not used (a window rarely identifies it well enough, transforms.leakage)
-    lam = np.ones(g_n)
+    # the leakage is the commissioning one (the leakage characteristics); the window's own is
+    # reported, not used (a window rarely identifies it well enough, transforms.leakage)
     lam_b = np.array([(leak_scale or {}).get(v, {}).get(OPPOSITE_EDGE[e], 1.0) for v, e in zip(valve_ids, edge_ids, strict=True)])
     scale = np.ones(g_n)
     shift = np.zeros(g_n)
@@ -410,22 +409,27 @@ def monitor(
         idx, sub_off = _strided(offsets, FIRST_FIT_STRIDE)
         su, splain, sratio = u[idx], plain[idx], ratio[idx]
         sarea = np.empty_like(splain)
-        sleak = np.empty_like(splain)
         for _ in range(passes):
-            _leak_correct(su, splain, sratio, sub_off, scale, shift, lam, *lk, sarea, sleak)
+            _leak_correct(su, splain, sratio, sub_off, scale, shift, *lk, sarea, _NO_LEAK)
             status, alpha, xhat = _quick_fit(su, sarea, sub_off, baselines, pmap, valve_ids, edge_ids)
             own_a, own_x = _edge_states(status, alpha, xhat, su, sarea, sub_off, baselines, valve_ids, edge_ids)
             scale, shift = own_a[opposite], own_x[opposite]
             x0 = xhat
     area = np.empty_like(plain)
-    leak = np.empty_like(plain)
-    _leak_correct(u, plain, ratio, offsets, scale, shift, lam, *lk, area, leak)
+    _leak_correct(u, plain, ratio, offsets, scale, shift, *lk, area, _NO_LEAK)
     fits = fit_groups(groups, u, area, offsets, baselines, pmap, x_start_m=x0, sort=False)
-    if leak_reference is not None:  # the window's extra leakage in units of Eq. 3's branch
+    # the windows' own leakage, on every FIRST_FIT_STRIDE-th point (a report, at 1/8 of a pass):
+    # the points as corrected, and the regressor, Eq. 3's branch at o's state in the window
+    if not passes:
+        idx, sub_off = _strided(offsets, FIRST_FIT_STRIDE)
+        su, splain, sratio = u[idx], plain[idx], ratio[idx]
+    sarea = np.empty_like(splain)
+    sleak = np.empty_like(splain)
+    _leak_correct(su, splain, sratio, sub_off, scale, shift, *lk, sarea, sleak)
+    if leak_reference is not None:
         ref = _LeakPacked([leak_reference.get(v, {}).get(OPPOSITE_EDGE[e]) for v, e in zip(valve_ids, edge_ids, strict=True)])
-        _leak_correct(u, plain, ratio, offsets, scale, shift, np.zeros(g_n), ref.kstart, ref.kend, ref.kn, ref.kv, ref.ks,
-                      np.empty_like(plain), leak)  # fmt: skip
-    fits = fits.with_columns(_leak_columns(fits, u, area, leak, offsets, lam_b, opposite, bk, pmap, valve_ids))
+        _leak_correct(su, splain, sratio, sub_off, scale, shift, ref.kstart, ref.kend, ref.kn, ref.kv, ref.ks, np.empty_like(splain), sleak)
+    fits = fits.with_columns(_leak_columns(fits, su, sarea, sleak, sub_off, lam_b, opposite, bk, pmap, valve_ids))
     out_points = res.points.with_columns(pl.Series("area_m2", area)) if points else res.points
     return MonitorResult(points=out_points, selection=res.selection, fits=sorted_fits(fits), windows=res.windows)
 
@@ -433,12 +437,14 @@ def monitor(
 def _leak_columns(fits, u, area, leak, offsets, lam_b, opposite, bk, pmap, valve_ids) -> list[pl.Series]:
     """Each row's edge's leakage in the window: its commissioning λ_eff plus the scale of the
     Eq. 3-shaped regressor ``leak`` that the port's other population's final fit asks for (one
-    Gauss–Newton step on block means, all points), clipped to ≥ 0, and its interval (Student's t,
-    the serial-correlation factor); NaN where that fit is not ``ok``."""
+    Gauss–Newton step on block means of the strided points ``u``, ``area`` in ``offsets``: the
+    same 50 ms per block), clipped to ≥ 0, and its interval (Student's t, the serial-correlation
+    factor); NaN where that fit is not ``ok``."""
     ok = (fits["status"] == "ok").to_numpy()
     alpha = fits["alpha_hat"].to_numpy()
     xhat = fits["x_hat_m"].to_numpy()
-    block = np.int64(max(pmap[v].leak_block_points for v in set(valve_ids))) if valve_ids else np.int64(1)
+    block = max(pmap[v].leak_block_points for v in set(valve_ids)) if valve_ids else 1
+    block = np.int64(max(1, -(-block // FIRST_FIT_STRIDE)))  # the same span of time on the strided points
     step, info, sigma2, rho = leak_scale_step(u, area, leak, offsets, ok, alpha, xhat, *bk, block)
     se = np.sqrt(sigma2 / info) * inflation(rho)
     lam = np.maximum(lam_b + step, 0.0)
@@ -508,11 +514,17 @@ class _LeakPacked:
             self.ks[s1 - 1] = d[-1]
 
 
+_NO_LEAK = np.zeros(0)
+"""``leak`` of :func:`_leak_correct` when only the corrected points are wanted."""
+
+
 @numba.njit(cache=True)
-def _leak_correct(u, plain, ratio, offsets, scale, shift, lam, kstart, kend, kn, kv, ks, out, leak):
-    """leak_i = a_g·L_g(−u_i + x_g)·ratio_i and out_i = plain_i − λ_g·leak_i for the points of
-    each population g, L_g piecewise linear (linear beyond its end knots); the segment is walked
-    from the previous point's (points are in time order, so the walk is 0–1 steps)."""
+def _leak_correct(u, plain, ratio, offsets, scale, shift, kstart, kend, kn, kv, ks, out, leak):
+    """leak_i = a_g·L_g(−u_i + x_g)·ratio_i (unless ``leak`` is empty) and out_i = plain_i −
+    leak_i for the points of each population g, L_g piecewise linear (linear beyond its end
+    knots); the segment is walked from the previous point's (points are in time order, so the
+    walk is 0–1 steps)."""
+    keep = leak.shape[0] > 0
     for g in range(offsets.shape[0] - 1):
         s = offsets[g]
         e = offsets[g + 1]
@@ -522,14 +534,14 @@ def _leak_correct(u, plain, ratio, offsets, scale, shift, lam, kstart, kend, kn,
         k1 = kend[g]
         a = scale[g]
         x = shift[g]
-        lg = lam[g]
         j = k0
         for i in range(s, e):
             t = x - u[i]
             j = walk_segment(kn, k0, k1, j, t)
             lk = a * (kv[j] + ks[j] * (t - kn[j])) * ratio[i]
-            leak[i] = lk
-            out[i] = plain[i] - lg * lk
+            if keep:
+                leak[i] = lk
+            out[i] = plain[i] - lk
 
 
 FIRST_FIT_STRIDE = 8
