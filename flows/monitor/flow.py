@@ -223,8 +223,8 @@ def _baseline_rows(valve: ValveSpec, params: MonitorParams, warehouse: Path, ver
                     " for the initial characteristic (step 4a)"
                 )
             check = b.plausibility
-            rows.append((e, "commissioning", b.characteristic, b.n_points, check.ok, "; ".join(check.reasons), b.alpha_vs_nominal, b.x_vs_nominal_m,
-                         b.leak_coefficients, b.leak_scale, b.leak_scale_se))  # fmt: skip
+            rows.append((e, "commissioning", b.characteristic, b.n_points, check.ok, "; ".join(check.reasons), b.alpha_vs_nominal,
+                         b.x_vs_nominal_m, b.leak_coefficients, b.leak_scale, b.leak_scale_se))  # fmt: skip
     return pl.DataFrame(
         {
             "valve_id": [valve.id] * len(rows),
