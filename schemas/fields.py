@@ -200,7 +200,7 @@ MANIFEST_FIELDS: tuple[Field, ...] = (
     Field("file_hash", pl.Utf8, "", "Content hash of the file, 'blake3:' + BLAKE3-256 in hex ('sha256:' + SHA-256 for files ingested before BLAKE3); the table's key."),
     Field("source_file", pl.Utf8, "", "Path of the file when it was ingested."),
     Field("size_bytes", pl.Int64, "B", "File size.", ge=0),
-    Field("file_format", pl.Utf8, "", "How the file was read.", isin=("csv", "csv.gz", "parquet")),
+    Field("file_format", pl.Utf8, "", "How the file was read.", isin=("csv", "csv.gz", "parquet", "tdms")),
     Field("layout", pl.Utf8, "", "Export layout of the plant configuration.", isin=("long", "wide")),
     Field("rows_in", pl.Int64, "", "Data rows in the file.", ge=0),
     Field("samples_in", pl.Int64, "", "Tag values in the file (long: one per row; wide: non-empty cells).", ge=0),

@@ -13,6 +13,12 @@ Keys the project adds to the specification (all optional; every key is documente
   nothing is interpolated across a gap. [s]
 - ``[export] duplicate_rule`` (default ``"last"``): the same tag and time with different
   values keeps the ``"last"`` row in file order, or ``"first"``, or is an ``"error"``.
+- ``[export] header_rows`` (wide only; default: one header line of tags): what each header line of
+  a wide text export holds, in file order: ``"tag"`` (the column names, once), ``"unit"`` (each
+  column's unit, at most once; checked against ``[valves.tags]``, or taken from it where a tag
+  leaves ``unit`` out), ``"name"`` (descriptions, shown in messages) or ``"skip"`` (anything
+  else) — iba's ASCII export is ``["tag", "name", "unit"]`` (:data:`HEADER_ROW_KINDS`).
+- ``[export] tdms_group`` (optional): the TDMS group whose channels are read (default: every group).
 - ``[valves] baseline_window = { start = ..., end = ... }`` (spec) and ``[valves] scenario``
   (written by ``valvemon simulate`` for the record; ignored by monitoring).
 - ``[valve_types.NAME.bounds]``: the condition bounds of step 5b (:class:`ConditionBounds`,
@@ -46,7 +52,8 @@ class TagSpec:
     """One signal's historian tag and the unit its values are exported in."""
 
     tag: str
-    unit: str
+    unit: str | None
+    """None: taken from each export file (``export.header_rows`` holds ``"unit"``)."""
 
 
 @dataclass(frozen=True)
@@ -65,6 +72,20 @@ class ExportSpec:
     sample_rate_hz: float = 1000.0
     max_gap_s: float = 0.005
     duplicate_rule: str = "last"
+    header_rows: tuple[str, ...] = ("tag",)
+    """What each header line of a text export holds, in order (:data:`HEADER_ROW_KINDS`)."""
+    tdms_group: str | None = None
+    """The TDMS group that holds the tags (None: every group)."""
+
+    @property
+    def units_in_file(self) -> bool:
+        """Whether text exports carry a unit row (TDMS files may carry ``unit_string`` anyway)."""
+        return "unit" in self.header_rows
+
+
+HEADER_ROW_KINDS: tuple[str, ...] = ("tag", "name", "unit", "skip")
+"""What a header line of a text export can hold: the tags (the column names; exactly one such
+line), names (descriptions), units, or anything else (skipped)."""
 
 
 DEFAULT_WINDOW_S = 60.0
@@ -205,9 +226,13 @@ class ValveSpec:
         """Rod-side annulus area A2 = A1 − π d² / 4. [m²]"""
         return self.piston_area_m2 - math.pi * self.rod_diameter_m**2 / 4
 
-    def si_factor(self, signal: str) -> float:
-        """Factor from the exported unit of ``signal`` to SI."""
-        return si_factor(self.tags[signal].unit, SIGNAL_KIND[signal], self.design.x_max_m)
+    def si_factor(self, signal: str, unit: str | None = None) -> float:
+        """Factor from the exported unit of ``signal`` (or ``unit``) to SI; NaN when neither the
+        configuration nor the caller gives one (units taken from each file)."""
+        unit = unit if unit is not None else self.tags[signal].unit
+        if unit is None:
+            return math.nan
+        return si_factor(unit, SIGNAL_KIND[signal], self.design.x_max_m)
 
 
 @dataclass(frozen=True)
@@ -318,7 +343,7 @@ _RETENTION_KEYS = {"keep_days", "mode", "thin_keep_s_per_hour"}
 _EXPORT_KEYS = {
     "layout", "timestamp_column", "timestamp_format", "tag_column", "value_column",
     "quality_column", "good_quality", "separator", "decimal", "sample_rate_hz", "max_gap_s",
-    "duplicate_rule",
+    "duplicate_rule", "header_rows", "tdms_group",
 }  # fmt: skip
 
 
@@ -347,7 +372,28 @@ def _parse_export(raw: Any) -> ExportSpec:
     if kw["max_gap_s"] < 1.0 / kw["sample_rate_hz"]:
         raise ConfigError("export.max_gap_s: must be at least one sample period")
     kw["duplicate_rule"] = _str(t.get("duplicate_rule", "last"), "export.duplicate_rule", ("last", "first", "error"))
+    if "header_rows" in t:
+        kw["header_rows"] = _parse_header_rows(t["header_rows"], layout)
+    if "tdms_group" in t:
+        kw["tdms_group"] = _str(t["tdms_group"], "export.tdms_group")
     return ExportSpec(**kw)
+
+
+def _parse_header_rows(raw: Any, layout: str) -> tuple[str, ...]:
+    key = "export.header_rows"
+    if not isinstance(raw, list) or not raw or not all(isinstance(r, str) for r in raw):
+        raise ConfigError(f"{key}: expected a non-empty list of {', '.join(repr(k) for k in HEADER_ROW_KINDS)}, got {raw!r}")
+    for i, r in enumerate(raw):
+        if r not in HEADER_ROW_KINDS:
+            raise ConfigError(f"{key}[{i}]: {r!r} is not one of {', '.join(repr(k) for k in HEADER_ROW_KINDS)}")
+    for kind, most in (("tag", 1), ("unit", 1), ("name", 1)):
+        if raw.count(kind) > most:
+            raise ConfigError(f"{key}: {kind!r} may occur only once (the file has one line of {kind}s)")
+    if "tag" not in raw:
+        raise ConfigError(f"{key}: needs one 'tag' line (the column names, matched to the configured tags)")
+    if layout != "wide" and raw != ["tag"]:
+        raise ConfigError(f"{key}: header rows other than 'tag' are only for export.layout = 'wide'")
+    return tuple(raw)
 
 
 def _parse_retention(raw: Any) -> RetentionSpec:
@@ -484,7 +530,7 @@ _VALVE_KEYS = {
 } | _DESIGN_KEYS  # fmt: skip
 
 
-def _parse_tags(raw: Any, key: str, x_max_m: float) -> dict[str, TagSpec]:
+def _parse_tags(raw: Any, key: str, x_max_m: float, units_in_file: bool = False) -> dict[str, TagSpec]:
     t = _table(raw, key)
     _no_unknown(t, set(SIGNALS), key)
     tags: dict[str, TagSpec] = {}
@@ -497,7 +543,12 @@ def _parse_tags(raw: Any, key: str, x_max_m: float) -> dict[str, TagSpec]:
         spec = _table(t[signal], skey)
         _no_unknown(spec, {"tag", "unit"}, skey)
         tag = _str(_required(spec, "tag", skey), f"{skey}.tag")
-        unit = _str(_required(spec, "unit", skey), f"{skey}.unit")
+        if "unit" not in spec and units_in_file:
+            tags[signal] = TagSpec(tag, None)  # the unit row of each file says it
+            continue
+        if "unit" not in spec:
+            raise ConfigError(f"{skey}.unit: missing required key (it may be left out only when export.header_rows has a 'unit' line)")
+        unit = _str(spec["unit"], f"{skey}.unit")
         try:
             si_factor(unit, SIGNAL_KIND[signal], x_max_m)
         except UnitError as exc:
@@ -506,7 +557,7 @@ def _parse_tags(raw: Any, key: str, x_max_m: float) -> dict[str, TagSpec]:
     return tags
 
 
-def _parse_valve(raw: Any, key: str, types: dict[str, ValveDesign], tz: ZoneInfo) -> ValveSpec:
+def _parse_valve(raw: Any, key: str, types: dict[str, ValveDesign], tz: ZoneInfo, units_in_file: bool = False) -> ValveSpec:
     t = _table(raw, key)
     _no_unknown(t, _VALVE_KEYS, key)
     vid = _str(_required(t, "id", key), f"{key}.id")
@@ -556,7 +607,7 @@ def _parse_valve(raw: Any, key: str, types: dict[str, ValveDesign], tz: ZoneInfo
         v02_m3=v02,
         bulk_modulus_pa=num("bulk_modulus_gpa", 0, 10, 1e9),
         density_kg_m3=num("density_kg_m3", 0, 5000, 1.0),
-        tags=_parse_tags(_required(t, "tags", key), f"{key}.tags", design.x_max_m),
+        tags=_parse_tags(_required(t, "tags", key), f"{key}.tags", design.x_max_m, units_in_file),
         baseline_window=baseline,
         scenario=_str(t["scenario"], f"{key}.scenario") if "scenario" in t else None,
         overrides=overrides,
@@ -593,7 +644,7 @@ def parse_plant_config(data: dict) -> PlantConfig:
     valves_raw = _required(data, "valves", "")
     if not isinstance(valves_raw, list) or not valves_raw:
         raise ConfigError("valves: expected at least one [[valves]] table")
-    valves = tuple(_parse_valve(v, f"valves[{i}]", types, tz) for i, v in enumerate(valves_raw))
+    valves = tuple(_parse_valve(v, f"valves[{i}]", types, tz, export.units_in_file) for i, v in enumerate(valves_raw))
     seen_ids: dict[str, int] = {}
     seen_tags: dict[str, str] = {}
     for i, v in enumerate(valves):
@@ -669,6 +720,10 @@ def plant_config_to_dict(config: PlantConfig) -> dict:
         "max_gap_s": e.max_gap_s,
         "duplicate_rule": e.duplicate_rule,
     }
+    if e.header_rows != ExportSpec.header_rows:
+        export["header_rows"] = list(e.header_rows)
+    if e.tdms_group is not None:
+        export["tdms_group"] = e.tdms_group
     valves = []
     for v in config.valves:
         d: dict[str, Any] = {"id": v.id, "type": v.type, "commissioned": _iso(v.commissioned)}
@@ -686,7 +741,7 @@ def plant_config_to_dict(config: PlantConfig) -> dict:
             d["baseline_window"] = {"start": _iso(v.baseline_window[0]), "end": _iso(v.baseline_window[1])}
         if v.scenario is not None:
             d["scenario"] = v.scenario
-        d["tags"] = {s: {"tag": t.tag, "unit": t.unit} for s, t in v.tags.items()}
+        d["tags"] = {s: {"tag": t.tag} | ({"unit": t.unit} if t.unit is not None else {}) for s, t in v.tags.items()}
         valves.append(d)
     out: dict[str, Any] = {"plant": {"name": config.name, "timezone": config.timezone}, "export": export}
     if config.monitor != MonitorSpec():

@@ -187,10 +187,11 @@ def merge_batches(
     from flows.ingest.staging import LakeStager
     from transforms.ingest.export import ExportResult
     from transforms.ingest.stream import ExportStream
+    from transforms.ingest.units import tags_with_file_units
 
-    stream = ExportStream(config, tags)
     stager = LakeStager(warehouse, config, lock)
     try:
+        stream = ExportStream(config, tags_with_file_units(tags, config, source.units))  # the file's own units, where it states them
         for df, first_line, final in batches:
             for frame in stream.feed(df, first_line=first_line, final=final):
                 stager.add(frame)

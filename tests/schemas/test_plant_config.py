@@ -2,6 +2,7 @@
 
 import copy
 import math
+import re
 import tomllib
 from datetime import datetime, timezone
 from pathlib import Path
@@ -282,3 +283,49 @@ def test_broken_monitor_window_names_the_key(raw, monitor, message):
     with pytest.raises(ConfigError) as err:
         parse_plant_config(raw)
     assert message in str(err.value)
+
+
+def _wide(raw: dict, **export) -> dict:
+    for k in ("tag_column", "value_column", "quality_column", "good_quality"):
+        raw["export"].pop(k)
+    raw["export"] |= {"layout": "wide"} | export
+    return raw
+
+
+def test_header_rows_default_one_tag_line_and_round_trip(raw, tmp_path):
+    assert parse_plant_config(raw).export.header_rows == ("tag",)
+    _wide(raw, header_rows=["skip", "tag", "name", "unit"], tdms_group="fast")
+    del raw["valves"][0]["tags"]["p1"]["unit"]  # taken from the files' unit line
+    config = parse_plant_config(raw)
+    assert config.export.header_rows == ("skip", "tag", "name", "unit") and config.export.tdms_group == "fast"
+    assert config.valves[0].tags["p1"].unit is None and math.isnan(config.valves[0].si_factor("p1"))
+    assert config.valves[0].si_factor("p1", "psi") == pytest.approx(6894.757293168361)
+    path = tmp_path / "p.toml"
+    path.write_bytes(tomli_w.dumps(plant_config_to_dict(config)).encode())
+    assert load_plant_config(path) == config
+
+
+@pytest.mark.parametrize(
+    "rows, layout, message",
+    [
+        (["tag", "units"], "wide", "export.header_rows[1]: 'units' is not one of 'tag', 'name', 'unit', 'skip'"),
+        (["name", "unit"], "wide", "export.header_rows: needs one 'tag' line"),
+        (["tag", "tag"], "wide", "export.header_rows: 'tag' may occur only once"),
+        (["tag", "unit", "unit"], "wide", "export.header_rows: 'unit' may occur only once"),
+        ([], "wide", "export.header_rows: expected a non-empty list"),
+        ("tag", "wide", "export.header_rows: expected a non-empty list"),
+        (["tag", "unit"], "long", "export.header_rows: header rows other than 'tag' are only for export.layout = 'wide'"),
+    ],
+)
+def test_broken_header_rows_name_the_key(raw, rows, layout, message):
+    if layout == "wide":
+        _wide(raw)
+    raw["export"]["header_rows"] = rows
+    with pytest.raises(ConfigError, match=re.escape(message)):
+        parse_plant_config(raw)
+
+
+def test_a_unit_may_be_left_out_only_with_a_unit_line(raw):
+    del raw["valves"][0]["tags"]["ps"]["unit"]
+    with pytest.raises(ConfigError, match=re.escape("valves[0].tags.ps.unit: missing required key (it may be left out only when export.header_rows has a 'unit' line)")):
+        parse_plant_config(raw)
