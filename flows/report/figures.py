@@ -80,7 +80,8 @@ def _leak_panel(ax, d: pl.DataFrame | None) -> None:
     if base.len():
         ax.axhline(float(base[0]), color="#1565c0", lw=1.2, label="commissioning")
     ax.axhline(1.0, color="k", ls="--", lw=0.8, label="Eq. 3")
-    ax.set_ylim(bottom=0.0)
+    top = max(2.0, 1.5 * float(np.nanpercentile(y, 95)), 1.5 * (float(base[0]) if base.len() else 0.0))
+    ax.set_ylim(0.0, top)  # the estimates, not the widest intervals of 10 s windows
     ax.legend(fontsize=7, loc="upper left")
 
 
