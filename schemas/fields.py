@@ -300,6 +300,9 @@ EDGE_FIT_FIELDS: tuple[Field, ...] = (
     Field("u_max_mm", pl.Float64, "mm", "Largest opening coordinate among the points.", nullable=True),
     Field("baseline_version", pl.Int32, "", "Version of the baseline characteristic fitted against.", nullable=True),
     Field("monitored_at", UTC_US, "", "When this row was computed."),
+    Field("leak_scale", pl.Float64, "", "The edge's closed-edge leakage in the window over Eq. 3's (0 = none).", nullable=True, ge=0.0),
+    Field("leak_scale_ci_low", pl.Float64, "", "Lower bound of the 95 % confidence interval of leak_scale.", nullable=True),
+    Field("leak_scale_ci_high", pl.Float64, "", "Upper bound of the 95 % confidence interval of leak_scale.", nullable=True),
 )
 """One row per valve, edge and monitoring window (table ``edge_fits``, interfaces.md)."""
 
@@ -317,6 +320,11 @@ BASELINE_FIELDS: tuple[Field, ...] = (
     Field("alpha_vs_nominal", pl.Float64, "", "Scale of the baseline against the nominal characteristic.", nullable=True),
     Field("x_vs_nominal_mm", pl.Float64, "mm", "Shift of the baseline against the nominal characteristic.", nullable=True),
     Field("created_at", UTC_US, "", "When this version was stored."),
+    Field("leak_branch_scale", pl.Float64, "", "λ₁: the edge's closed-edge leakage is Eq. 3's branch × λ₁ ...", nullable=True, ge=0.0),
+    Field("leak_gap_scale", pl.Float64, "", "... + λ₂ × its area at the closing point (a gap flow).", nullable=True, ge=0.0),
+    Field("leak_scale", pl.Float64, "", "That leakage over Eq. 3's 1 mm inside the edge (1 = Eq. 3, 0 = none).", nullable=True, ge=0.0),
+    Field("leak_scale_ci_low", pl.Float64, "", "Lower 95 % bound of leak_scale (NULL: not identified, Eq. 3 kept).", nullable=True),
+    Field("leak_scale_ci_high", pl.Float64, "", "Upper bound of the 95 % interval of leak_scale.", nullable=True),
 )
 """Versioned baseline characteristics per valve and edge (table ``baselines``)."""
 
@@ -412,6 +420,8 @@ VALVE_CONDITION_FIELDS: tuple[Field, ...] = (
     Field("n_recent_alarms", pl.Int64, "", "Alarm windows within fault_hold_hours of the latest ok window.", ge=0),
     Field("eq9_ok", pl.Boolean, "", "Latest Eq. 9 standstill check of the valve passed (null: no standstill data).", nullable=True),
     Field("edge_order", pl.Int32, "", "1..4 for s1, 1r, s2, 2r (for sorting)."),
+    Field("leak_scale", pl.Float64, "", "Closed-edge leakage over Eq. 3's (0 = none), median of the ok windows.", nullable=True),
+    Field("leak_scale_baseline", pl.Float64, "", "The same at commissioning (1 for a nominal baseline: Eq. 3 assumed).", nullable=True),
 )
 """View ``valve_condition`` (interfaces.md), as exported to ``export/valve_condition.parquet``."""
 

@@ -201,6 +201,13 @@ class ValveDesign:
     contraction_coefficient: float
     bounds: ConditionBounds = field(default_factory=ConditionBounds)
     """Condition bounds of step 5b (``[valve_types.NAME.bounds]``)."""
+    area_law: str = "eq3"
+    """The valve family's area law, ``"eq3"`` (the paper's Eq. 3) or ``"sharp"`` (sharp edges, no
+    closed-edge leakage): what the simulator builds (``model.area``); the monitor identifies the
+    leakage from the data and does not read it."""
+    leakage_factor: float = 1.0
+    """Eq. 3's closed-edge leakage times this far from the edge (worn lands; ``model.area``),
+    for the simulator; 1 = Eq. 3. [-]"""
 
     def taper_angle_rad(self, edge: str) -> float:
         """Taper angle of an edge: port 1 for s1 and 1r, port 2 for s2 and 2r. [rad]"""
@@ -439,8 +446,12 @@ def _parse_monitor(raw: Any) -> MonitorSpec:
 
 _DESIGN_KEYS = {
     "x_max_mm", "bore_radius_mm", "spool_radius_mm", "taper_angle_port1_deg",
-    "taper_angle_port2_deg", "underlap_mm", "contraction_coefficient", "bounds",
+    "taper_angle_port2_deg", "underlap_mm", "contraction_coefficient", "bounds", "area_law",
+    "leakage_factor",
 }  # fmt: skip
+
+AREA_LAWS = ("eq3", "sharp")
+"""Values of ``area_law`` (``model.params.AREA_LAWS``; schemas imports nothing of ours)."""
 
 
 def _parse_underlaps(raw: Any, key: str, base: tuple[float, ...] | None) -> tuple[float, float, float, float]:
@@ -527,7 +538,11 @@ def _parse_design(t: dict, key: str, base: ValveDesign | None) -> ValveDesign:
     alpha = get("contraction_coefficient", 0, 1.5, 1.0, b and b.contraction_coefficient)
     base_bounds = b.bounds if b is not None else ConditionBounds()
     bounds = _parse_bounds(t["bounds"], f"{key}.bounds", base_bounds) if "bounds" in t else base_bounds
-    return ValveDesign(x_max, bore, spool, phi1, phi2, underlaps, alpha, bounds)
+    area_law = _str(t["area_law"], f"{key}.area_law", AREA_LAWS) if "area_law" in t else (b.area_law if b else "eq3")
+    leakage_factor = get("leakage_factor", 0, 100, 1.0, b.leakage_factor if b else 1.0)
+    if area_law == "sharp" and leakage_factor != 1.0:
+        raise ConfigError(f"{key}.leakage_factor: {leakage_factor:g} needs area_law = \"eq3\" (a sharp-edged valve has no leakage branch)")
+    return ValveDesign(x_max, bore, spool, phi1, phi2, underlaps, alpha, bounds, area_law, leakage_factor)
 
 
 _VALVE_KEYS = {
@@ -689,8 +704,13 @@ def _design_dict(d: ValveDesign, keys: frozenset[str] | set[str], base_bounds: C
         "underlap_mm": lambda: {e: _r(u * 1e3) for e, u in zip(EDGES, d.underlap_m)},
         "contraction_coefficient": lambda: d.contraction_coefficient,
         "bounds": lambda: bounds_to_dict(d.bounds, base_bounds),
+        "area_law": lambda: d.area_law,
+        "leakage_factor": lambda: d.leakage_factor,
     }
     out = {k: full[k]() for k in full if k in keys}
+    for k, default in (("area_law", "eq3"), ("leakage_factor", 1.0)):
+        if base_bounds is None and out.get(k, default) == default:
+            out.pop(k, None)  # a type's family at its default is not written
     if base_bounds is None and not out.get("bounds", True):
         del out["bounds"]  # a type's bounds all at their defaults
     return out

@@ -230,6 +230,25 @@ def ensure_tables(con: duckdb.DuckDBPyConnection, tables: Mapping[str, tuple[tup
             con.execute(create_table_sql(name, fields, key))
 
 
+def add_missing_columns(con: duckdb.DuckDBPyConnection, tables: Mapping[str, tuple[Field, ...]]) -> None:
+    """Add to existing ``tables`` (name → fields) the fields they lack, as nullable columns after
+    their own (a warehouse made before the fields existed); one catalog query, DDL only when
+    something is missing."""
+    names = list(tables)
+    have: dict[str, set[str]] = {}
+    for t, c in con.execute(
+        f"SELECT table_name, column_name FROM duckdb_columns() WHERE database_name = current_database() "
+        f"AND table_name IN ({', '.join('?' * len(names))})", names,
+    ).fetchall():  # fmt: skip
+        have.setdefault(t, set()).add(c)
+    for name, fields in tables.items():
+        if name not in have:
+            continue
+        for f in fields:
+            if f.name not in have[name]:
+                con.execute(f'ALTER TABLE {name} ADD COLUMN "{f.name}" {duckdb_type(f.dtype)}')
+
+
 def ensure_ingest_tables(con: duckdb.DuckDBPyConnection) -> None:
     """Create the ingest's tables if they do not exist (and migrate an older warehouse's)."""
     have: dict[str, set[str]] = {}

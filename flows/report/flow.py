@@ -121,7 +121,7 @@ def _edge_curves(config: PlantConfig, valve_id: str, baselines: pl.DataFrame, la
             lo_slope = (values[1] - values[0]) / (knots[1] - knots[0])
             hi_slope = (values[-1] - values[-2]) / (knots[-1] - knots[-2])
             y = np.where(u < knots[0], values[0] + lo_slope * (u - knots[0]), y)
-            return np.where(u > knots[-1], values[-1] + hi_slope * (u - knots[-1]), y)
+            return np.maximum(np.where(u > knots[-1], values[-1] + hi_slope * (u - knots[-1]), y), 0.0)  # an area is never negative
 
         nominal = d.contraction_coefficient * edge_area(
             u_mm * 1e-3, d.underlap_m[EDGES.index(edge)], d.taper_angle_rad(edge), d.bore_radius_m, d.spool_radius_m
@@ -187,8 +187,15 @@ def run_report(config_path: str | Path, warehouse: str | Path, *, detail: int = 
             )
             trend = query_frame(con, "SELECT * FROM trend_operating_hours WHERE valve_id = ?", [vid])
             lines = query_frame(con, "SELECT * FROM parameter_trends WHERE valve_id = ?", [vid])
+            leak = query_frame(
+                con,
+                "SELECT f.edge, f.operating_hours, f.leak_scale, f.leak_scale_ci_low, f.leak_scale_ci_high, "
+                "c.leak_scale_baseline FROM stg_edge_fits f JOIN valve_condition c USING (valve_id, edge) "
+                "WHERE f.valve_id = ? AND f.is_ok AND f.leak_scale IS NOT NULL",
+                [vid],
+            )
             jobs += [(characteristics_figure, (vid, _edge_curves(config, vid, baselines, latest), latest, out_dir / f"characteristics_{vid}.png")),
-                     (trends_figure, (vid, trend, lines, out_dir / f"trends_{vid}.png"))]  # fmt: skip
+                     (trends_figure, (vid, trend, lines, out_dir / f"trends_{vid}.png", leak))]  # fmt: skip
         discrepancy = discrepancy_results(con, warehouse)
         quality = data_quality(con)
     finally:

@@ -240,13 +240,15 @@ def _scaled_channel(ch: SensorChannel, factor: float) -> SensorChannel:
 
 
 def plant_params_for_valve(valve: ValveSpec, export: ExportSpec, base: PlantParams = TABLE1) -> PlantParams:
-    """The simulator's parameters for a configured valve: its design data and positioning unit
-    from the configuration, sampled at the export's ``sample_rate_hz``; everything the
+    """The simulator's parameters for a configured valve: its design data (with its valve
+    family, ``area_law`` and ``leakage_factor``) and positioning unit from the configuration,
+    sampled at the export's ``sample_rate_hz``; everything the
     configuration does not name (spool dynamics, mass, friction, supply, controller, load,
     sensor noise) from ``base`` (Table 1). For a stroke or x_max other than Table 1's, the
     reference targets and the position sensors' ranges are scaled with them."""
     d = valve.design
-    geometry = ValveGeometry(d.x_max_m, d.bore_radius_m, d.spool_radius_m, d.taper_angle_port1_rad, d.taper_angle_port2_rad)
+    geometry = ValveGeometry(d.x_max_m, d.bore_radius_m, d.spool_radius_m, d.taper_angle_port1_rad, d.taper_angle_port2_rad,
+                             d.area_law, d.leakage_factor)
     nominal = ValveCondition(underlap_m=d.underlap_m, alpha=(d.contraction_coefficient,) * 4, x_l_fraction=base.nominal_condition.x_l_fraction)
     cylinder = dataclasses.replace(
         base.cylinder,

@@ -57,6 +57,22 @@ def test_valve_overrides_its_type(raw):
     assert parse_plant_config(raw).valve_types["servo_4w"].contraction_coefficient == 0.675
 
 
+def test_valve_family_per_type_defaults_and_round_trips(raw, tmp_path):
+    assert parse_plant_config(raw).valve("V017").design.area_law == "eq3"
+    assert parse_plant_config(raw).valve("V017").design.leakage_factor == 1.0
+    raw["valve_types"]["sharp_4w"] = copy.deepcopy(raw["valve_types"]["servo_4w"]) | {"area_law": "sharp"}
+    raw["valve_types"]["servo_4w"]["leakage_factor"] = 4.0
+    cfg = parse_plant_config(raw)
+    assert (cfg.valve_types["sharp_4w"].area_law, cfg.valve_types["sharp_4w"].leakage_factor) == ("sharp", 1.0)
+    assert (cfg.valve("V017").design.area_law, cfg.valve("V017").design.leakage_factor) == ("eq3", 4.0)
+    path = tmp_path / "plant.toml"
+    path.write_bytes(tomli_w.dumps(plant_config_to_dict(cfg)).encode())
+    assert load_plant_config(path) == cfg
+    raw["valve_types"]["sharp_4w"]["leakage_factor"] = 2.0
+    with pytest.raises(ConfigError, match=r"valve_types.sharp_4w.leakage_factor: 2 needs area_law = \"eq3\""):
+        parse_plant_config(raw)
+
+
 def test_naive_commissioning_time_is_plant_local(raw):
     raw["valves"][0]["commissioned"] = "2025-07-01T02:00:00"
     v = parse_plant_config(raw).valve("V017")
@@ -103,6 +119,9 @@ _DELETE = object()
         ("export.max_bad_share", 1, None),
         ("export.other_tags", "skip", "export.other_tags: 'skip' is not one of 'ignore', 'error'"),
         ("export.other_tags", "error", None),
+        ("valve_types.servo_4w.area_law", "round", "valve_types.servo_4w.area_law: 'round' is not one of 'eq3', 'sharp'"),
+        ("valve_types.servo_4w.leakage_factor", 0, "valve_types.servo_4w.leakage_factor: 0 must be > 0"),
+        ("valves.0.area_law", 3, "valves[0].area_law: expected a non-empty string, got 3"),
     ],
 )
 def test_broken_configurations_name_the_key(raw, path, value, message):
