@@ -158,8 +158,12 @@ def test_windows_without_estimate_are_recorded(archive, short_windows, tmp_path)
 
 
 def _shift_exports(src: Path, dst: Path, seconds: float) -> Path:
-    """A copy of an archive whose export time stamps are moved by ``seconds``."""
+    """A copy of an archive whose export time stamps, and its valves' commissioning, are moved by
+    ``seconds`` (the ingest quarantines samples from before ``commissioned``)."""
     shutil.copytree(src, dst)
+    config = load_plant_config(dst / "plant.toml")
+    moved = [dataclasses.replace(v, commissioned=v.commissioned + timedelta(seconds=seconds)) for v in config.valves]
+    (dst / "plant.toml").write_bytes(tomli_w.dumps(plant_config_to_dict(dataclasses.replace(config, valves=tuple(moved)))).encode())
     for f in sorted((dst / "exports").glob("*.parquet")):
         pl.read_parquet(f).with_columns(pl.col("timestamp") + pl.duration(microseconds=int(seconds * 1e6))).write_parquet(f)
     return dst
