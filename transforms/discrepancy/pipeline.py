@@ -31,6 +31,7 @@ import numpy as np
 from model.effects import EFFECT_LIBRARY, Effects, EffectSpec, equation_terms, sensor_readings, true_signals
 from model.params import PlantParams, ValveCondition
 from model.replay import replay
+from transforms.discrepancy.nuisance import NuisancePriors
 from model.simulate import DEFAULT_REG_BAND_PA
 from transforms.discrepancy.gaps import GapAccumulator
 from transforms.discrepancy.load import LoadEstimate, estimate_load, replay_load, stuck_spans
@@ -73,7 +74,7 @@ class _Prepared:
     regions: dict[str, np.ndarray]
     edges: np.ndarray
     base_load: LoadEstimate
-    loads: dict = field(default_factory=dict)  # Effects -> LoadEstimate of that model
+    loads: dict = field(default_factory=dict)  # (plant, condition, Effects) -> LoadEstimate of that model
     seg: LoadEstimate | None = None  # the load segments of the regression (default base_load)
 
     @property
@@ -94,7 +95,7 @@ def prepare_records(records: list[Record], plant: PlantParams, condition: ValveC
         if edges.size < 4:
             continue
         load = _estimate_load(rec, plant, condition, Effects(), settings)
-        out.append(_Prepared(rec, regions, edges, load, {Effects(): load}))
+        out.append(_Prepared(rec, regions, edges, load, {(plant, condition, Effects()): load}))
     return out
 
 
@@ -126,9 +127,10 @@ def _estimate_load(rec: Record, plant, condition, effects, settings) -> LoadEsti
 
 def _load_for(p: _Prepared, plant, condition, effects, settings) -> np.ndarray:
     """The load at every sample under the model with ``effects`` (estimated once per model)."""
-    if effects not in p.loads:
-        p.loads[effects] = _estimate_load(p.rec, plant, condition, effects, settings)
-    return p.loads[effects].load
+    key = (plant, condition, effects)
+    if key not in p.loads:
+        p.loads[key] = _estimate_load(p.rec, plant, condition, effects, settings)
+    return p.loads[key].load
 
 
 def _holding(rec: Record, plant, condition, effects) -> tuple[np.ndarray, np.ndarray]:
@@ -145,7 +147,7 @@ DEFAULT_STUCK_V = 1.0e-3
 
 def _replay_load_for(p: _Prepared, plant, condition, effects, settings) -> np.ndarray:
     level = _load_for(p, plant, condition, effects, settings)
-    est = p.loads[effects]
+    est = p.loads[(plant, condition, effects)]
     if est.hold_until <= 0:
         return level
     hold, stuck = _holding(p.rec, plant, condition, effects)
@@ -453,6 +455,13 @@ class Diagnosis:
     equation_sigmas: tuple[float, float, float] = (1.0, 1.0, 1.0)
     monitoring: list[dict] = field(default_factory=list)
     """Step 4 per edge (:func:`monitoring_bias`); empty if not run."""
+    verdict: object = None
+    """With nuisance priors: the :class:`transforms.discrepancy.verdict.Verdict` (named / ambiguous /
+    none, confidence, readings, calibrated nuisances); None when the model was taken as exact."""
+    gap_nominal: float = float("nan")
+    """Normalised gap of the nominal (uncalibrated) base model; = stage 0 without nuisances."""
+    model: tuple = ()
+    """(plant, condition) of the final stage (calibrated nuisances when priors were given)."""
 
     @property
     def final_effects(self) -> Effects:
@@ -508,15 +517,43 @@ def _refine(prepared, plant, condition, specs: list[EffectSpec], start: Effects,
     return fx, se, J
 
 
-def _select(prepared, plant, condition, specs, settings):
-    """Rows, weights and forward selection against the base model (module docstring)."""
+def _project_out(Nw: np.ndarray, *cols: np.ndarray) -> list[np.ndarray]:
+    """Each of ``cols`` (weighted rows) minus its ridge regression on the weighted nuisance
+    columns Nw (z units, prior N(0, I): v − Nw (NwᵀNw + I)⁻¹ Nwᵀ v; rows with a non-finite entry
+    are left as they are (block_stats drops them))."""
+    ok = np.all(np.isfinite(Nw), axis=1)
+    for c in cols:
+        ok &= np.isfinite(c) if c.ndim == 1 else np.all(np.isfinite(c), axis=1)
+    N = Nw[ok]
+    H = N.T @ N + np.eye(N.shape[1])
+    out = []
+    for c in cols:
+        c2 = np.array(c, float, copy=True)
+        c2[ok] = c[ok] - N @ np.linalg.solve(H, N.T @ c[ok])
+        out.append(c2)
+    return out
+
+
+def _select(prepared, plant, condition, specs, settings, nuisance=None):
+    """Rows, weights and forward selection against the base model (module docstring). With
+    ``nuisance`` = (NuisanceModel, z) the plant and condition are the nuisance model at z and the
+    residual and every candidate's regressor are first cleared of what the nuisances (within
+    their priors) explain (:func:`_project_out`): a candidate is then scored only on what the
+    nuisances cannot explain."""
     base = Effects()
     rows0 = _rows(prepared, plant, condition, base, settings)
     r0 = _demean_motion(rows0.y, rows0)
     sig = _equation_sigmas(r0, rows0)
     w_rows = 1.0 / sig[rows0.eq]
     J0 = _jacobian(prepared, plant, condition, base, specs, rows0, settings, rows0.y)
-    st = block_stats(-r0 * w_rows, J0 * w_rows[:, None], rows0.block)
+    yw, Jw = -r0 * w_rows, J0 * w_rows[:, None]
+    if nuisance is not None:
+        from transforms.discrepancy.calibration import jacobians
+
+        nm, z = nuisance
+        _, Jz, _ = jacobians(prepared, nm, z, base, [], rows0, settings, r0)
+        yw, Jw = _project_out(Jz * w_rows[:, None], yw, Jw)
+    st = block_stats(yw, Jw, rows0.block)
     sel: SelectionResult = forward_select(
         st, list(range(len(specs))), max_effects=settings.max_effects, min_t_stat=settings.min_t_stat,
         min_relative_gain=settings.min_relative_gain, min_z=settings.min_z,
@@ -525,7 +562,7 @@ def _select(prepared, plant, condition, specs, settings):
     return rows0, w_rows, sel, sig
 
 
-def diagnose(records: list[Record], plant: PlantParams, condition: ValveCondition | None = None, settings: DiscrepancySettings | None = None, *, library: tuple[EffectSpec, ...] = EFFECT_LIBRARY, trace_records: int = 1, monitoring: bool = True) -> Diagnosis:
+def diagnose(records: list[Record], plant: PlantParams, condition: ValveCondition | None = None, settings: DiscrepancySettings | None = None, *, library: tuple[EffectSpec, ...] = EFFECT_LIBRARY, trace_records: int = 1, monitoring: bool = True, priors: NuisancePriors | None = None) -> Diagnosis:
     """Run steps 1–3 on ``records`` of one valve (module docstring).
 
     Parameters
@@ -544,8 +581,17 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
     monitoring : bool
         Run step 4 (:func:`monitoring_bias`) with the named effects (with none named, the
         as-recorded and corrected estimates coincide).
+    priors : NuisancePriors, optional
+        Tolerances of the base model's uncertain parameters (:mod:`transforms.discrepancy.nuisance`):
+        they are calibrated on the records with the effects, an effect is selected only on what
+        the nuisances cannot explain within their priors, and the verdict weighs an effect against
+        the nuisance reading of the same data (:mod:`transforms.discrepancy.verdict`). None or
+        :meth:`NuisancePriors.exact`: ``plant`` and ``condition`` are taken as exact (the method
+        of before, e.g. after a commissioning calibration).
     """
     from scipy import stats as _stats
+
+    from transforms.discrepancy.calibration import NuisanceModel, calibrate_prepared, joint_fit
 
     settings = settings or DiscrepancySettings()
     condition = plant.nominal_condition if condition is None else condition
@@ -554,20 +600,43 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
         raise ValueError("no record long enough to diagnose")
     base = Effects()
     specs = list(library)
+    nominal = (plant, condition)
+    nm = None if priors is None or priors.is_exact else NuisanceModel.of(plant, condition, priors)
+    z_cal = None
+    if nm is not None:
+        # calibrate the nuisances (loads from the nominal model), then again on the loads of the
+        # calibrated model; the calibrated base model is stage 0
+        z_cal = calibrate_prepared(prepared, nm, settings)[0].z
+        plant, condition = nm.model(z_cal)
+        prepared = prepare_records(records, plant, condition, settings)
+        z_cal = calibrate_prepared(prepared, nm, settings, z0=z_cal)[0].z
+        plant, condition = nm.model(z_cal)
     # step 2: the base model's residuals and the library's regressors; the load segments come
     # from the base model's motion equation, which a friction or mass change disturbs (where the
     # inertia mismatch changes fast it can pass for a load step and absorb part of the effect):
     # once effects are named, the load is segmented again with the fitted model and the
     # selection repeated (alternating between the nuisance load and the effects)
-    rows0, w_rows, sel, sig = _select(prepared, plant, condition, specs, settings)
+    rows0, w_rows, sel, sig = _select(prepared, plant, condition, specs, settings, None if nm is None else (nm, z_cal))
+
+    def refine(named_specs, start):
+        """(effects, SEs, stage model) of the named effects fitted (with the nuisances)."""
+        if nm is None:
+            fx, se_, _ = _refine(prepared, plant, condition, named_specs, start, rows0, w_rows, settings)
+            return fx, se_, (plant, condition), None
+        jf = joint_fit(prepared, nm, z_cal, named_specs, start, rows0, w_rows, settings)
+        return jf.effects, jf.effect_se, nm.model(jf.z), jf
+
     if sel.named:
         start = base
         for cs in sel.named:
             start = perturbed(start, specs[cs.column], cs.theta)
-        fitted, _, _ = _refine(prepared, plant, condition, [specs[cs.column] for cs in sel.named], start, rows0, w_rows, settings)
+        fitted, _, (fp, fc), _ = refine([specs[cs.column] for cs in sel.named], start)
         for p in prepared:
-            p.seg = _estimate_load(p.rec, plant, condition, fitted, settings)
-        rows0, w_rows, sel, sig = _select(prepared, plant, condition, specs, settings)
+            p.seg = _estimate_load(p.rec, fp, fc, fitted, settings)
+        if nm is not None:
+            z_cal = calibrate_prepared(prepared, nm, settings, z0=z_cal)[0].z
+            plant, condition = nm.model(z_cal)
+        rows0, w_rows, sel, sig = _select(prepared, plant, condition, specs, settings, None if nm is None else (nm, z_cal))
     B = sel.n_blocks
     q = float(_stats.t.ppf(0.5 + settings.ci_level / 2.0, max(B - 1, 1)))
     candidates = []
@@ -595,12 +664,12 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
     while True:
         named_specs = [specs[cs.column] for cs in named_sel]
         stage_effects = [base]
-        refined, se = base, np.zeros(0)
+        refined, se, stage_model, final_fit = base, np.zeros(0), (plant, condition), None
         if named_specs:
             start = base
             for spec, cs in zip(named_specs, named_sel):
                 start = perturbed(start, spec, cs.theta)
-            refined, se, _ = _refine(prepared, plant, condition, named_specs, start, rows0, w_rows, settings)
+            refined, se, stage_model, final_fit = refine(named_specs, start)
             cur = base
             for spec in named_specs:
                 cur = replace(cur, **{spec.attribute: spec.value(refined)})
@@ -609,7 +678,7 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
         kept_all = [{i: kept0[i] for i in kept_idx}]
         drop = None
         for k, fx in enumerate(stage_effects[1:], start=1):
-            acc, kept = _gaps(prepared, plant, condition, fx, settings, kept_idx)
+            acc, kept = _gaps(prepared, *stage_model, fx, settings, kept_idx)
             if not acc.gap() < stage_acc[-1].gap():
                 drop = k - 1
                 break
@@ -638,7 +707,7 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
             gap_rows.append({"stage": k, **row})
     residual_rows = [{"stage": 0, **r} for r in _residual_summary(prepared, plant, condition, base, settings)]
     if len(stage_effects) > 1:
-        residual_rows += [{"stage": len(stage_effects) - 1, **r} for r in _residual_summary(prepared, plant, condition, stage_effects[-1], settings)]
+        residual_rows += [{"stage": len(stage_effects) - 1, **r} for r in _residual_summary(prepared, *stage_model, stage_effects[-1], settings)]
     traces = []
     for i in sorted(kept_all[0]):
         p = prepared[i]
@@ -647,12 +716,21 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
             measured={"p1": p.rec.raw["p1"], "p2": p.rec.raw["p2"], "X": p.rec.raw["X"]},
             replayed={f"stage{k}_{s}": kept_all[k][i][s] for k in range(len(stage_effects)) for s in ("p1", "p2", "X")},
         ))
-    mon = monitoring_bias([p.rec for p in prepared], plant, condition, stage_effects[-1], settings.window_s) if monitoring else []
+    mon = monitoring_bias([p.rec for p in prepared], *stage_model, stage_effects[-1], settings.window_s) if monitoring else []
+    verdict = None
+    gap_nominal = stage_gaps[0]
+    if nm is not None:
+        from transforms.discrepancy.verdict import nuisance_verdict
+
+        if final_fit is None:
+            final_fit = joint_fit(prepared, nm, z_cal, [], base, rows0, w_rows, settings, iterations=0)
+        verdict = nuisance_verdict(prepared, nm, final_fit, named_specs, specs, rows0, w_rows, settings, named, candidates)
+        gap_nominal = _gaps(prepared, *nominal, base, settings, set())[0].gap()
     return Diagnosis(
         n_records=len(prepared), records=[(p.rec.start_us, p.rec.end_us) for p in prepared], named=named,
         candidates=candidates, gap_rows=gap_rows, residual_rows=residual_rows, stage_effects=stage_effects,
         stage_gaps=stage_gaps, traces=traces, n_blocks=B, equation_sigmas=tuple(float(s) for s in sig),
-        monitoring=mon,
+        monitoring=mon, verdict=verdict, gap_nominal=gap_nominal, model=stage_model,
     )
 
 
