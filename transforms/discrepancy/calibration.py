@@ -76,21 +76,31 @@ def _residuals(prepared, nm: NuisanceModel, z, effects, rows0, settings):
 
 
 def jacobians(prepared, nm: NuisanceModel, z, effects: Effects, specs: list[EffectSpec], rows0, settings, r_here=None):
-    """(r, J_z, J_θ): the demeaned residual rows at (z, effects) and their forward-difference
-    derivatives with respect to the active standardised nuisances and the effects' parameters."""
+    """(r, J_z, J_θ): the demeaned residual rows at (z, effects) and their central-difference
+    derivatives with respect to the active standardised nuisances and the effects' parameters
+    (forward differences for a parameter at its physical bound). Central, because the verdict
+    compares an effect with the nuisance pattern it resembles: a spool sensor offset is exactly an
+    underlap pattern, and forward differences of different steps would make them differ by the
+    curvature of the orifice law, which the heavily weighted data rows then take for a real difference."""
     from transforms.discrepancy.pipeline import FD_FRACTION, perturbed
 
     r = _residuals(prepared, nm, z, effects, rows0, settings) if r_here is None else r_here
     cols = []
     for j in range(len(nm.active)):
-        zz = np.array(z, float)
-        zz[j] += Z_STEP
-        cols.append((_residuals(prepared, nm, zz, effects, rows0, settings) - r) / Z_STEP)
+        zp, zm = np.array(z, float), np.array(z, float)
+        zp[j] += Z_STEP
+        zm[j] -= Z_STEP
+        cols.append((_residuals(prepared, nm, zp, effects, rows0, settings) - _residuals(prepared, nm, zm, effects, rows0, settings)) / (2 * Z_STEP))
     Jz = np.column_stack(cols) if cols else np.zeros((r.size, 0))
     ecols = []
     for spec in specs:
         d = FD_FRACTION * spec.typical
-        ecols.append((_residuals(prepared, nm, z, perturbed(effects, spec, d), rows0, settings) - r) / d)
+        lo = spec.value(effects) - d
+        if spec.lower is not None and lo < spec.lower:  # one-sided at the physical bound
+            ecols.append((_residuals(prepared, nm, z, perturbed(effects, spec, d), rows0, settings) - r) / d)
+            continue
+        ecols.append((_residuals(prepared, nm, z, perturbed(effects, spec, d), rows0, settings)
+                      - _residuals(prepared, nm, z, perturbed(effects, spec, -d), rows0, settings)) / (2 * d))
     Je = np.column_stack(ecols) if ecols else np.zeros((r.size, 0))
     return r, Jz, Je
 

@@ -534,6 +534,11 @@ def _project_out(Nw: np.ndarray, *cols: np.ndarray) -> list[np.ndarray]:
     return out
 
 
+NUISANCE_COLLINEAR = 0.05
+"""A candidate whose regressor keeps less than this fraction of its norm once the nuisance
+directions are projected out is not selected on the residuals (it is a nuisance pattern)."""
+
+
 def _select(prepared, plant, condition, specs, settings, nuisance=None):
     """Rows, weights and forward selection against the base model (module docstring). With
     ``nuisance`` = (NuisanceModel, z) the plant and condition are the nuisance model at z and the
@@ -547,15 +552,22 @@ def _select(prepared, plant, condition, specs, settings, nuisance=None):
     w_rows = 1.0 / sig[rows0.eq]
     J0 = _jacobian(prepared, plant, condition, base, specs, rows0, settings, rows0.y)
     yw, Jw = -r0 * w_rows, J0 * w_rows[:, None]
+    cand = list(range(len(specs)))
     if nuisance is not None:
         from transforms.discrepancy.calibration import jacobians
 
         nm, z = nuisance
         _, Jz, _ = jacobians(prepared, nm, z, base, [], rows0, settings, r0)
+        ok = np.isfinite(yw) & np.all(np.isfinite(Jw), axis=1)
+        before = np.sqrt(np.sum(Jw[ok] ** 2, axis=0))
         yw, Jw = _project_out(Jz * w_rows[:, None], yw, Jw)
+        after = np.sqrt(np.sum(Jw[ok] ** 2, axis=0))
+        # a candidate the nuisances reproduce (a spool offset is an underlap pattern, a mass change
+        # the mass) has nothing left to select on; the verdict weighs it against the priors
+        cand = [j for j in cand if after[j] > NUISANCE_COLLINEAR * before[j]]
     st = block_stats(yw, Jw, rows0.block)
     sel: SelectionResult = forward_select(
-        st, list(range(len(specs))), max_effects=settings.max_effects, min_t_stat=settings.min_t_stat,
+        st, cand, max_effects=settings.max_effects, min_t_stat=settings.min_t_stat,
         min_relative_gain=settings.min_relative_gain, min_z=settings.min_z,
         positive=frozenset(j for j, spec in enumerate(specs) if spec.lower is not None),
     )
@@ -724,7 +736,10 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
 
         if final_fit is None:
             final_fit = joint_fit(prepared, nm, z_cal, [], base, rows0, w_rows, settings, iterations=0)
-        verdict = nuisance_verdict(prepared, nm, final_fit, named_specs, specs, rows0, w_rows, settings, named, candidates)
+        def gap_of(fx, model):
+            return _gaps(prepared, *model, fx, settings, set())[0].gap()
+
+        verdict = nuisance_verdict(prepared, nm, final_fit, named_specs, specs, rows0, w_rows, settings, named, gap_of, stage_gaps[0])
         gap_nominal = _gaps(prepared, *nominal, base, settings, set())[0].gap()
     return Diagnosis(
         n_records=len(prepared), records=[(p.rec.start_us, p.rec.end_us) for p in prepared], named=named,
