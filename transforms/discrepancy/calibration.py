@@ -9,8 +9,8 @@ segment), each row weighted by 1/σ of its equation, with the prior as extra row
     Σ_rows (w r(z, θ))² + |z|²
 
 over the standardised nuisances z (prior N(0, I)) and the effect parameters θ (flat prior, kept
-on their physical side). Derivatives are forward differences of the exact residual functions
-(step :data:`Z_STEP` σ for a nuisance). The equation weights are re-estimated from the calibrated
+on their physical side). Derivatives are finite differences of the exact residual functions
+(central, step :data:`Z_STEP` σ for a nuisance). The equation weights are re-estimated from the calibrated
 residuals once (the nominal model's residuals carry its own error and would under-weight the data).
 """
 
@@ -210,6 +210,9 @@ class Calibration:
     plant: PlantParams
     condition: ValveCondition
     sigmas: tuple[float, float, float]
+    gap_nominal: float = float("nan")
+    gap_calibrated: float = float("nan")
+    """Normalised replay gaps of the records with the nominal and the calibrated model."""
 
     def table(self) -> list[dict]:
         """One dict per nuisance: name, nominal, value, prior σ, z (SI units, :data:`NUISANCE_UNITS`)."""
@@ -252,15 +255,19 @@ def calibrate(records, plant: PlantParams, condition: ValveCondition, priors: Nu
     """Calibrate the base model's nuisances on ``records`` (e.g. a commissioning window): the
     loads are estimated with the nominal model, the nuisances fitted, the loads estimated again
     with the calibrated model and the nuisances refitted."""
-    from transforms.discrepancy.pipeline import prepare_records
+    from transforms.discrepancy.pipeline import _gaps, prepare_records
 
+    fx = Effects() if effects is None else effects
     nm = NuisanceModel.of(plant, condition, priors)
     prepared = prepare_records(records, plant, condition, settings)
     if not prepared:
         raise ValueError("no record long enough to calibrate on")
+    g0 = _gaps(prepared, plant, condition, fx, settings, set())[0].gap()
     fit, _, _, sig = calibrate_prepared(prepared, nm, settings, effects)
     p1, c1 = nm.model(fit.z)
     prepared = prepare_records(records, p1, c1, settings)
     fit, _, _, sig = calibrate_prepared(prepared, nm, settings, effects, fit.z)
     p1, c1 = nm.model(fit.z)
-    return Calibration(nm=nm, z=fit.z, z_se=fit.z_se, plant=p1, condition=c1, sigmas=tuple(float(s) for s in sig))
+    prepared = prepare_records(records, p1, c1, settings)
+    g1 = _gaps(prepared, p1, c1, fx, settings, set())[0].gap()
+    return Calibration(nm=nm, z=fit.z, z_se=fit.z_se, plant=p1, condition=c1, sigmas=tuple(float(s) for s in sig), gap_nominal=g0, gap_calibrated=g1)
