@@ -26,6 +26,9 @@ from transforms.discrepancy.nuisance import NUISANCES, NuisancePriors, apply_nui
 
 __all__ = ["Calibration", "NuisanceModel", "calibrate", "joint_fit"]
 
+BREAKAWAY = NUISANCES.index("d_s")
+BREAKAWAY_RANGE = 3.0
+"""The breakaway force is searched within ±this many prior σ."""
 Z_STEP = 0.05
 """Finite-difference step of a nuisance, in prior standard deviations."""
 
@@ -40,7 +43,11 @@ class NuisanceModel:
     theta0, sigma : ndarray (15,)
         Nominal values and prior σ of :data:`NUISANCES` (SI).
     active : tuple of int
-        Indices of the nuisances with σ > 0.
+        Indices of the nuisances with σ > 0 fitted by Gauss–Newton (all but the breakaway force).
+    breakaway_z : float
+        The breakaway force d_s in prior σ: it shows only in when the cylinder breaks away, not in
+        the integrated equations of moving samples, and is fitted on the replay
+        (:func:`refine_breakaway`).
     """
 
     plant: PlantParams
@@ -48,16 +55,18 @@ class NuisanceModel:
     theta0: np.ndarray
     sigma: np.ndarray
     active: tuple[int, ...]
+    breakaway_z: float = 0.0
 
     @classmethod
     def of(cls, plant: PlantParams, condition: ValveCondition, priors: NuisancePriors) -> "NuisanceModel":
         sig = nuisance_sigmas(plant, condition, priors)
-        return cls(plant, condition, nuisance_values(plant, condition), sig, tuple(int(i) for i in np.flatnonzero(sig > 0)))
+        return cls(plant, condition, nuisance_values(plant, condition), sig, tuple(int(i) for i in np.flatnonzero(sig > 0) if i != BREAKAWAY))
 
     def values(self, z: np.ndarray) -> np.ndarray:
-        """θ = θ0 + σ z (z over the active nuisances)."""
+        """θ = θ0 + σ z (z over the active nuisances; d_s at ``breakaway_z``)."""
         v = self.theta0.copy()
         v[list(self.active)] += self.sigma[list(self.active)] * np.asarray(z, float)
+        v[BREAKAWAY] += self.sigma[BREAKAWAY] * self.breakaway_z
         return v
 
     def model(self, z: np.ndarray) -> tuple[PlantParams, ValveCondition]:
@@ -223,9 +232,50 @@ class Calibration:
         sefull = np.zeros(len(NUISANCES))
         zfull[list(self.nm.active)] = self.z
         sefull[list(self.nm.active)] = self.z_se
+        zfull[BREAKAWAY] = self.nm.breakaway_z
         return [{"name": n, "unit": NUISANCE_UNITS[n], "nominal": float(self.nm.theta0[i]), "value": float(vals[i]),
                  "prior_sigma": float(self.nm.sigma[i]), "z": float(zfull[i]), "se": float(sefull[i] * self.nm.sigma[i])}
                 for i, n in enumerate(NUISANCES)]
+
+
+def refine_breakaway(prepared, nm: NuisanceModel, z, settings, effects: Effects | None = None) -> NuisanceModel:
+    """The breakaway force d_s that makes the replay fit best (a grid over ±``BREAKAWAY_RANGE`` σ,
+    then golden-section search), the other nuisances held at z and the loads those of the model at
+    the start. Returns the nuisance model with ``breakaway_z`` set."""
+    from transforms.discrepancy.pipeline import _gaps, _load_for
+
+    if nm.sigma[BREAKAWAY] <= 0:
+        return nm
+    fx = Effects() if effects is None else effects
+    ref = nm.model(z)
+    for p in prepared:
+        _load_for(p, *ref, fx, settings)
+
+    def gap(zb: float) -> float:
+        m = replace(nm, breakaway_z=float(zb))
+        plant, cond = m.model(z)
+        for p in prepared:
+            p.loads.setdefault((plant, cond, fx), p.loads[(*ref, fx)])
+        return _gaps(prepared, plant, cond, fx, settings, set())[0].gap()
+
+    grid = np.linspace(-BREAKAWAY_RANGE, BREAKAWAY_RANGE, 13)
+    vals = [gap(g) for g in grid]
+    k = int(np.argmin(vals))
+    a, b = grid[max(k - 1, 0)], grid[min(k + 1, grid.size - 1)]
+    phi = (np.sqrt(5.0) - 1.0) / 2.0
+    c, d = b - phi * (b - a), a + phi * (b - a)
+    gc, gd = gap(c), gap(d)
+    for _ in range(8):
+        if gc < gd:
+            b, d, gd = d, c, gc
+            c = b - phi * (b - a)
+            gc = gap(c)
+        else:
+            a, c, gc = c, d, gd
+            d = a + phi * (b - a)
+            gd = gap(d)
+    best = min([(vals[k], grid[k]), (gc, c), (gd, d)])[1]
+    return replace(nm, breakaway_z=float(best))
 
 
 def calibrate_prepared(prepared, nm: NuisanceModel, settings, effects: Effects | None = None, z0=None) -> tuple[JointFit, object, np.ndarray, np.ndarray]:
@@ -264,6 +314,7 @@ def calibrate(records, plant: PlantParams, condition: ValveCondition, priors: Nu
         raise ValueError("no record long enough to calibrate on")
     g0 = _gaps(prepared, plant, condition, fx, settings, set())[0].gap()
     fit, _, _, sig = calibrate_prepared(prepared, nm, settings, effects)
+    nm = refine_breakaway(prepared, nm, fit.z, settings, effects)
     p1, c1 = nm.model(fit.z)
     prepared = prepare_records(records, p1, c1, settings)
     fit, _, _, sig = calibrate_prepared(prepared, nm, settings, effects, fit.z)

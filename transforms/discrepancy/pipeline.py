@@ -603,7 +603,7 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
     """
     from scipy import stats as _stats
 
-    from transforms.discrepancy.calibration import NuisanceModel, calibrate_prepared, joint_fit
+    from transforms.discrepancy.calibration import NuisanceModel, calibrate_prepared, joint_fit, refine_breakaway
 
     settings = settings or DiscrepancySettings()
     condition = plant.nominal_condition if condition is None else condition
@@ -619,6 +619,7 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
         # calibrate the nuisances (loads from the nominal model), then again on the loads of the
         # calibrated model; the calibrated base model is stage 0
         z_cal = calibrate_prepared(prepared, nm, settings)[0].z
+        nm = refine_breakaway(prepared, nm, z_cal, settings)
         plant, condition = nm.model(z_cal)
         prepared = prepare_records(records, plant, condition, settings)
         z_cal = calibrate_prepared(prepared, nm, settings, z0=z_cal)[0].z
