@@ -76,8 +76,8 @@ def test_project_out_removes_what_the_nuisances_explain():
 def test_calibration_recovers_the_perturbed_plant_and_closes_the_gap():
     recs = _records(None, seed=301)
     cal = calibrate(recs, TABLE1, NOM, PRIORS, SETTINGS)
-    well_identified = [NUISANCES.index(n) for n in NUISANCES if n not in ("d_c", "d_s")]  # breakaway: few stick-slip events
-    assert np.max(np.abs(cal.z[well_identified] - Z_TRUE[well_identified])) < 0.3
+    z = np.array([r["z"] for r in cal.table()])
+    assert np.max(np.abs(z - Z_TRUE)) < 0.3, np.round(z - Z_TRUE, 2)  # the breakaway force from the replay included
     assert cal.gap_nominal > 1.0
     exact = diagnose(recs, PLANT, PLANT.nominal_condition, SETTINGS, monitoring=False).gap_before
     assert cal.gap_calibrated <= 2.0 * exact, (cal.gap_calibrated, exact)
