@@ -11,6 +11,9 @@ use; the workflow is given the nominal design data only, and
 * ``--commissioning yes``: first calibrates the nuisances on a commissioning window of the same
   valve without the effect (another seed), then diagnoses against that model taken as exact.
 
+``--method before`` runs the workflow as it was before issue 17 on the same cells (the design data
+taken as exact; with commissioning only α and underlap fitted, ``pipeline.fit_condition``).
+
 Outcome per run: ``named`` (the right effect named first), ``ambiguous`` (the right effect among the
 verdict's readings), ``none``, ``wrong`` (another effect named first, or an ambiguous verdict without
 the right one); on clean data ``none`` is right, ``ambiguous`` is reported as such and ``named`` is
@@ -67,6 +70,19 @@ def _lake(effects, seed: int, n_windows: int, plant):
 
 
 @functools.lru_cache(maxsize=4)
+def commissioning_condition_before(seed: int, n_windows: int):
+    """Before issue 17: only α and underlap fitted on the commissioning window."""
+    from model import TABLE1
+    from transforms.discrepancy import DiscrepancySettings, split_records
+    from transforms.discrepancy.pipeline import fit_condition
+
+    plant, _ = true_plant(seed)
+    s = DiscrepancySettings()
+    recs = split_records(_lake(None, 5000 + seed, n_windows, plant), s)
+    return TABLE1, fit_condition(recs, TABLE1, TABLE1.nominal_condition, s).condition
+
+
+@functools.lru_cache(maxsize=4)
 def commissioning_model(seed: int, n_windows: int):
     """The nuisances calibrated on a clean commissioning window of the seed's valve."""
     from model import TABLE1
@@ -81,7 +97,7 @@ def commissioning_model(seed: int, n_windows: int):
     return cal.plant, cal.condition
 
 
-def run_cell(key: str, magnitude: str, commissioning: bool, seed: int, n_windows: int) -> dict:
+def run_cell(key: str, magnitude: str, commissioning: bool, seed: int, n_windows: int, method: str = "nuisance") -> dict:
     from model import TABLE1
     from model.effects import library_entry
     from transforms.discrepancy import DiscrepancySettings, split_records
@@ -100,8 +116,11 @@ def run_cell(key: str, magnitude: str, commissioning: bool, seed: int, n_windows
         effects = spec.effects(value)
     s = DiscrepancySettings()
     recs = split_records(_lake(effects, 100 + seed, n_windows, plant), s)
-    if commissioning:
-        cp, cc = commissioning_model(seed, n_windows)
+    if commissioning or method == "before":
+        if not commissioning:
+            cp, cc = TABLE1, TABLE1.nominal_condition
+        else:
+            cp, cc = (commissioning_model if method == "nuisance" else commissioning_condition_before)(seed, n_windows)
         d = diagnose(recs, cp, cc, s, monitoring=False)
         if d.named:
             first = d.named[0]
@@ -129,7 +148,7 @@ def run_cell(key: str, magnitude: str, commissioning: bool, seed: int, n_windows
     if spec is not None and got == key and got_value is not None and np.isfinite(got_value):
         rel_err = abs(got_value - value) / abs(value - spec.neutral)
     return {
-        "effect": key, "magnitude": magnitude, "commissioning": commissioning, "seed": seed, "value": value,
+        "effect": key, "magnitude": magnitude, "commissioning": commissioning, "seed": seed, "value": value, "method": method,
         "verdict": verdict, "got": got, "got_value": got_value, "alternatives": alts, "confidence": conf, "outcome": outcome,
         "rel_err": rel_err, "gap_nominal": d.gap_nominal, "gap_before": d.stage_gaps[0], "gap_after": d.stage_gaps[-1],
         "cpu_s": time.process_time() - t0,
@@ -140,7 +159,7 @@ def _run(args):
     try:
         return run_cell(*args)
     except Exception as exc:  # a failed run is reported, not hidden
-        key, magnitude, commissioning, seed, _ = args
+        key, magnitude, commissioning, seed = args[:4]
         return {"effect": key, "magnitude": magnitude, "commissioning": commissioning, "seed": seed, "outcome": "error", "error": repr(exc)}
 
 
@@ -171,6 +190,7 @@ def main(argv=None) -> None:
     ap.add_argument("--commissioning", default="no,yes")
     ap.add_argument("--effects", default="all")
     ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--method", default="nuisance", choices=("nuisance", "before"))
     ap.add_argument("--out", default="bench/discrepancy_robustness.jsonl")
     a = ap.parse_args(argv)
     keys = [s.key for s in EFFECT_LIBRARY] if a.effects == "all" else a.effects.split(",")
@@ -180,10 +200,10 @@ def main(argv=None) -> None:
     tasks = []
     for c in comms:
         for seed in seeds:  # seed-major, so a worker reuses its commissioning calibration
-            tasks.append(("none", "typical", c, seed, a.windows))
+            tasks.append(("none", "typical", c, seed, a.windows, a.method))
             for m in mags:
                 for k in keys:
-                    tasks.append((k, m, c, seed, a.windows))
+                    tasks.append((k, m, c, seed, a.windows, a.method))
     t0 = time.time()
     rows = []
     out = Path(a.out)
