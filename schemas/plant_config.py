@@ -5,7 +5,8 @@
 (``valves[1].tags.p1.unit``) and what was expected. :func:`plant_config_to_dict` writes a
 configuration back in the file's own units, so a round trip through TOML is lossless.
 
-Keys the project adds to the specification (all optional, documented in the README):
+Keys the project adds to the specification (all optional; every key is documented in
+``docs/configuration.md``):
 
 - ``[export] sample_rate_hz`` (default 1000): the uniform grid the lake is built on. [Hz]
 - ``[export] max_gap_s`` (default 0.005): samples further apart than this are a gap;
@@ -358,6 +359,10 @@ def _instant(value: Any, key: str, tz: ZoneInfo) -> datetime:
 
 # --- the tables ------------------------------------------------------------------------------
 
+_TOP_KEYS = {"plant", "export", "monitor", "valve_types", "valves", "retention"}
+_PLANT_KEYS = {"name", "timezone"}
+_MONITOR_KEYS = {"window_s"}
+_RETENTION_KEYS = {"keep_days", "mode", "thin_keep_s_per_hour"}
 _EXPORT_KEYS = {
     "layout", "timestamp_column", "timestamp_format", "tag_column", "value_column",
     "quality_column", "good_quality", "separator", "decimal", "sample_rate_hz", "max_gap_s",
@@ -395,7 +400,7 @@ def _parse_export(raw: Any) -> ExportSpec:
 
 def _parse_retention(raw: Any) -> RetentionSpec:
     t = _table(raw, "retention")
-    _no_unknown(t, {"keep_days", "mode", "thin_keep_s_per_hour"}, "retention")
+    _no_unknown(t, _RETENTION_KEYS, "retention")
     days = _required(t, "keep_days", "retention")
     if isinstance(days, bool) or not isinstance(days, int) or days < 1:
         raise ConfigError(f"retention.keep_days: expected a whole number of days >= 1, got {days!r}")
@@ -412,7 +417,7 @@ def _parse_retention(raw: Any) -> RetentionSpec:
 
 def _parse_monitor(raw: Any) -> MonitorSpec:
     t = _table(raw, "monitor")
-    _no_unknown(t, {"window_s"}, "monitor")
+    _no_unknown(t, _MONITOR_KEYS, "monitor")
     window_s = _number(t.get("window_s", DEFAULT_WINDOW_S), "monitor.window_s", 1.0, 86_400.0)
     per_day = 86_400.0 / window_s
     if abs(per_day - round(per_day)) > 1e-9 * per_day:
@@ -608,9 +613,9 @@ def parse_plant_config(data: dict) -> PlantConfig:
         For unknown keys, missing required keys, impossible values, unknown units, duplicate
         valve ids or a historian tag used twice; the message starts with the key's path.
     """
-    _no_unknown(_table(data, "top level"), {"plant", "export", "monitor", "valve_types", "valves", "retention"}, "")
+    _no_unknown(_table(data, "top level"), _TOP_KEYS, "")
     plant = _table(_required(data, "plant", ""), "plant")
-    _no_unknown(plant, {"name", "timezone"}, "plant")
+    _no_unknown(plant, _PLANT_KEYS, "plant")
     name = _str(_required(plant, "name", "plant"), "plant.name")
     tz_name = _str(_required(plant, "timezone", "plant"), "plant.timezone")
     try:

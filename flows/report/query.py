@@ -4,10 +4,15 @@ Reads the read-only snapshot the last writing command published (``--live``: the
 database, read-only), so a query never waits for the nightly writer and never holds it up
 (:mod:`flows.report.views`). Output: a rich table (default), CSV, JSON (an array of objects, times as
 ISO-8601 UTC) or Parquet (``--out`` required).
+
+A query never changes the warehouse or writes a file (:func:`check_read_only`,
+:func:`lock_down`): the database is attached read-only, only a single ``SELECT`` (or
+``EXPLAIN`` of one) runs, and DuckDB's file system is closed except for reading the lake.
 """
 
 from __future__ import annotations
 
+import re
 import sys
 from pathlib import Path
 
@@ -19,11 +24,55 @@ from flows.report.views import connect_snapshot
 
 FORMATS = ("table", "csv", "json", "parquet")
 
+_EXPLAIN_PREFIX = re.compile(r"\s*explain\s*(\([^)]*\))?\s*(analy[sz]e\b)?", re.IGNORECASE)
+_REFUSED = "valvemon query runs one SELECT (or EXPLAIN of one) and never writes the warehouse or a file"
+
+
+def _statements(sql: str) -> list:
+    try:
+        return duckdb.extract_statements(sql)
+    except duckdb.Error as exc:
+        raise ValvemonError(f"query failed: {str(exc).splitlines()[0]}") from None
+
+
+def check_read_only(sql: str) -> None:
+    """Refuse anything but one ``SELECT`` (``WITH``, ``FROM``, ``DESCRIBE``, ``SHOW``, ``SUMMARIZE``
+    are SELECTs to DuckDB) or ``EXPLAIN`` of one. ``COPY ... TO``, ``EXPORT``, ``ATTACH``,
+    ``INSTALL``, ``LOAD``, ``SET``, ``CREATE`` and the rest are refused before anything runs,
+    including ``EXPLAIN ANALYZE COPY``, which would execute the copy.
+    """
+    statements = _statements(sql)
+    if len(statements) != 1:
+        raise ValvemonError(f"query refused: {len(statements)} statements; {_REFUSED}")
+    statement = statements[0]
+    kind = statement.type
+    if kind == duckdb.StatementType.EXPLAIN:
+        inner = _statements(statement.query[_EXPLAIN_PREFIX.match(statement.query).end() :])
+        kind = inner[0].type if len(inner) == 1 else kind
+    if kind != duckdb.StatementType.SELECT:
+        raise ValvemonError(f"query refused: a {kind.name} statement; {_REFUSED}")
+
+
+def lock_down(con: duckdb.DuckDBPyConnection, warehouse: Path) -> None:
+    """Close DuckDB's file system for ``con`` except for the lake, then lock the settings.
+
+    ``enable_external_access = false`` refuses every file, extension install or load and
+    ``ATTACH`` outside ``allowed_directories``; the lake stays readable for
+    ``read_parquet('WAREHOUSE/lake/sensors/**/*.parquet')``; ``lock_configuration`` refuses any
+    ``SET`` that would reopen them. Writing into the lake is refused by :func:`check_read_only`.
+    """
+    lake = str((Path(warehouse) / "lake").resolve()).replace("'", "''")
+    con.execute(f"SET allowed_directories = ['{lake}/']")
+    con.execute("SET enable_external_access = false")
+    con.execute("SET lock_configuration = true")
+
 
 def fetch(sql: str, warehouse: Path, *, live: bool = False) -> pl.DataFrame:
     """Run ``sql`` on the snapshot (or the live file) and return the whole result."""
+    check_read_only(sql)
     con = connect_snapshot(warehouse, live=live)
     try:
+        lock_down(con, warehouse)
         try:
             rel = con.sql(sql)
         except duckdb.Error as exc:
