@@ -129,9 +129,7 @@ def nuisance_priors(valve: ValveSpec) -> NuisancePriors:
     """The nuisance priors of a valve: its ``[valves.tolerances]`` or the documented defaults."""
     from dataclasses import asdict
 
-    from schemas.plant_config import ModelTolerances
-
-    return NuisancePriors(**asdict(valve.tolerances or ModelTolerances()))
+    return NuisancePriors(**asdict(valve.tolerances)) if valve.tolerances is not None else NuisancePriors()
 
 
 def valve_condition(valve: ValveSpec, plant: PlantParams, warehouse: Path, mode: str, settings: DiscrepancySettings) -> tuple[str, PlantParams, ValveCondition, ConditionFit | None]:

@@ -2,7 +2,7 @@
 records, alone or jointly with library effects.
 
 The fit is a maximum a-posteriori Gauss–Newton on the same integrated residual rows the effect
-selection regresses (:func:`transforms.discrepancy.pipeline._rows`: both chamber equations over
+selection regresses (:func:`transforms.discrepancy.rows._rows`: both chamber equations over
 20-sample intervals and the motion equation integrated twice, the load eliminated per
 segment), each row weighted by 1/σ of its equation, with the prior as extra rows: it minimises
 
@@ -78,7 +78,7 @@ class NuisanceModel:
 
 
 def _residuals(prepared, nm: NuisanceModel, z, effects, rows0, settings):
-    from transforms.discrepancy.pipeline import _demean_motion, _rows
+    from transforms.discrepancy.rows import _demean_motion, _rows
 
     plant, cond = nm.model(z)
     return _demean_motion(_rows(prepared, plant, cond, effects, settings).y, rows0)
@@ -91,7 +91,7 @@ def jacobians(prepared, nm: NuisanceModel, z, effects: Effects, specs: list[Effe
     compares an effect with the nuisance pattern it resembles: a spool sensor offset is exactly an
     underlap pattern, and forward differences of different steps would make them differ by the
     curvature of the orifice law, which the heavily weighted data rows then take for a real difference."""
-    from transforms.discrepancy.pipeline import FD_FRACTION, perturbed
+    from transforms.discrepancy.rows import FD_FRACTION, perturbed
 
     r = _residuals(prepared, nm, z, effects, rows0, settings) if r_here is None else r_here
     cols = []
@@ -242,7 +242,7 @@ def refine_breakaway(prepared, nm: NuisanceModel, z, settings, effects: Effects 
     """The breakaway force d_s that makes the replay fit best (a grid over ±``BREAKAWAY_RANGE`` σ,
     then golden-section search), the other nuisances held at z and the loads those of the model at
     the start. Returns the nuisance model with ``breakaway_z`` set."""
-    from transforms.discrepancy.pipeline import _gaps, _load_for
+    from transforms.discrepancy.rows import _gaps, _load_for
 
     if nm.sigma[BREAKAWAY] <= 0:
         return nm
@@ -281,7 +281,7 @@ def refine_breakaway(prepared, nm: NuisanceModel, z, settings, effects: Effects 
 def calibrate_prepared(prepared, nm: NuisanceModel, settings, effects: Effects | None = None, z0=None) -> tuple[JointFit, object, np.ndarray, np.ndarray]:
     """Calibrate the nuisances on prepared records with ``effects`` held (default none).
     Returns (fit, rows, weights, equation sigmas)."""
-    from transforms.discrepancy.pipeline import _demean_motion, _equation_sigmas, _rows
+    from transforms.discrepancy.rows import _demean_motion, _equation_sigmas, _rows
 
     fx = Effects() if effects is None else effects
     z = np.zeros(len(nm.active)) if z0 is None else np.asarray(z0, float)
@@ -305,7 +305,7 @@ def calibrate(records, plant: PlantParams, condition: ValveCondition, priors: Nu
     """Calibrate the base model's nuisances on ``records`` (e.g. a commissioning window): the
     loads are estimated with the nominal model, the nuisances fitted, the loads estimated again
     with the calibrated model and the nuisances refitted."""
-    from transforms.discrepancy.pipeline import _gaps, prepare_records
+    from transforms.discrepancy.rows import _gaps, prepare_records
 
     fx = Effects() if effects is None else effects
     nm = NuisanceModel.of(plant, condition, priors)

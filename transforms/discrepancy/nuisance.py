@@ -30,6 +30,7 @@ from dataclasses import dataclass, fields, replace
 import numpy as np
 
 from model.params import EDGES, PlantParams, ValveCondition
+from schemas.plant_config import ModelTolerances
 
 __all__ = ["NUISANCES", "NUISANCE_UNITS", "NuisancePriors", "apply_nuisances", "nuisance_sigmas", "nuisance_values"]
 
@@ -43,29 +44,19 @@ CONDITION_NUISANCES = tuple(range(8))
 
 
 @dataclass(frozen=True)
-class NuisancePriors:
-    """Standard deviations of the nuisance priors (0 = the parameter is taken as exact).
+class NuisancePriors(ModelTolerances):
+    """Standard deviations of the nuisance priors (0 = the parameter is taken as exact): the plant
+    TOML's ``[valves.tolerances]`` (:class:`schemas.plant_config.ModelTolerances`, whose
+    defaults are documented there and in docs/configuration.md).
 
     Attributes
     ----------
-    alpha_rel : float
-        Relative σ of every edge's contraction coefficient. [-]
-    underlap_m : float
-        σ of every edge's underlap. [m]
-    bulk_modulus_rel, volume_rel : float
-        Relative σ of β and of V01, V02. [-]
-    friction_rel : float
-        Relative σ of d_v, d_c and d_s. [-]
-    mass_rel : float
-        Relative σ of the moving mass. [-]
+    alpha_rel : relative σ of every edge's contraction coefficient [-]
+    underlap_m : σ of every edge's underlap [m]
+    bulk_modulus_rel, volume_rel : relative σ of β and of V01, V02 [-]
+    friction_rel : relative σ of d_v, d_c and d_s [-]
+    mass_rel : relative σ of the moving mass [-]
     """
-
-    alpha_rel: float = 0.03
-    underlap_m: float = 5.0e-6
-    bulk_modulus_rel: float = 0.07
-    volume_rel: float = 0.07
-    friction_rel: float = 0.30
-    mass_rel: float = 0.02
 
     def __post_init__(self):
         for f in fields(self):
