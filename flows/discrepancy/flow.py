@@ -5,10 +5,11 @@ effect explains it, what adding it does to the gap and to the monitoring (issue 
 (:func:`flows.discrepancy.lake_records.lake_records`: the records are chosen from the time stamps,
 read in chunks, then only their rows are read; on a continuous recording no record straddles a
 monitoring window of the configuration's ``[monitor] window_s``, ``DiscrepancySettings.window_s``), builds the plant model from the plant
-configuration (:func:`plant_params_for`) with the valve's condition -- fitted on its commissioning
-window (the configuration's ``baseline_window``) when there is one, else its design data
-(:func:`valve_condition`) --, runs :func:`transforms.discrepancy.pipeline.diagnose` and stores, in one
-transaction,
+configuration (:func:`plant_params_for`) -- its uncertain parameters (edges, β, volumes, friction,
+mass) calibrated on its commissioning window (the configuration's ``baseline_window``) when there
+is one, else calibrated by the diagnosis itself within the valve's ``[valves.tolerances]``
+(:func:`valve_condition`, :func:`nuisance_priors`) --, runs :func:`transforms.discrepancy.pipeline.diagnose`
+and stores, in one transaction,
 
 * ``discrepancy_findings`` -- one row per named effect (or one ``none`` row), interfaces.md;
 * ``discrepancy_candidates`` -- every library candidate scored against the base model;
