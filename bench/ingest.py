@@ -5,6 +5,7 @@ Usage (figures and the exact command in BENCHMARKS.md, "Ingest"):
     .venv/bin/python bench/ingest.py                 # throughput, one core
     .venv/bin/python bench/ingest.py --storage       # lake storage study (codec, float width, row groups)
     .venv/bin/python bench/ingest.py --seconds 200   # a smaller input
+    .venv/bin/python bench/ingest.py --recorder      # wide recorder formats: CSV, ASCII with header rows, TDMS, Parquet
 
 Throughput: a synthetic plant export (one valve, six required tags, sampled exactly on the 1 kHz
 grid, realistic signals: smooth motion + sensor noise + 16-bit quantisation) is written as a
@@ -14,6 +15,11 @@ the whole ingest of the file into an empty warehouse (``flows.ingest.flow.ingest
 parse, quarantine check, de-duplicate, grid, validate, merge, atomic Parquet write,
 DuckDB manifest). Everything runs on one core (``POLARS_MAX_THREADS=1``, one Arrow thread), so
 rows/s is per core. The ratio ingest / bare read is the figure (target ≤ 2).
+
+Recorder formats (``--recorder``): the same signals as one wide file per format — CSV with one
+header line, iba-style ASCII (tab, header lines tag/name/unit), TDMS (a channel per tag, waveform
+time, a segment per 100,000 samples) and Parquet — each against its bare read (``polars.read_csv``,
+``nptdms.TdmsFile.read`` of every channel, ``polars.read_parquet``) and ingested with a wide plant.
 
 Storage: the same signals as a lake partition, written with several codecs and float widths,
 then decoded (``polars.read_parquet`` of all columns, and a DuckDB scan), sized, and read for
@@ -110,6 +116,17 @@ def timed(f, repeat: int) -> float:
     return min(times)
 
 
+def ingester(path: Path, config, tags: TagTable, wh: Path, n: int):
+    """The whole ingest of ``path`` into an empty warehouse ``wh`` (``n`` lake rows expected)."""
+
+    def ingest() -> None:
+        shutil.rmtree(wh, ignore_errors=True)
+        r = ingest_file(path, config, wh, "bench", tags=tags)
+        assert r.rows_out == n, r
+
+    return ingest
+
+
 def throughput(seconds: int, repeat: int) -> None:
     n = seconds * 1000
     config = load_plant_config(CONFIG)
@@ -124,13 +141,7 @@ def throughput(seconds: int, repeat: int) -> None:
         for kind, path in inputs.items():
             bare = (lambda: pl.read_csv(path)) if kind == "csv" else (lambda: pl.read_parquet(path))
             t_bare = timed(bare, repeat)
-            wh = tmp / f"wh_{kind}"
-
-            def ingest() -> None:
-                shutil.rmtree(wh, ignore_errors=True)
-                r = ingest_file(path, config, wh, "bench", tags=tags)
-                assert r.rows_out == n, r
-
+            ingest = ingester(path, config, tags, tmp / f"wh_{kind}", n)
             t_ing = timed(ingest, repeat)
             print(f"{kind:<10}{path.stat().st_size / 1e6:>9.1f}{t_bare:>13.3f}{t_ing:>10.3f}{t_ing / t_bare:>7.2f}{rows / t_bare / 1e6:>14.2f}{rows / t_ing / 1e6:>16.2f}{n:>11,}")
             stages[kind] = _stages(lambda: ingest(), repeat)
@@ -189,6 +200,75 @@ def _stages(run, repeat: int) -> dict[str, float]:
         for k, v in acc.items():
             best[k] = min(best.get(k, v), v)
     return best
+
+
+def wide_config():
+    """The example plant, wide (time column ``timestamp``, ISO-8601)."""
+    import tomllib
+
+    from schemas.plant_config import parse_plant_config
+
+    raw = tomllib.loads(CONFIG.read_text())
+    for k in ("tag_column", "value_column", "quality_column", "good_quality"):
+        raw["export"].pop(k)
+    raw["export"]["layout"] = "wide"
+    return parse_plant_config(raw)
+
+
+def write_recorder_inputs(folder: Path, n: int) -> dict[str, tuple[Path, object, object]]:
+    """``format → (file, bare read, plant)`` of the same signals, wide."""
+    import dataclasses
+
+    from nptdms import ChannelObject, TdmsWriter
+
+    sig = signals(n)
+    t_us = START_US + np.arange(n, dtype=np.int64) * 1000
+    ts = pl.Series("timestamp", t_us).cast(pl.Datetime("us", "UTC"))
+    df = pl.DataFrame([ts] + [pl.Series(TAGS[s][0], sig[s]) for s in TAGS])
+    text = df.with_columns(pl.col("timestamp").dt.strftime("%Y-%m-%dT%H:%M:%S%.3fZ"))
+    config = wide_config()
+    ascii_config = dataclasses.replace(config, export=dataclasses.replace(config.export, header_rows=("tag", "name", "unit"), separator="\t"))
+    out = {}
+    csv = folder / "export_wide.csv"
+    text.write_csv(csv)
+    out["wide csv"] = (csv, lambda: pl.read_csv(csv), config)
+    asc = folder / "export_iba.txt"
+    units = ["bar"] * 4 + ["mm"] * 2
+    with asc.open("wb") as fh:
+        fh.write(("\t".join(df.columns) + "\n" + "\t".join(["", *TAGS]) + "\n" + "\t".join(["", *units]) + "\n").encode())
+        text.write_csv(fh, separator="\t", include_header=False)
+    out["iba ascii"] = (asc, lambda: pl.read_csv(asc, separator="\t", skip_rows_after_header=2), ascii_config)
+    tdms = folder / "export.tdms"
+    with TdmsWriter(str(tdms)) as w:
+        for a in range(0, n, 100_000):
+            props = lambda k: {"wf_start_time": np.datetime64(START_US, "us"), "wf_increment": 0.001, "unit_string": units[k]} if a == 0 else None  # noqa: E731
+            w.write_segment([ChannelObject("rec", TAGS[s][0], sig[s][a : a + 100_000], properties=props(k)) for k, s in enumerate(TAGS)])
+
+    def read_tdms() -> None:
+        from nptdms import TdmsFile
+
+        f = TdmsFile.read(tdms)
+        for ch in f["rec"].channels():
+            ch[:]
+
+    out["tdms"] = (tdms, read_tdms, config)
+    pq_path = folder / "export_wide.parquet"
+    df.write_parquet(pq_path, compression="zstd")
+    out["wide parquet"] = (pq_path, lambda: pl.read_parquet(pq_path), config)
+    return out
+
+
+def recorder(seconds: int, repeat: int) -> None:
+    n = seconds * 1000
+    with tempfile.TemporaryDirectory(prefix="valvemon-bench-") as tmp:
+        tmp = Path(tmp)
+        inputs = write_recorder_inputs(tmp, n)
+        print(f"input: {n:,} instants × 6 tags, wide; one core (POLARS_MAX_THREADS={os.environ['POLARS_MAX_THREADS']})")
+        print(f"{'file':<14}{'size MB':>9}{'bare read s':>13}{'ingest s':>10}{'ratio':>7}{'ingest lake rows/s':>20}")
+        for kind, (path, bare, config) in inputs.items():
+            t_bare = timed(bare, repeat)
+            t_ing = timed(ingester(path, config, TagTable.from_config(config), tmp / f"wh_{kind.replace(' ', '_')}", n), repeat)
+            print(f"{kind:<14}{path.stat().st_size / 1e6:>9.1f}{t_bare:>13.3f}{t_ing:>10.3f}{t_ing / t_bare:>7.2f}{n / t_ing / 1e6:>18.2f} M")
 
 
 def lake_day(days: int, seed: int = 1) -> pl.DataFrame:
@@ -299,8 +379,9 @@ def main() -> None:
     ap.add_argument("--seconds", type=int, default=1000, help="length of the synthetic export at 1 kHz [s] (default 1000: 6 M long rows)")
     ap.add_argument("--repeat", type=int, default=3, help="repetitions per measurement (median)")
     ap.add_argument("--storage", action="store_true", help="run the lake storage study instead")
+    ap.add_argument("--recorder", action="store_true", help="wide recorder formats (CSV, iba ASCII, TDMS, Parquet) instead")
     args = ap.parse_args()
-    (storage if args.storage else throughput)(args.seconds, args.repeat)
+    (storage if args.storage else recorder if args.recorder else throughput)(args.seconds, args.repeat)
 
 
 if __name__ == "__main__":

@@ -106,14 +106,18 @@ def _simulate_all(requests: list[SimulateRequest]) -> None:
         run_simulate(req, show_progress=False)
 
 
-def run_demo(warehouse: Path, *, show_progress: bool = True) -> dict:
+def run_demo(warehouse: Path, *, show_progress: bool = True, valves: tuple[str, ...] | None = None) -> dict:
     """Simulate, ingest, monitor and report the demo plant into ``warehouse``.
 
     The snapshot span is written here (with the simulator's default workers) while one spawned
     side process writes the commissioning days and the recordings: the archives are
-    independent and each is the same, byte for byte, however it is run."""
+    independent and each is the same, byte for byte, however it is run. ``valves``: only these of
+    the demo plant (the same valves, data and outcome as in the whole demo; for tests)."""
     out = warehouse / "demo"
     config, config_path = demo_config(out)
+    if valves is not None:
+        config = dataclasses.replace(config, valves=tuple(v for v in config.valves if v.id in valves))
+        _part_config(config, config.valves, config_path)
     start = DEMO_END - timedelta(days=DEMO_DAYS)
     side = []  # each valve's commissioning day, simulated for that valve alone, then the recordings
     archives = []
@@ -126,12 +130,14 @@ def run_demo(warehouse: Path, *, show_progress: bool = True) -> dict:
         ))  # fmt: skip
         archives.append(day / "archive" / "exports")
     recorded = out / "recordings"
-    continuous = _part_config(config, [v for v in config.valves if v.id in CONTINUOUS_VALVES], out / "parts" / "recordings.toml")
-    side.append(SimulateRequest(
-        out=recorded, config_path=continuous, start=start.isoformat(), days=float(DEMO_DAYS), windows_per_day=1,
-        window_s=CONTINUOUS_MINUTES * 60.0, file_minutes=float(CONTINUOUS_MINUTES), format="parquet", overwrite=True,
-        seed=DEMO_SEED, workers=0,
-    ))  # fmt: skip
+    recording = [v for v in config.valves if v.id in CONTINUOUS_VALVES]
+    if recording:
+        continuous = _part_config(config, recording, out / "parts" / "recordings.toml")
+        side.append(SimulateRequest(
+            out=recorded, config_path=continuous, start=start.isoformat(), days=float(DEMO_DAYS), windows_per_day=1,
+            window_s=CONTINUOUS_MINUTES * 60.0, file_minutes=float(CONTINUOUS_MINUTES), format="parquet", overwrite=True,
+            seed=DEMO_SEED, workers=0,
+        ))  # fmt: skip
     span = out / "archive"
     snapshot = _part_config(config, [v for v in config.valves if v.id not in CONTINUOUS_VALVES], out / "parts" / "snapshots.toml")
     with ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn")) as pool:
@@ -144,7 +150,8 @@ def run_demo(warehouse: Path, *, show_progress: bool = True) -> dict:
             show_progress=show_progress,
         )  # fmt: skip
         side_done.result()
-    ingest = run_ingest(config_path, [*archives, span / "exports", recorded / "exports"], warehouse, show_progress=show_progress)
+    exports = [*archives, span / "exports"] + ([recorded / "exports"] if recording else [])
+    ingest = run_ingest(config_path, exports, warehouse, show_progress=show_progress)
     monitored = run_monitor(config_path, warehouse)
     report = run_report(config_path, warehouse)
     return {"config": config_path, "ingest": ingest, "monitor": monitored, "report": report}

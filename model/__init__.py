@@ -14,7 +14,7 @@ from .effects import EFFECT_LIBRARY, EFFECT_NAMES, EffectSpec, Effects
 from .cylinder import (chamber_volumes, cylinder_acceleration, friction_force,
                        pressure_derivatives, resultant_force)
 from .orifice import orifice_flow, port_flows, port_flows_from_areas
-from .params import (EDGES, OPENING_SIGN, TABLE1, ControllerParams, CylinderParams,
+from .params import (AREA_LAWS, EDGES, OPENING_SIGN, TABLE1, ControllerParams, CylinderParams,
                      FluidParams, LoadParams, PlantParams, SensorChannel, SensorParams,
                      SpoolParams, SupplyParams, TrajectoryParams, ValveCondition, ValveGeometry,
                      edge_index)
@@ -27,7 +27,7 @@ from .trajectory import (SupplyProfile, WindowInputs, draw_supply, load_profile,
                          minimum_jerk, reference_trajectory, window_inputs)
 
 __all__ = [
-    "EDGES", "OPENING_SIGN", "TABLE1", "ControllerParams", "CylinderParams", "FluidParams",
+    "AREA_LAWS", "EDGES", "OPENING_SIGN", "TABLE1", "ControllerParams", "CylinderParams", "FluidParams",
     "LoadParams", "PlantParams", "SensorChannel", "SensorParams", "SpoolParams", "SupplyParams",
     "TrajectoryParams", "ValveCondition", "ValveGeometry", "edge_index",
     "edge_area", "opening_coordinate", "valve_areas",

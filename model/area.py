@@ -10,6 +10,13 @@ that edge's underlap x_u and taper angle phi. With delta = (R - r) tan(phi) and 
            A_l = pi (R + r) c^(3/2) / (c + (x_l - u)(x_l + x_u))           if u < x_l
     c = (R - r)^2 + (x_l + x_u)^2,   x_l in (-x_u, -x_u + delta]
 
+Two variants beside Eq. 3 (:class:`model.params.ValveGeometry` ``area_law``, ``leakage_factor``):
+
+* worn lands, ``leakage_factor`` k: A_l = pi (R + r) c^(3/2) / (c + (x_l - u)(x_l + x_u) / k), equal
+  to Eq. 3 at u = x_l (continuous) and k times Eq. 3's leakage far from the edge;
+* the sharp-edged family (``area_law = "sharp"``): A(u) = 2 pi R sin(phi) (u + x_u) for u >= -x_u,
+  0 below -- the slope of Eq. 3's open branch at h = 0, no radial-clearance intercept, no leakage.
+
 The scalar kernel :func:`edge_area_kernel` works on a precomputed constant vector (see
 :func:`edge_constants`), so the simulator evaluates the equation without trigonometry; the
 array functions below are built on that one kernel.
@@ -22,40 +29,47 @@ import math
 import numpy as np
 from numba import njit
 
-from .params import EDGES, OPENING_SIGN, ValveCondition, ValveGeometry, edge_index
+from .params import AREA_LAWS, EDGES, OPENING_SIGN, ValveCondition, ValveGeometry, edge_index
 
 # Layout of an edge-constant vector (float64[N_EDGE_CONST]).
-_XU, _XL, _SIN, _COS, _A0, _DELTA, _TWO_R, _KT, _D2, _C, _C15, _W = range(12)
-N_EDGE_CONST = 12
+_XU, _XL, _SIN, _COS, _A0, _DELTA, _TWO_R, _KT, _D2, _C, _C15, _W, _KS = range(13)
+N_EDGE_CONST = 13
 
 
 @njit(cache=True)
-def edge_constants_kernel(underlap_m, taper_angle_rad, bore_radius_m, spool_radius_m, x_l_m):
-    """Constants of Eq. 3 for one edge, as a tuple of N_EDGE_CONST floats (layout private to
-    this module; a tuple so that numba passes it by value)."""
+def edge_constants_kernel(underlap_m, taper_angle_rad, bore_radius_m, spool_radius_m, x_l_m,
+                          sharp=False, leakage_factor=1.0):
+    """Constants of Eq. 3 (or of the sharp-edged law, ``sharp``) for one edge, as a tuple of
+    N_EDGE_CONST floats (layout private to this module; a tuple so that numba passes it by
+    value). ``leakage_factor`` [-] scales the leakage branch (module docstring)."""
     gap = bore_radius_m - spool_radius_m
     w = x_l_m + underlap_m
     c = gap * gap + w * w
+    ks = 2.0 * math.pi * bore_radius_m * math.sin(taper_angle_rad) if sharp else 0.0
     return (underlap_m, x_l_m, math.sin(taper_angle_rad), math.cos(taper_angle_rad),
             gap * math.cos(taper_angle_rad), gap * math.tan(taper_angle_rad),
             2.0 * bore_radius_m, math.pi * (bore_radius_m + spool_radius_m), gap * gap, c,
-            c * math.sqrt(c), w)
+            c * math.sqrt(c), w / leakage_factor, ks)
 
 
 @njit(cache=True)
 def edge_tuple_kernel(row):
     """An edge-constant tuple from a row of :func:`valve_edge_constants`."""
     return (row[0], row[1], row[2], row[3], row[4], row[5], row[6], row[7], row[8], row[9],
-            row[10], row[11])
+            row[10], row[11], row[12])
 
 
 @njit(cache=True)
 def edge_area_kernel(u, ec):
-    """Eq. 3: opening area [m^2] of one edge at opening coordinate ``u`` [m].
+    """Eq. 3 (or the sharp-edged law): opening area [m^2] of one edge at opening coordinate
+    ``u`` [m].
 
     ``ec`` is the edge's constant tuple from :func:`edge_constants_kernel`.
     """
     xu = ec[_XU]
+    if ec[_KS] > 0.0:
+        s = u + xu
+        return ec[_KS] * s if s > 0.0 else 0.0
     if u >= -xu + ec[_DELTA]:
         h = ec[_A0] + (u + xu) * ec[_SIN]
         return math.pi * h * (ec[_TWO_R] - h * ec[_COS])
@@ -79,12 +93,17 @@ def _default_x_l(underlap_m: float, taper_angle_rad: float, bore_radius_m: float
 
 
 def edge_constants(underlap_m: float, taper_angle_rad: float, bore_radius_m: float,
-                   spool_radius_m: float, x_l_m: float | None = None) -> tuple:
+                   spool_radius_m: float, x_l_m: float | None = None, area_law: str = "eq3",
+                   leakage_factor: float = 1.0) -> tuple:
     """Precomputed constants of Eq. 3 for one edge (the tuple :func:`edge_area_kernel` takes).
 
     Parameters are those of :func:`edge_area`. Raises ``ValueError`` if x_l is outside
-    (-x_u, -x_u + delta].
+    (-x_u, -x_u + delta], for an unknown ``area_law`` or a ``leakage_factor`` <= 0.
     """
+    if area_law not in AREA_LAWS:
+        raise ValueError(f"area_law must be one of {AREA_LAWS}, got {area_law!r}")
+    if not leakage_factor > 0:
+        raise ValueError(f"leakage_factor must be > 0, got {leakage_factor!r}")
     if x_l_m is None:
         x_l_m = _default_x_l(underlap_m, taper_angle_rad, bore_radius_m, spool_radius_m)
     delta = (bore_radius_m - spool_radius_m) * math.tan(taper_angle_rad)
@@ -94,12 +113,14 @@ def edge_constants(underlap_m: float, taper_angle_rad: float, bore_radius_m: flo
             f"x_l = {x_l_m:.6g} m outside (-x_u, -x_u + delta] = "
             f"({-underlap_m:.6g}, {-underlap_m + delta:.6g}] m (model.md, Eq. 3)")
     return edge_constants_kernel(float(underlap_m), float(taper_angle_rad),
-                                 float(bore_radius_m), float(spool_radius_m), float(x_l_m))
+                                 float(bore_radius_m), float(spool_radius_m), float(x_l_m),
+                                 area_law == "sharp", float(leakage_factor))
 
 
 def edge_area(u, underlap_m: float, taper_angle_rad: float, bore_radius_m: float,
-              spool_radius_m: float, x_l_m: float | None = None):
-    """Opening area of one control edge, Eq. 3.
+              spool_radius_m: float, x_l_m: float | None = None, area_law: str = "eq3",
+              leakage_factor: float = 1.0):
+    """Opening area of one control edge, Eq. 3 (or a variant: module docstring).
 
     Parameters
     ----------
@@ -113,13 +134,18 @@ def edge_area(u, underlap_m: float, taper_angle_rad: float, bore_radius_m: float
         Bore radius R and spool radius r. [m]
     x_l_m : float, optional
         Onset of the leakage branch, in (-x_u, -x_u + delta]; default -x_u + delta/2. [m]
+    area_law : str
+        ``"eq3"`` (default) or ``"sharp"`` (module docstring). [-]
+    leakage_factor : float
+        Eq. 3's leakage branch far from the edge times this (continuous at x_l); default 1. [-]
 
     Returns
     -------
     ndarray or float
         Opening area A(u), same shape as ``u``. [m^2]
     """
-    ec = edge_constants(underlap_m, taper_angle_rad, bore_radius_m, spool_radius_m, x_l_m)
+    ec = edge_constants(underlap_m, taper_angle_rad, bore_radius_m, spool_radius_m, x_l_m,
+                        area_law, leakage_factor)
     ua = np.asarray(u, dtype=np.float64)
     out = _edge_area_array(np.ascontiguousarray(ua).ravel(), ec).reshape(ua.shape)
     return out if out.ndim else float(out)
@@ -134,11 +160,13 @@ def opening_coordinate(x, edge: str):
 
 
 def valve_edge_constants(geometry: ValveGeometry, condition: ValveCondition) -> np.ndarray:
-    """Edge constants of all four edges, shape (4, N_EDGE_CONST), in :data:`EDGES` order."""
+    """Edge constants of all four edges, shape (4, N_EDGE_CONST), in :data:`EDGES` order, for
+    the geometry's ``area_law`` and ``leakage_factor``."""
     x_l = condition.x_l_m(geometry)
     return np.array([
         edge_constants(condition.underlap_m[i], geometry.taper_angle(e),
-                       geometry.bore_radius_m, geometry.spool_radius_m, x_l[i])
+                       geometry.bore_radius_m, geometry.spool_radius_m, x_l[i],
+                       geometry.area_law, geometry.leakage_factor)
         for i, e in enumerate(EDGES)
     ])
 
@@ -160,7 +188,8 @@ def _valve_areas_array(x, ecs):
 
 
 def valve_areas(x, geometry: ValveGeometry, condition: ValveCondition) -> np.ndarray:
-    """Opening areas of the four edges at spool displacement(s) ``x`` [m], Eq. 3.
+    """Opening areas of the four edges at spool displacement(s) ``x`` [m], Eq. 3 (or the
+    geometry's ``area_law`` and ``leakage_factor``).
 
     Returns
     -------

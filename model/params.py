@@ -24,6 +24,10 @@ OPENING_SIGN: dict[str, float] = {"s1": 1.0, "1r": -1.0, "s2": -1.0, "2r": 1.0}
 EDGE_PORT: dict[str, int] = {"s1": 1, "1r": 1, "s2": 2, "2r": 2}
 
 
+#: The valve families' area laws (:class:`ValveGeometry` ``area_law``).
+AREA_LAWS: tuple[str, str] = ("eq3", "sharp")
+
+
 def edge_index(edge: str) -> int:
     """Position of ``edge`` in :data:`EDGES`; raises ``ValueError`` for an unknown name."""
     try:
@@ -57,6 +61,13 @@ class ValveGeometry:
         Taper angle phi1 of the control edges of port 1 (s1, 1r). [rad] (Table 1: 10.48 deg)
     taper_angle_port2_rad : float
         Taper angle phi2 of the control edges of port 2 (s2, 2r). [rad] (Table 1: 5.24 deg)
+    area_law : str
+        The valve family's area law (:mod:`model.area`): ``"eq3"`` (the paper's Eq. 3, with the
+        radial-clearance annulus and the closed edge's leakage branch) or ``"sharp"`` (sharp
+        edges: A = 0 below -x_u, linear above, no radial-clearance intercept, no leakage). [-]
+    leakage_factor : float
+        Eq. 3 only: the closed edge's leakage branch, far from the edge, is this many times
+        Eq. 3's (worn lands); continuous at x_l; 1 = Eq. 3. [-]
     """
 
     x_max_m: float = 3.5e-3
@@ -64,6 +75,8 @@ class ValveGeometry:
     spool_radius_m: float = 9.99e-3
     taper_angle_port1_rad: float = math.radians(10.48)
     taper_angle_port2_rad: float = math.radians(5.24)
+    area_law: str = "eq3"
+    leakage_factor: float = 1.0
 
     def __post_init__(self):
         if not self.bore_radius_m > self.spool_radius_m > 0:
@@ -73,6 +86,10 @@ class ValveGeometry:
                 raise ValueError("taper angles must lie in (0, pi/2) rad")
         if self.x_max_m <= 0:
             raise ValueError("x_max_m must be > 0")
+        if self.area_law not in AREA_LAWS:
+            raise ValueError(f"area_law must be one of {AREA_LAWS}, got {self.area_law!r}")
+        if not self.leakage_factor > 0:
+            raise ValueError("leakage_factor must be > 0")
 
     @property
     def radial_clearance_m(self) -> float:

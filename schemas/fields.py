@@ -170,6 +170,15 @@ RAW_ROW_FIELDS: tuple[Field, ...] = (
 )
 """One accepted sample of one tag, as the ingest reads it from an export (long form)."""
 
+QUARANTINE_REASONS: tuple[str, ...] = (
+    "bad_quality", "non_numeric", "non_finite", "missing_value", "missing_tag", "bad_timestamp", "implausible_time", "out_of_range",
+)  # fmt: skip
+"""Why a sample is quarantined (``transforms.ingest.samples``; ``docs/ingest.md``)."""
+
+FAULT_REASONS: tuple[str, ...] = ("bad_timestamp", "implausible_time", "out_of_range")
+"""The quarantine reasons whose share per tag and file ``export.max_bad_share`` bounds; each is
+also a column of ``ingest_manifest``."""
+
 QUARANTINE_FIELDS: tuple[Field, ...] = (
     _FILE_HASH,
     _SOURCE_FILE,
@@ -178,7 +187,7 @@ QUARANTINE_FIELDS: tuple[Field, ...] = (
     Field("timestamp_raw", pl.Utf8, "", "Timestamp as written in the export.", nullable=True),
     Field("value_raw", pl.Utf8, "", "Value as written in the export (e.g. a PI digital state).", nullable=True),
     Field("quality", pl.Utf8, "", "Quality code as written in the export.", nullable=True),
-    Field("reason", pl.Utf8, "", "Why the sample was set aside.", isin=("bad_quality", "non_numeric", "non_finite", "missing_value", "missing_tag")),
+    Field("reason", pl.Utf8, "", "Why the sample was set aside.", isin=QUARANTINE_REASONS),
     Field("run_id", pl.Utf8, "", "Ingest run that read the file."),
     Field("ingested_at", UTC_US, "", "When the ingest read the file."),
 )
@@ -200,7 +209,7 @@ MANIFEST_FIELDS: tuple[Field, ...] = (
     Field("file_hash", pl.Utf8, "", "Content hash of the file, 'blake3:' + BLAKE3-256 in hex ('sha256:' + SHA-256 for files ingested before BLAKE3); the table's key."),
     Field("source_file", pl.Utf8, "", "Path of the file when it was ingested."),
     Field("size_bytes", pl.Int64, "B", "File size.", ge=0),
-    Field("file_format", pl.Utf8, "", "How the file was read.", isin=("csv", "csv.gz", "parquet")),
+    Field("file_format", pl.Utf8, "", "How the file was read.", isin=("csv", "csv.gz", "parquet", "tdms")),
     Field("layout", pl.Utf8, "", "Export layout of the plant configuration.", isin=("long", "wide")),
     Field("rows_in", pl.Int64, "", "Data rows in the file.", ge=0),
     Field("samples_in", pl.Int64, "", "Tag values in the file (long: one per row; wide: non-empty cells).", ge=0),
@@ -217,6 +226,12 @@ MANIFEST_FIELDS: tuple[Field, ...] = (
     Field("time_end", UTC_US, "", "Latest accepted sample (UTC).", nullable=True),
     Field("run_id", pl.Utf8, "", "Ingest run that ingested the file."),
     Field("ingested_at", UTC_US, "", "When the file was ingested."),
+    Field("bad_timestamp", pl.Int64, "", "Of quarantined: samples whose timestamp is missing or not in export.timestamp_format.", ge=0),
+    Field("implausible_time", pl.Int64, "", "Of quarantined: samples later than the ingest's time + 1 day or before their valve's commissioned.", ge=0),
+    Field("out_of_range", pl.Int64, "", "Of quarantined: samples outside the physical range of their lake column (e.g. 1e308).", ge=0),
+    Field("other_tags", pl.Int64, "", "Tags (long) or columns (wide) of the file that no valve has, read past (export.other_tags = 'ignore').", ge=0),
+    Field("other_samples", pl.Int64, "", "Rows (long) or non-empty cells (wide) of those tags, not in samples_in.", ge=0),
+    Field("other_tag_names", pl.Utf8, "", "Those tags, comma-separated in the order of the file (empty: none)."),
 )
 """One row per ingested export file (table ``ingest_manifest``)."""
 
@@ -285,6 +300,9 @@ EDGE_FIT_FIELDS: tuple[Field, ...] = (
     Field("u_max_mm", pl.Float64, "mm", "Largest opening coordinate among the points.", nullable=True),
     Field("baseline_version", pl.Int32, "", "Version of the baseline characteristic fitted against.", nullable=True),
     Field("monitored_at", UTC_US, "", "When this row was computed."),
+    Field("leak_scale", pl.Float64, "", "The edge's closed-edge leakage in the window over Eq. 3's (0 = none).", nullable=True, ge=0.0),
+    Field("leak_scale_ci_low", pl.Float64, "", "Lower bound of the 95 % confidence interval of leak_scale.", nullable=True),
+    Field("leak_scale_ci_high", pl.Float64, "", "Upper bound of the 95 % confidence interval of leak_scale.", nullable=True),
 )
 """One row per valve, edge and monitoring window (table ``edge_fits``, interfaces.md)."""
 
@@ -302,6 +320,11 @@ BASELINE_FIELDS: tuple[Field, ...] = (
     Field("alpha_vs_nominal", pl.Float64, "", "Scale of the baseline against the nominal characteristic.", nullable=True),
     Field("x_vs_nominal_mm", pl.Float64, "mm", "Shift of the baseline against the nominal characteristic.", nullable=True),
     Field("created_at", UTC_US, "", "When this version was stored."),
+    Field("leak_branch_scale", pl.Float64, "", "λ₁: the edge's closed-edge leakage is Eq. 3's branch × λ₁ ...", nullable=True, ge=0.0),
+    Field("leak_gap_scale", pl.Float64, "", "... + λ₂ × its area at the closing point (a gap flow).", nullable=True, ge=0.0),
+    Field("leak_scale", pl.Float64, "", "That leakage over Eq. 3's 1 mm inside the edge (1 = Eq. 3, 0 = none).", nullable=True, ge=0.0),
+    Field("leak_scale_ci_low", pl.Float64, "", "Lower 95 % bound of leak_scale (NULL: not identified, Eq. 3 kept).", nullable=True),
+    Field("leak_scale_ci_high", pl.Float64, "", "Upper bound of the 95 % interval of leak_scale.", nullable=True),
 )
 """Versioned baseline characteristics per valve and edge (table ``baselines``)."""
 
@@ -397,6 +420,8 @@ VALVE_CONDITION_FIELDS: tuple[Field, ...] = (
     Field("n_recent_alarms", pl.Int64, "", "Alarm windows within fault_hold_hours of the latest ok window.", ge=0),
     Field("eq9_ok", pl.Boolean, "", "Latest Eq. 9 standstill check of the valve passed (null: no standstill data).", nullable=True),
     Field("edge_order", pl.Int32, "", "1..4 for s1, 1r, s2, 2r (for sorting)."),
+    Field("leak_scale", pl.Float64, "", "Closed-edge leakage over Eq. 3's (0 = none), median of the ok windows.", nullable=True),
+    Field("leak_scale_baseline", pl.Float64, "", "The same at commissioning (1 for a nominal baseline: Eq. 3 assumed).", nullable=True),
 )
 """View ``valve_condition`` (interfaces.md), as exported to ``export/valve_condition.parquet``."""
 

@@ -13,6 +13,18 @@ Keys the project adds to the specification (all optional; every key is documente
   nothing is interpolated across a gap. [s]
 - ``[export] duplicate_rule`` (default ``"last"``): the same tag and time with different
   values keeps the ``"last"`` row in file order, or ``"first"``, or is an ``"error"``.
+- ``[export] max_bad_share`` (default :data:`DEFAULT_MAX_BAD_SHARE`): the share of a tag's
+  samples in one file that may be quarantined as ``out_of_range``, ``bad_timestamp`` or
+  ``implausible_time`` before the file is refused (``docs/ingest.md``, "Quarantine or refusal").
+- ``[export] other_tags`` (default ``"ignore"``): tags (long) and columns (wide) of an export
+  that no valve of the plant has are read past and counted (``"ignore"``) or refuse the file
+  (``"error"``).
+- ``[export] header_rows`` (wide only; default: one header line of tags): what each header line of
+  a wide text export holds, in file order: ``"tag"`` (the column names, once), ``"unit"`` (each
+  column's unit, at most once; checked against ``[valves.tags]``, or taken from it where a tag
+  leaves ``unit`` out), ``"name"`` (descriptions, shown in messages) or ``"skip"`` (anything
+  else) — iba's ASCII export is ``["tag", "name", "unit"]`` (:data:`HEADER_ROW_KINDS`).
+- ``[export] tdms_group`` (optional): the TDMS group whose channels are read (default: every group).
 - ``[valves] baseline_window = { start = ..., end = ... }`` (spec) and ``[valves] scenario``
   (written by ``valvemon simulate`` for the record; ignored by monitoring).
 - ``[valve_types.NAME.bounds]``: the condition bounds of step 5b (:class:`ConditionBounds`,
@@ -49,7 +61,8 @@ class TagSpec:
     """One signal's historian tag and the unit its values are exported in."""
 
     tag: str
-    unit: str
+    unit: str | None
+    """None: taken from each export file (``export.header_rows`` holds ``"unit"``)."""
 
 
 @dataclass(frozen=True)
@@ -68,7 +81,34 @@ class ExportSpec:
     sample_rate_hz: float = 1000.0
     max_gap_s: float = 0.005
     duplicate_rule: str = "last"
+    max_bad_share: float = 0.05
+    """Share of a tag's samples in one file that may be quarantined as out of range or for their
+    time (:data:`DEFAULT_MAX_BAD_SHARE`); more refuses the file."""
+    other_tags: str = "ignore"
+    """Tags or columns no valve has: ``"ignore"`` (read past, counted) or ``"error"``."""
+    header_rows: tuple[str, ...] = ("tag",)
+    """What each header line of a text export holds, in order (:data:`HEADER_ROW_KINDS`)."""
+    tdms_group: str | None = None
+    """The TDMS group that holds the tags (None: every group)."""
 
+    @property
+    def units_in_file(self) -> bool:
+        """Whether text exports carry a unit row (TDMS files may carry ``unit_string`` anyway)."""
+        return "unit" in self.header_rows
+
+
+HEADER_ROW_KINDS: tuple[str, ...] = ("tag", "name", "unit", "skip")
+"""What a header line of a text export can hold: the tags (the column names; exactly one such
+line), names (descriptions), units, or anything else (skipped)."""
+
+
+DEFAULT_MAX_BAD_SHARE = ExportSpec.max_bad_share
+"""5 %: a configuration error (a wrong unit in the TOML, a wrong ``timestamp_format``, a recorder
+clock years off) faults nearly every sample of a tag, while transmitter glitches and short
+faults fault a few in a thousand (one 1e308 in 2,000 samples is 0.05 %; a transmitter out of
+range for a minute of an hour file 1.7 %); ``docs/ingest.md``, "Quarantine or refusal"."""
+
+OTHER_TAGS_RULES: tuple[str, ...] = ("ignore", "error")
 
 DEFAULT_WINDOW_S = 60.0
 """Default monitoring window length (docs/monitoring.md, "Continuous recordings", measured on
@@ -164,6 +204,13 @@ class ValveDesign:
     contraction_coefficient: float
     bounds: ConditionBounds = field(default_factory=ConditionBounds)
     """Condition bounds of step 5b (``[valve_types.NAME.bounds]``)."""
+    area_law: str = "eq3"
+    """The valve family's area law, ``"eq3"`` (the paper's Eq. 3) or ``"sharp"`` (sharp edges, no
+    closed-edge leakage): what the simulator builds (``model.area``); the monitor identifies the
+    leakage from the data and does not read it."""
+    leakage_factor: float = 1.0
+    """Eq. 3's closed-edge leakage times this far from the edge (worn lands; ``model.area``),
+    for the simulator; 1 = Eq. 3. [-]"""
 
     def taper_angle_rad(self, edge: str) -> float:
         """Taper angle of an edge: port 1 for s1 and 1r, port 2 for s2 and 2r. [rad]"""
@@ -253,9 +300,13 @@ class ValveSpec:
         """Rod-side annulus area A2 = A1 − π d² / 4. [m²]"""
         return self.piston_area_m2 - math.pi * self.rod_diameter_m**2 / 4
 
-    def si_factor(self, signal: str) -> float:
-        """Factor from the exported unit of ``signal`` to SI."""
-        return si_factor(self.tags[signal].unit, SIGNAL_KIND[signal], self.design.x_max_m)
+    def si_factor(self, signal: str, unit: str | None = None) -> float:
+        """Factor from the exported unit of ``signal`` (or ``unit``) to SI; NaN when neither the
+        configuration nor the caller gives one (units taken from each file)."""
+        unit = unit if unit is not None else self.tags[signal].unit
+        if unit is None:
+            return math.nan
+        return si_factor(unit, SIGNAL_KIND[signal], self.design.x_max_m)
 
 
 @dataclass(frozen=True)
@@ -366,7 +417,7 @@ _RETENTION_KEYS = {"keep_days", "mode", "thin_keep_s_per_hour"}
 _EXPORT_KEYS = {
     "layout", "timestamp_column", "timestamp_format", "tag_column", "value_column",
     "quality_column", "good_quality", "separator", "decimal", "sample_rate_hz", "max_gap_s",
-    "duplicate_rule",
+    "duplicate_rule", "max_bad_share", "other_tags", "header_rows", "tdms_group",
 }  # fmt: skip
 
 
@@ -395,7 +446,30 @@ def _parse_export(raw: Any) -> ExportSpec:
     if kw["max_gap_s"] < 1.0 / kw["sample_rate_hz"]:
         raise ConfigError("export.max_gap_s: must be at least one sample period")
     kw["duplicate_rule"] = _str(t.get("duplicate_rule", "last"), "export.duplicate_rule", ("last", "first", "error"))
+    kw["max_bad_share"] = _number(t.get("max_bad_share", DEFAULT_MAX_BAD_SHARE), "export.max_bad_share", 0, 1, open_lo=True)
+    kw["other_tags"] = _str(t.get("other_tags", "ignore"), "export.other_tags", OTHER_TAGS_RULES)
+    if "header_rows" in t:
+        kw["header_rows"] = _parse_header_rows(t["header_rows"], layout)
+    if "tdms_group" in t:
+        kw["tdms_group"] = _str(t["tdms_group"], "export.tdms_group")
     return ExportSpec(**kw)
+
+
+def _parse_header_rows(raw: Any, layout: str) -> tuple[str, ...]:
+    key = "export.header_rows"
+    if not isinstance(raw, list) or not raw or not all(isinstance(r, str) for r in raw):
+        raise ConfigError(f"{key}: expected a non-empty list of {', '.join(repr(k) for k in HEADER_ROW_KINDS)}, got {raw!r}")
+    for i, r in enumerate(raw):
+        if r not in HEADER_ROW_KINDS:
+            raise ConfigError(f"{key}[{i}]: {r!r} is not one of {', '.join(repr(k) for k in HEADER_ROW_KINDS)}")
+    for kind, most in (("tag", 1), ("unit", 1), ("name", 1)):
+        if raw.count(kind) > most:
+            raise ConfigError(f"{key}: {kind!r} may occur only once (the file has one line of {kind}s)")
+    if "tag" not in raw:
+        raise ConfigError(f"{key}: needs one 'tag' line (the column names, matched to the configured tags)")
+    if layout != "wide" and raw != ["tag"]:
+        raise ConfigError(f"{key}: header rows other than 'tag' are only for export.layout = 'wide'")
+    return tuple(raw)
 
 
 def _parse_retention(raw: Any) -> RetentionSpec:
@@ -427,8 +501,12 @@ def _parse_monitor(raw: Any) -> MonitorSpec:
 
 _DESIGN_KEYS = {
     "x_max_mm", "bore_radius_mm", "spool_radius_mm", "taper_angle_port1_deg",
-    "taper_angle_port2_deg", "underlap_mm", "contraction_coefficient", "bounds",
+    "taper_angle_port2_deg", "underlap_mm", "contraction_coefficient", "bounds", "area_law",
+    "leakage_factor",
 }  # fmt: skip
+
+AREA_LAWS = ("eq3", "sharp")
+"""Values of ``area_law`` (``model.params.AREA_LAWS``; schemas imports nothing of ours)."""
 
 
 def _parse_underlaps(raw: Any, key: str, base: tuple[float, ...] | None) -> tuple[float, float, float, float]:
@@ -515,7 +593,11 @@ def _parse_design(t: dict, key: str, base: ValveDesign | None) -> ValveDesign:
     alpha = get("contraction_coefficient", 0, 1.5, 1.0, b and b.contraction_coefficient)
     base_bounds = b.bounds if b is not None else ConditionBounds()
     bounds = _parse_bounds(t["bounds"], f"{key}.bounds", base_bounds) if "bounds" in t else base_bounds
-    return ValveDesign(x_max, bore, spool, phi1, phi2, underlaps, alpha, bounds)
+    area_law = _str(t["area_law"], f"{key}.area_law", AREA_LAWS) if "area_law" in t else (b.area_law if b else "eq3")
+    leakage_factor = get("leakage_factor", 0, 100, 1.0, b.leakage_factor if b else 1.0)
+    if area_law == "sharp" and leakage_factor != 1.0:
+        raise ConfigError(f"{key}.leakage_factor: {leakage_factor:g} needs area_law = \"eq3\" (a sharp-edged valve has no leakage branch)")
+    return ValveDesign(x_max, bore, spool, phi1, phi2, underlaps, alpha, bounds, area_law, leakage_factor)
 
 
 _VALVE_KEYS = {
@@ -524,7 +606,7 @@ _VALVE_KEYS = {
 } | _DESIGN_KEYS  # fmt: skip
 
 
-def _parse_tags(raw: Any, key: str, x_max_m: float) -> dict[str, TagSpec]:
+def _parse_tags(raw: Any, key: str, x_max_m: float, units_in_file: bool = False) -> dict[str, TagSpec]:
     t = _table(raw, key)
     _no_unknown(t, set(SIGNALS), key)
     tags: dict[str, TagSpec] = {}
@@ -537,7 +619,12 @@ def _parse_tags(raw: Any, key: str, x_max_m: float) -> dict[str, TagSpec]:
         spec = _table(t[signal], skey)
         _no_unknown(spec, {"tag", "unit"}, skey)
         tag = _str(_required(spec, "tag", skey), f"{skey}.tag")
-        unit = _str(_required(spec, "unit", skey), f"{skey}.unit")
+        if "unit" not in spec and units_in_file:
+            tags[signal] = TagSpec(tag, None)  # the unit row of each file says it
+            continue
+        if "unit" not in spec:
+            raise ConfigError(f"{skey}.unit: missing required key (it may be left out only when export.header_rows has a 'unit' line)")
+        unit = _str(spec["unit"], f"{skey}.unit")
         try:
             si_factor(unit, SIGNAL_KIND[signal], x_max_m)
         except UnitError as exc:
@@ -546,7 +633,7 @@ def _parse_tags(raw: Any, key: str, x_max_m: float) -> dict[str, TagSpec]:
     return tags
 
 
-def _parse_valve(raw: Any, key: str, types: dict[str, ValveDesign], tz: ZoneInfo) -> ValveSpec:
+def _parse_valve(raw: Any, key: str, types: dict[str, ValveDesign], tz: ZoneInfo, units_in_file: bool = False) -> ValveSpec:
     t = _table(raw, key)
     _no_unknown(t, _VALVE_KEYS, key)
     vid = _str(_required(t, "id", key), f"{key}.id")
@@ -596,7 +683,7 @@ def _parse_valve(raw: Any, key: str, types: dict[str, ValveDesign], tz: ZoneInfo
         v02_m3=v02,
         bulk_modulus_pa=num("bulk_modulus_gpa", 0, 10, 1e9),
         density_kg_m3=num("density_kg_m3", 0, 5000, 1.0),
-        tags=_parse_tags(_required(t, "tags", key), f"{key}.tags", design.x_max_m),
+        tags=_parse_tags(_required(t, "tags", key), f"{key}.tags", design.x_max_m, units_in_file),
         baseline_window=baseline,
         scenario=_str(t["scenario"], f"{key}.scenario") if "scenario" in t else None,
         overrides=overrides,
@@ -634,7 +721,7 @@ def parse_plant_config(data: dict) -> PlantConfig:
     valves_raw = _required(data, "valves", "")
     if not isinstance(valves_raw, list) or not valves_raw:
         raise ConfigError("valves: expected at least one [[valves]] table")
-    valves = tuple(_parse_valve(v, f"valves[{i}]", types, tz) for i, v in enumerate(valves_raw))
+    valves = tuple(_parse_valve(v, f"valves[{i}]", types, tz, export.units_in_file) for i, v in enumerate(valves_raw))
     seen_ids: dict[str, int] = {}
     seen_tags: dict[str, str] = {}
     for i, v in enumerate(valves):
@@ -673,8 +760,13 @@ def _design_dict(d: ValveDesign, keys: frozenset[str] | set[str], base_bounds: C
         "underlap_mm": lambda: {e: _r(u * 1e3) for e, u in zip(EDGES, d.underlap_m)},
         "contraction_coefficient": lambda: d.contraction_coefficient,
         "bounds": lambda: bounds_to_dict(d.bounds, base_bounds),
+        "area_law": lambda: d.area_law,
+        "leakage_factor": lambda: d.leakage_factor,
     }
     out = {k: full[k]() for k in full if k in keys}
+    for k, default in (("area_law", "eq3"), ("leakage_factor", 1.0)):
+        if base_bounds is None and out.get(k, default) == default:
+            out.pop(k, None)  # a type's family at its default is not written
     if base_bounds is None and not out.get("bounds", True):
         del out["bounds"]  # a type's bounds all at their defaults
     return out
@@ -705,6 +797,14 @@ def plant_config_to_dict(config: PlantConfig) -> dict:
         "max_gap_s": e.max_gap_s,
         "duplicate_rule": e.duplicate_rule,
     }
+    if e.max_bad_share != DEFAULT_MAX_BAD_SHARE:
+        export["max_bad_share"] = e.max_bad_share
+    if e.other_tags != ExportSpec.other_tags:
+        export["other_tags"] = e.other_tags
+    if e.header_rows != ExportSpec.header_rows:
+        export["header_rows"] = list(e.header_rows)
+    if e.tdms_group is not None:
+        export["tdms_group"] = e.tdms_group
     valves = []
     for v in config.valves:
         d: dict[str, Any] = {"id": v.id, "type": v.type, "commissioned": _iso(v.commissioned)}
@@ -724,7 +824,7 @@ def plant_config_to_dict(config: PlantConfig) -> dict:
             d["scenario"] = v.scenario
         if v.tolerances is not None:
             d["tolerances"] = _tolerances_dict(v.tolerances)
-        d["tags"] = {s: {"tag": t.tag, "unit": t.unit} for s, t in v.tags.items()}
+        d["tags"] = {s: {"tag": t.tag} | ({"unit": t.unit} if t.unit is not None else {}) for s, t in v.tags.items()}
         valves.append(d)
     out: dict[str, Any] = {"plant": {"name": config.name, "timezone": config.timezone}, "export": export}
     if config.monitor != MonitorSpec():

@@ -36,7 +36,7 @@ import numpy as np
 from transforms.characteristic import Characteristic, scaled_shifted
 from transforms.fit import fit_arrays
 
-__all__ = ["Plausibility", "carrier_fit", "choose_knots", "fit_characteristic", "plausibility"]
+__all__ = ["Plausibility", "carrier_fit", "choose_knots", "fit_characteristic", "leak_scale_lstsq", "plausibility"]
 
 
 def choose_knots(
@@ -97,6 +97,7 @@ def fit_characteristic(
     carrier: Characteristic | None = None,
     extend_m: float = 0.0,
     grid_step_m: float = 0.05e-3,
+    closed: tuple[Characteristic, float, float] | None = None,
 ) -> Characteristic:
     """Step 4a: least-squares piecewise-linear Â through the points (u_i, A_i).
 
@@ -115,6 +116,12 @@ def fit_characteristic(
     segment (or beyond the commissioning range, where a chord extrapolates linearly) maps it into
     α̂ and x̂ (≈ 0.3 % of x_max on simulated Table 1 valves; docs/monitoring.md). The carrier
     carries the curvature and the scatter of underlap and α; c keeps the data's own shape.
+
+    ``closed`` = (L, u_c, u_from) (with a carrier): below the edge's closing point u_c (in u)
+    Â is the edge's identified closed-edge leakage L (α·A with the fitted leakage,
+    :func:`transforms.leakage.closed_leakage`), blended linearly into S·c over one grid step
+    below u_c, and the samples start at u_from (e.g. −x_max): Â ≥ 0 over the whole stroke, and
+    0 below the underlap when the edge does not leak.
     """
     u = np.asarray(u, dtype=np.float64).reshape(-1)
     a = np.asarray(area, dtype=np.float64).reshape(-1)
@@ -137,10 +144,82 @@ def fit_characteristic(
     shape = scaled_shifted(carrier, *carrier_fit(u, a, carrier))
     c = _hat_lstsq(u, a, k, shape.evaluate(u))
     lo, hi = float(k[0]), float(k[-1])
-    n = int(np.ceil((hi - lo + 2.0 * extend_m) / grid_step_m - 1e-9))
-    grid = np.unique(np.concatenate([lo - extend_m + grid_step_m * np.arange(n + 1), k]))
+    start = lo - extend_m
+    extra = k
+    if closed is not None:
+        leak, u_c, u_from = closed
+        u_c = min(u_c, lo - grid_step_m)
+        start = min(start, u_from, u_c - grid_step_m)
+        extra = np.concatenate([[u_c - grid_step_m, u_c], k])
+    n = int(np.ceil((hi + extend_m - start) / grid_step_m - 1e-9))
+    grid = np.unique(np.concatenate([start + grid_step_m * np.arange(n + 1), extra]))
     grid = grid[np.concatenate([[True], np.diff(grid) > 1e-12])]
-    return Characteristic(grid, shape.evaluate(grid) * np.interp(grid, k, c))
+    values = shape.evaluate(grid) * np.interp(grid, k, c)
+    if closed is not None:
+        w = np.clip((grid - (u_c - grid_step_m)) / grid_step_m, 0.0, 1.0)
+        values = w * values + (1.0 - w) * np.maximum(leak.evaluate(grid), 0.0)
+    return Characteristic(grid, values)
+
+
+def leak_scale_lstsq(u, plain, leak, knots, carrier: np.ndarray, *, block: int = 1, prior=None,
+                     prior_sd: float = float("inf")) -> tuple[np.ndarray, np.ndarray]:
+    """Step 4a with the closed-edge leakage (:mod:`transforms.leakage`): the coefficients λ ≥ 0 of
+    the leakage columns ``leak`` (n × m) in the joint least squares plain_i = S_i c(u_i) + Σ λ_k ℓ_ik
+    (c piecewise linear on ``knots``, S the carrier at the points), on the means of ``block``
+    consecutive equations (points in time order: a linear combination of the equations, which
+    filters the load's fast dynamics out of the pressure ratio), with the prior N(``prior``,
+    ``prior_sd``²) on each λ (a ridge toward it, weighted by the residual variance) and a
+    coefficient that would be negative set to 0 (active set). Returns (λ, their covariance with
+    the residuals' serial-correlation factor; 0 for a coefficient held at 0)."""
+    leak = np.asarray(leak, dtype=np.float64).reshape(u.shape[0], -1)
+    m = leak.shape[1]
+    prior = np.zeros(m) if prior is None else np.asarray(prior, dtype=np.float64)
+    n_k = knots.shape[0]
+    n = u.shape[0]
+    j = np.clip(np.searchsorted(knots, u, side="right") - 1, 0, n_k - 2)
+    t = (u - knots[j]) / (knots[j + 1] - knots[j])
+    x = np.zeros((n, n_k + m))
+    rows = np.arange(n)
+    x[rows, j] = (1.0 - t) * carrier
+    x[rows, j + 1] += t * carrier
+    x[:, n_k:] = leak
+    y = np.asarray(plain, dtype=np.float64)
+    if block > 1 and n >= 2 * block:
+        starts = np.arange(0, n, block)
+        size = np.diff(np.append(starts, n))[:, None]
+        x = np.add.reduceat(x, starts, axis=0) / size
+        y = np.add.reduceat(y, starts) / size[:, 0]
+    coef, *_ = np.linalg.lstsq(x, y, rcond=None)
+    r = y - x @ coef
+    rr = float(r @ r)
+    rho = float(r[1:] @ r[:-1] / rr) if rr > 0 else 0.0
+    rho = min(max(rho, 0.0), 0.98)
+    s2 = rr / max(y.shape[0] - x.shape[1], 1) * (1.0 + rho) / (1.0 - rho)
+    active = list(range(m))
+    while True:
+        cols = list(range(n_k)) + [n_k + k for k in active]
+        xa, ya = x[:, cols], y
+        if np.isfinite(prior_sd) and active:
+            w = np.sqrt(s2) / prior_sd
+            ridge = np.zeros((len(active), len(cols)))
+            ridge[np.arange(len(active)), n_k + np.arange(len(active))] = w
+            xa = np.vstack([xa, ridge])
+            ya = np.concatenate([y, w * prior[active]])
+        ca, *_ = np.linalg.lstsq(xa, ya, rcond=None)
+        lam = ca[n_k:]
+        if not active or lam.min() >= 0.0:
+            break
+        active.pop(int(np.argmin(lam)))
+    out = np.zeros(m)
+    cov = np.zeros((m, m))
+    if active:
+        out[active] = lam
+        try:
+            inv = np.linalg.inv(xa.T @ xa)[n_k:, n_k:]
+        except np.linalg.LinAlgError:
+            inv = np.full((len(active), len(active)), np.nan)
+        cov[np.ix_(active, active)] = s2 * inv
+    return out, cov
 
 
 def carrier_fit(u, area, carrier: Characteristic, *, x_search_m: float = 1.5e-3) -> tuple[float, float]:

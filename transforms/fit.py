@@ -67,6 +67,7 @@ __all__ = [
     "fit_groups",
     "fit_windows",
     "profile_cost",
+    "sorted_fits",
 ]
 
 STATUSES = (
@@ -99,7 +100,15 @@ FIT_COLUMNS = (
     "x_hat_ci_high_m",
     "ci_inflation",
     "iterations",
+    "leak_scale",
+    "leak_scale_ci_low",
+    "leak_scale_ci_high",
 )
+"""``leak_scale*``: the row's edge's closed-edge leakage scale λ (× Eq. 3's leakage at the edge's
+state; identified from the other edge of its port, :mod:`transforms.leakage`) and its interval;
+NaN without the closed-edge correction."""
+
+LEAK_COLUMNS = FIT_COLUMNS[-3:]
 
 # kernel result codes
 _OK, _DEGENERATE, _AT_BOUND, _NOT_CONVERGED, _SKIPPED, _PREDICTED = 0, 1, 2, 3, 4, 5
@@ -778,10 +787,14 @@ def fit_groups(
         residuals=not quick,
     )
     out = groups.with_columns(pl.Series(name, col) for name, col in res.items())
-    if not sort:
-        return out.select(FIT_COLUMNS)
+    out = out.with_columns(pl.lit(float("nan")).alias(c) for c in LEAK_COLUMNS if c not in out.columns)
+    return sorted_fits(out.select(FIT_COLUMNS)) if sort else out.select(FIT_COLUMNS)
+
+
+def sorted_fits(fits: pl.DataFrame) -> pl.DataFrame:
+    """Fit rows sorted by valve, window and edge (EDGES order)."""
     edge_rank = {e: i for i, e in enumerate(EDGES)}
-    return out.select(FIT_COLUMNS).sort(
+    return fits.sort(
         pl.col("valve_id"),
         pl.col("window_start"),
         pl.col("window_id"),

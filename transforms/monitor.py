@@ -25,11 +25,13 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 import polars as pl
+from scipy.special import stdtrit
 
-from transforms.baseline import Plausibility, carrier_fit, fit_characteristic, plausibility
+from transforms.baseline import Plausibility, carrier_fit, choose_knots, fit_characteristic, leak_scale_lstsq, plausibility
 from transforms.characteristic import Characteristic, scaled_shifted
 from transforms.derivatives import add_savgol, savgol_arrays
-from transforms.fit import fit_arrays, fit_groups, walk_segment
+from transforms.fit import fit_arrays, fit_groups, sorted_fits, walk_segment
+from transforms.leakage import closed_leakage, effective_scale, inflation, leak_columns, leak_scale_step
 from transforms.params import EDGES, MonitorParams
 from transforms.points import (
     DEFAULT_SIGNALS,
@@ -342,6 +344,8 @@ def monitor(
     baselines: Mapping[str, Mapping[str, Characteristic]],
     *,
     leakage: Mapping[str, Mapping[str, Characteristic]] | None = None,
+    leak_scale: Mapping[str, Mapping[str, float]] | None = None,
+    leak_reference: Mapping[str, Mapping[str, Characteristic]] | None = None,
     leakage_passes: int | None = None,
     engine: str = "numba",
     points: bool = True,
@@ -355,16 +359,22 @@ def monitor(
     empty; the fits are the same): what the flows do, which store only fits and counts.
 
     ``leakage[valve][edge]``: α·A of each edge *at its baseline state* over the whole stroke
-    (closed branch included: the nominal Eq. 3 characteristic for a nominal baseline,
-    α_b·nominal(u + x_b) for a commissioning baseline, :class:`BaselineFit`). When given, every
-    point is corrected for the flow through the closed edge o of its port
-    (:mod:`transforms.points`), and the correction follows each window's own state of o:
-    after a first fit with o at its baseline state, o's leakage is rebuilt from o's estimate in
-    the same window, α̂_o·L_o(u + x̂_o) (a fit that is not ``ok`` but has ≥ 50 points gives a
-    scale-only estimate, none the baseline state), and the window is fitted again, warm-started;
+    (closed branch included: the nominal Eq. 3 characteristic for a nominal baseline, the
+    identified leakage for a commissioning baseline, :class:`BaselineFit` ``leakage``). When
+    given, every point is corrected for the flow through the closed edge o of its port
+    (:mod:`transforms.points`) by that characteristic's closed branch, and the
+    correction follows each window's own state of o (:mod:`transforms.leakage`): after a first
+    fit with o at its baseline state, o's leakage is rebuilt from o's estimate in the same
+    window, α̂_o·L_o(u + x̂_o) (a fit that is not ``ok`` but has ≥ 50 points gives a scale-only
+    estimate, none the baseline state), and the window is fitted again, warm-started;
     ``leakage_passes`` times (default: the largest ``leakage_passes`` of the valves' params).
-    The returned points carry the corrected areas. The baselines must have been built with the
-    same correction (:func:`commissioning_baseline`).
+    Each fit row carries its edge's own leakage in the window and its interval (``leak_scale*``,
+    identified from the other edge of the port, :func:`_leak_columns`; reported, not used): the
+    commissioning value ``leak_scale[valve][edge]`` (default 1) plus the scale of an extra
+    Eq. 3-shaped leakage ``leak_reference[valve][edge]`` (Eq. 3's branch at the baseline state;
+    default ``leakage``) that the window asks for. The returned points carry the
+    corrected areas. The baselines must have been built with the same correction
+    (:func:`commissioning_baseline`).
     """
     pts = _monitor_points(lake, params, None, engine, with_ratio=leakage is not None, want_points=points)
     res, groups, offsets, u, plain = pts.result, pts.groups, pts.offsets, pts.u, pts.area
@@ -384,6 +394,11 @@ def monitor(
     opposite = _opposite_groups(groups)
     packed = _LeakPacked(chars)
     lk = (packed.kstart, packed.kend, packed.kn, packed.kv, packed.ks)
+    base = _LeakPacked([baselines.get(v, {}).get(e) for v, e in zip(valve_ids, edge_ids, strict=True)])
+    bk = (base.kstart, base.kend, base.kn, base.kv, base.ks)
+    # the leakage is the commissioning one (the leakage characteristics); the window's own is
+    # reported, not used (a window rarely identifies it well enough, transforms.leakage)
+    lam_b = np.array([(leak_scale or {}).get(v, {}).get(OPPOSITE_EDGE[e], 1.0) for v, e in zip(valve_ids, edge_ids, strict=True)])
     scale = np.ones(g_n)
     shift = np.zeros(g_n)
     x0 = None
@@ -395,16 +410,55 @@ def monitor(
         su, splain, sratio = u[idx], plain[idx], ratio[idx]
         sarea = np.empty_like(splain)
         for _ in range(passes):
-            _leak_correct(su, splain, sratio, sub_off, scale, shift, *lk, sarea)
+            _leak_correct(su, splain, sratio, sub_off, scale, shift, *lk, sarea, _NO_LEAK)
             status, alpha, xhat = _quick_fit(su, sarea, sub_off, baselines, pmap, valve_ids, edge_ids)
             own_a, own_x = _edge_states(status, alpha, xhat, su, sarea, sub_off, baselines, valve_ids, edge_ids)
             scale, shift = own_a[opposite], own_x[opposite]
             x0 = xhat
     area = np.empty_like(plain)
-    _leak_correct(u, plain, ratio, offsets, scale, shift, *lk, area)
-    fits = fit_groups(groups, u, area, offsets, baselines, pmap, x_start_m=x0)
+    _leak_correct(u, plain, ratio, offsets, scale, shift, *lk, area, _NO_LEAK)
+    fits = fit_groups(groups, u, area, offsets, baselines, pmap, x_start_m=x0, sort=False)
+    # the windows' own leakage, on every FIRST_FIT_STRIDE-th point (a report, at 1/8 of a pass):
+    # the points as corrected, and the regressor, Eq. 3's branch at o's state in the window
+    if not passes:
+        idx, sub_off = _strided(offsets, FIRST_FIT_STRIDE)
+        su, splain, sratio = u[idx], plain[idx], ratio[idx]
+    sarea = np.empty_like(splain)
+    sleak = np.empty_like(splain)
+    _leak_correct(su, splain, sratio, sub_off, scale, shift, *lk, sarea, sleak)
+    if leak_reference is not None:
+        ref = _LeakPacked([leak_reference.get(v, {}).get(OPPOSITE_EDGE[e]) for v, e in zip(valve_ids, edge_ids, strict=True)])
+        _leak_correct(su, splain, sratio, sub_off, scale, shift, ref.kstart, ref.kend, ref.kn, ref.kv, ref.ks, np.empty_like(splain), sleak)
+    fits = fits.with_columns(_leak_columns(fits, su, sarea, sleak, sub_off, lam_b, opposite, bk, pmap, valve_ids))
     out_points = res.points.with_columns(pl.Series("area_m2", area)) if points else res.points
-    return MonitorResult(points=out_points, selection=res.selection, fits=fits, windows=res.windows)
+    return MonitorResult(points=out_points, selection=res.selection, fits=sorted_fits(fits), windows=res.windows)
+
+
+def _leak_columns(fits, u, area, leak, offsets, lam_b, opposite, bk, pmap, valve_ids) -> list[pl.Series]:
+    """Each row's edge's leakage in the window: its commissioning λ_eff plus the scale of the
+    Eq. 3-shaped regressor ``leak`` that the port's other population's final fit asks for (one
+    Gauss–Newton step on block means of the strided points ``u``, ``area`` in ``offsets``: the
+    same 50 ms per block), clipped to ≥ 0, and its interval (Student's t, the serial-correlation
+    factor); NaN where that fit is not ``ok``."""
+    ok = (fits["status"] == "ok").to_numpy()
+    alpha = fits["alpha_hat"].to_numpy()
+    xhat = fits["x_hat_m"].to_numpy()
+    block = max(pmap[v].leak_block_points for v in set(valve_ids)) if valve_ids else 1
+    block = np.int64(max(1, -(-block // FIRST_FIT_STRIDE)))  # the same span of time on the strided points
+    step, info, sigma2, rho = leak_scale_step(u, area, leak, offsets, ok, alpha, xhat, *bk, block)
+    se = np.sqrt(sigma2 / info) * inflation(rho)
+    lam = np.maximum(lam_b + step, 0.0)
+    m = np.diff(offsets) // block  # block means
+    levels = np.array([pmap[v].ci_level for v in valve_ids]) if len(valve_ids) else np.zeros(0)
+    with np.errstate(invalid="ignore"):
+        half = stdtrit(np.maximum(m - 3, 1), 0.5 + levels / 2) * se
+    half = np.where(m > 3, half, np.nan)
+    lam_row, half_row = lam[opposite], half[opposite]
+    return [
+        pl.Series("leak_scale", lam_row),
+        pl.Series("leak_scale_ci_low", np.maximum(lam_row - half_row, 0.0)),
+        pl.Series("leak_scale_ci_high", lam_row + half_row),
+    ]
 
 
 # --------------------------------------------------------------------------------------------
@@ -460,11 +514,17 @@ class _LeakPacked:
             self.ks[s1 - 1] = d[-1]
 
 
+_NO_LEAK = np.zeros(0)
+"""``leak`` of :func:`_leak_correct` when only the corrected points are wanted."""
+
+
 @numba.njit(cache=True)
-def _leak_correct(u, plain, ratio, offsets, scale, shift, kstart, kend, kn, kv, ks, out):
-    """out_i = plain_i − a_g·L_g(−u_i + x_g)·ratio_i for the points of each population g, L_g
-    piecewise linear (linear beyond its end knots); the segment is walked from the previous
-    point's (points are in time order, so the walk is 0–1 steps)."""
+def _leak_correct(u, plain, ratio, offsets, scale, shift, kstart, kend, kn, kv, ks, out, leak):
+    """leak_i = a_g·L_g(−u_i + x_g)·ratio_i (unless ``leak`` is empty) and out_i = plain_i −
+    leak_i for the points of each population g, L_g piecewise linear (linear beyond its end
+    knots); the segment is walked from the previous point's (points are in time order, so the
+    walk is 0–1 steps)."""
+    keep = leak.shape[0] > 0
     for g in range(offsets.shape[0] - 1):
         s = offsets[g]
         e = offsets[g + 1]
@@ -478,7 +538,10 @@ def _leak_correct(u, plain, ratio, offsets, scale, shift, kstart, kend, kn, kv, 
         for i in range(s, e):
             t = x - u[i]
             j = walk_segment(kn, k0, k1, j, t)
-            out[i] = plain[i] - a * (kv[j] + ks[j] * (t - kn[j])) * ratio[i]
+            lk = a * (kv[j] + ks[j] * (t - kn[j])) * ratio[i]
+            if keep:
+                leak[i] = lk
+            out[i] = plain[i] - lk
 
 
 FIRST_FIT_STRIDE = 8
@@ -542,7 +605,8 @@ class BaselineFit:
 
     edge: str
     characteristic: Characteristic | None
-    """Â (None: fewer than ``min_points`` points or too narrow to place two knots)."""
+    """Â (None: fewer than ``min_points`` points or too narrow to place two knots); below the
+    underlap it is the identified leakage (``leakage``), so it is never negative."""
     n_points: int
     u_range_m: tuple[float, float]
     """Range of the points' u (NaN without points)."""
@@ -550,10 +614,28 @@ class BaselineFit:
     x_vs_nominal_m: float
     """Eq. 8 of the points onto the nominal characteristic: the edge's commissioning state."""
     leakage: Characteristic
-    """α·A of this edge over the whole stroke at commissioning, α_b·nominal(u + x_b): what the
-    other edge of its port sees leaking (the ``leakage`` argument of :func:`monitor`)."""
+    """α·A of this edge over the whole stroke at commissioning, α_b·nominal(u + x_b), its closed
+    branch that of the identified leakage (λ₁, λ₂, :func:`transforms.leakage.closed_leakage`):
+    what the other edge of its port sees leaking (the ``leakage`` argument of :func:`monitor`)."""
     plausibility: Plausibility | None
     """Step 5a against the nominal characteristic over ``u_range_m``."""
+    leak_coefficients: tuple[float, float] = (1.0, 0.0)
+    """(λ₁, λ₂) ≥ 0 of this edge's closed-edge leakage (:func:`transforms.leakage.closed_leakage`;
+    (1, 0) = Eq. 3's), identified with the other edge's characteristic."""
+    leak_scale: float = 1.0
+    """λ_eff: the identified leakage over Eq. 3's 1 mm inside the closed edge
+    (:func:`transforms.leakage.effective_scale`; the ``leak_scale`` argument of :func:`monitor`)."""
+    leak_scale_se: float = float("nan")
+    """Standard error of λ_eff (with the serial-correlation factor); NaN: not identified (too
+    few points on the other edge: Eq. 3's leakage kept)."""
+    leak_reference: Characteristic | None = None
+    """α_b·nominal(u + x_b): Eq. 3's leakage at the commissioning state, the unit in which the
+    windows report theirs (the ``leak_reference`` argument of :func:`monitor`)."""
+
+
+LEAK_ITERATIONS = 3
+"""Rounds of (state, leakage) at commissioning: each edge's state (α_b, x_b) and the closed edge's
+leakage are fitted with the other edge's previous round (stable after 3)."""
 
 
 def commissioning_baseline(
@@ -570,39 +652,74 @@ def commissioning_baseline(
     Â is :func:`transforms.baseline.fit_characteristic` with the nominal characteristic as
     carrier (the points' knots, sampled every ``params.baseline_grid_m``, widened by the fit's
     search bound). With ``leakage`` (the default, and what :func:`monitor` then must use too)
-    the points are corrected for the closed edge's flow, first at its nominal state, then
-    ``leakage_passes`` times (default ``params.leakage_passes``) at the state that edge's own
-    points give (Eq. 8 onto the nominal: α_b, x_b). The points of all windows are pooled, so the
-    rows are taken as whole runs (``params.window_s`` is not applied: a baseline does not depend
-    on the window length).
+    the points are corrected for the closed edge's flow: its nominal branch at the state that
+    edge's own points give (Eq. 8 onto the nominal: α_b, x_b), scaled by λ₁, plus λ₂ times a
+    constant gap flow (:func:`transforms.leakage.closed_leakage`), (λ₁, λ₂) ≥ 0 identified with
+    the characteristic (:func:`transforms.baseline.leak_scale_lstsq`: means of
+    ``leak_block_points`` points, prior N((1, 0), ``leak_scale_prior_sd``²) about Eq. 3's; only
+    from ≥ ``leak_min_points`` points of the other edge, else Eq. 3's is kept); first
+    at the nominal state and Eq. 3's leakage, then ``max(leakage_passes, LEAK_ITERATIONS − 1)``
+    more rounds (default ``params.leakage_passes``); Â then runs down to −x_max along the
+    identified leakage. The points of all windows are pooled, so the rows are taken as whole runs
+    (``params.window_s`` is not applied: a baseline does not depend on the window length).
     """
     params = dataclasses.replace(params, window_s=None)
     valve_ids = lake["valve_id"].unique().to_list()
     if len(valve_ids) != 1:
         raise ValueError(f"commissioning_baseline needs the rows of one valve, got {len(valve_ids)}")
-    vid = valve_ids[0]
     passes = params.leakage_passes if leakage_passes is None else int(leakage_passes)
+    pts = _monitor_points(lake, params, None, engine, with_ratio=leakage)
+    edge_col = pts.result.points["edge"].to_numpy()
+    cols = {e: np.flatnonzero(edge_col == e) for e in EDGES}
+    u = {e: pts.u[cols[e]] for e in EDGES}
+    plain = {e: pts.area[cols[e]] for e in EDGES}
     state = {e: (1.0, 0.0) for e in EDGES}
-    out: dict[str, BaselineFit] = {}
-    for it in range(1 + (passes if leakage else 0)):
-        leak = {e: scaled_shifted(nominal[e], *state[e]) for e in EDGES}
-        pts = monitor_points(lake, params, leakage={vid: leak} if leakage else None, engine=engine).points
-        new_state = {}
+    lam = {e: np.array([1.0, 0.0]) for e in EDGES}
+    cov = {e: np.full((2, 2), np.nan) for e in EDGES}
+
+    def closing(e):  # the closing point of edge e at its state, in its own u
+        return -params.underlap(e) - state[e][1]
+
+    def leak_char(e):
+        return closed_leakage(scaled_shifted(nominal[e], *state[e]), closing(e), lam[e])
+
+    rounds = 1 + (max(passes, LEAK_ITERATIONS - 1) if leakage else 0)
+    for it in range(rounds):
+        area = {e: plain[e] - leak_char(OPPOSITE_EDGE[e]).evaluate(-u[e]) * pts.ratio[cols[e]] if leakage else plain[e] for e in EDGES}
+        if it == rounds - 1:
+            break
+        cols_o = {e: leak_columns(scaled_shifted(nominal[OPPOSITE_EDGE[e]], *state[OPPOSITE_EDGE[e]]), closing(OPPOSITE_EDGE[e]), u[e],
+                                  pts.ratio[cols[e]]) for e in EDGES}  # fmt: skip
+        new_lam = dict(lam)
         for e in EDGES:
-            p = pts.filter(pl.col("edge") == e)
-            u, a = p["u_m"].to_numpy(), p["area_m2"].to_numpy()
-            n = u.shape[0]
-            rng = (float(u.min()), float(u.max())) if n else (float("nan"), float("nan"))
-            ab, xb = carrier_fit(u, a, nominal[e], x_search_m=params.x_hat_bound_m) if n >= 3 else (1.0, 0.0)
-            new_state[e] = (ab, xb)
-            char = check = None
-            if n >= params.min_points and rng[1] - rng[0] >= params.min_knot_spacing_m:
-                char = fit_characteristic(
-                    u, a, max_knots=params.max_knots, min_spacing_m=params.min_knot_spacing_m,
-                    points_per_interval=params.points_per_knot_interval, carrier=nominal[e],
-                    extend_m=params.x_hat_bound_m, grid_step_m=params.baseline_grid_m,
-                )  # fmt: skip
-                check = plausibility(char, nominal[e], u_range=rng, x_search_m=params.x_hat_bound_m)
-            out[e] = BaselineFit(e, char, n, rng, ab, xb, scaled_shifted(nominal[e], ab, xb), check)
-        state = new_state
+            n = u[e].shape[0]
+            state[e] = carrier_fit(u[e], area[e], nominal[e], x_search_m=params.x_hat_bound_m) if n >= 3 else (1.0, 0.0)
+            if n >= max(params.min_points, params.leak_min_points) and np.ptp(u[e]) >= params.min_knot_spacing_m:
+                knots = choose_knots(u[e], max_knots=params.max_knots, min_spacing_m=params.min_knot_spacing_m,
+                                     points_per_interval=params.points_per_knot_interval)  # fmt: skip
+                shape = scaled_shifted(nominal[e], *state[e]).evaluate(u[e])
+                o = OPPOSITE_EDGE[e]
+                new_lam[o], cov[o] = leak_scale_lstsq(u[e], plain[e], cols_o[e], knots, shape, block=params.leak_block_points,
+                                                      prior=np.array([1.0, 0.0]), prior_sd=params.leak_scale_prior_sd)  # fmt: skip
+        lam = new_lam
+    out: dict[str, BaselineFit] = {}
+    for e in EDGES:
+        ue, ae = u[e], area[e]
+        n = ue.shape[0]
+        rng = (float(ue.min()), float(ue.max())) if n else (float("nan"), float("nan"))
+        ab, xb = carrier_fit(ue, ae, nominal[e], x_search_m=params.x_hat_bound_m) if n >= 3 else (1.0, 0.0)
+        state[e] = (ab, xb)
+        own = leak_char(e) if leakage else scaled_shifted(nominal[e], ab, xb)
+        char = check = None
+        if n >= params.min_points and rng[1] - rng[0] >= params.min_knot_spacing_m:
+            char = fit_characteristic(
+                ue, ae, max_knots=params.max_knots, min_spacing_m=params.min_knot_spacing_m,
+                points_per_interval=params.points_per_knot_interval, carrier=nominal[e],
+                extend_m=params.x_hat_bound_m, grid_step_m=params.baseline_grid_m,
+                closed=(own, closing(e), -params.x_max_m) if leakage else None,
+            )  # fmt: skip
+            check = plausibility(char, nominal[e], u_range=rng, x_search_m=params.x_hat_bound_m)
+        eff, se = effective_scale(scaled_shifted(nominal[e], ab, xb), closing(e), lam[e], cov[e]) if leakage else (1.0, float("nan"))
+        out[e] = BaselineFit(e, char, n, rng, ab, xb, own, check, (float(lam[e][0]), float(lam[e][1])), eff, se,
+                             scaled_shifted(nominal[e], ab, xb))  # fmt: skip
     return out

@@ -174,6 +174,18 @@ class MonitorParams:
     """Sampling step of a carrier-shaped step-4a characteristic (transforms.baseline)."""
     leakage_passes: int = 1
     """Refits with the closed edge's leakage rebuilt from its own estimate (0: its baseline state only)."""
+    leak_min_points: int = 10_000
+    """The closed-edge leakage is identified at commissioning only from at least this many points of
+    the other edge (about 40 s of Table 1's moves; transforms.leakage): a single 10 s snapshot
+    leaves λ's error (±0.2 … ±0.9, and biased) larger than what it corrects; with fewer, Eq. 3's
+    leakage is kept (λ = 1, reported without an interval)."""
+    leak_block_points: int = 50
+    """λ at commissioning is fitted to the means of this many consecutive points' equations
+    (transforms.baseline.leak_scale_lstsq; 50 ms at 1 kHz, two periods of the load's 20–25 Hz ringing): the ringing, where the Savitzky–Golay
+    derivatives err by ~1 %, would otherwise alias into λ (−0.3 … −0.8 on s2's closed edge)."""
+    leak_scale_prior_sd: float = 1.0
+    """Prior standard deviation of the commissioning closed-edge leakage scale λ about Eq. 3's
+    (λ = 1; transforms.leakage, transforms.monitor.commissioning_baseline; inf: the data alone)."""
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "underlap_m", _edge_tuple(self.underlap_m, "underlap_m"))

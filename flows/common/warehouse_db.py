@@ -230,15 +230,49 @@ def ensure_tables(con: duckdb.DuckDBPyConnection, tables: Mapping[str, tuple[tup
             con.execute(create_table_sql(name, fields, key))
 
 
+def add_missing_columns(con: duckdb.DuckDBPyConnection, tables: Mapping[str, tuple[Field, ...]]) -> None:
+    """Add to existing ``tables`` (name → fields) the fields they lack, as nullable columns after
+    their own (a warehouse made before the fields existed); one catalog query, DDL only when
+    something is missing."""
+    names = list(tables)
+    have: dict[str, set[str]] = {}
+    for t, c in con.execute(
+        f"SELECT table_name, column_name FROM duckdb_columns() WHERE database_name = current_database() "
+        f"AND table_name IN ({', '.join('?' * len(names))})", names,
+    ).fetchall():  # fmt: skip
+        have.setdefault(t, set()).add(c)
+    for name, fields in tables.items():
+        if name not in have:
+            continue
+        for f in fields:
+            if f.name not in have[name]:
+                con.execute(f'ALTER TABLE {name} ADD COLUMN "{f.name}" {duckdb_type(f.dtype)}')
+
+
 def ensure_ingest_tables(con: duckdb.DuckDBPyConnection) -> None:
     """Create the ingest's tables if they do not exist (and migrate an older warehouse's)."""
-    legacy = {r[0] for r in con.execute(
-        "SELECT table_name FROM duckdb_columns() WHERE database_name = current_database() AND column_name = 'file_sha256'"
-    ).fetchall()}  # fmt: skip
+    have: dict[str, set[str]] = {}
+    for table, column in con.execute(
+        "SELECT table_name, column_name FROM duckdb_columns() WHERE database_name = current_database()"
+    ).fetchall():  # fmt: skip
+        have.setdefault(table, set()).add(column)
     for name in INGEST_TABLES:
-        if name in legacy:
+        if "file_sha256" in have.get(name, ()):
             migrate_hash_column(con, name)
     ensure_tables(con, INGEST_TABLES)
+    for name, (fields, _) in INGEST_TABLES.items():
+        if name in have:
+            add_missing_columns(con, name, fields, have[name])
+
+
+def add_missing_columns(con: duckdb.DuckDBPyConnection, table: str, fields: tuple[Field, ...], have: set[str]) -> None:
+    """Columns the registry added to a table after the warehouse was created, appended with the
+    value that means "none" for the rows already there (0, '' or null)."""
+    for f in fields:
+        if f.name in have or f.name == "file_hash":
+            continue
+        default = "NULL" if f.nullable else ("''" if f.dtype == pl.Utf8 else "0")
+        con.execute(f'ALTER TABLE {table} ADD COLUMN "{f.name}" {duckdb_type(f.dtype)} DEFAULT {default}')
 
 
 def migrate_hash_column(con: duckdb.DuckDBPyConnection, table: str) -> None:

@@ -20,9 +20,11 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from flows.common.errors import ValvemonError
-from flows.ingest.read import _NOT_BLANK, _is_text, _mapped, _value_columns, content_hash, enum_column, read_csv_export, sniff_format
+from flows.ingest.header_rows import HeaderRows, read_header_rows
+from flows.ingest.read import _NOT_BLANK, RaggedLine, _is_text, _mapped, _value_columns, content_hash, enum_column, read_csv_export, sniff_format
 from schemas.plant_config import ExportSpec
 from transforms.ingest import TagTable
+from transforms.ingest.units import FileUnits
 
 BATCH_SAMPLES = 4_194_304
 """Samples per batch (a wide row holds one per tag column): ~0.5 GB of working memory."""
@@ -40,15 +42,21 @@ class ExportSource:
     file_hash: str
     """``content_hash`` of the file's bytes."""
     size_bytes: int
+    header: HeaderRows | None = None
+    """A text export's header lines when ``export.header_rows`` has more than the tag line."""
+    units: FileUnits | None = None
+    """The units the file states (a unit header row, TDMS ``unit_string``); None: it states none."""
 
 
 def open_export(path: Path, export: ExportSpec) -> ExportSource:
-    """Hash one export file and check it is not empty (``read_export``'s checks before decoding).
+    """Hash one export file and check it is not empty (``read_export``'s checks before decoding);
+    read a text export's header rows (``export.header_rows``) and a TDMS file's metadata, for
+    the units they state.
 
     Raises
     ------
     ValvemonError
-        Naming the file: unreadable, empty.
+        Naming the file: unreadable, empty, header rows missing, a truncated TDMS file.
     """
     path = Path(path)
     empty = f"{path}: empty file (expected a {export.layout} export with a header line)"
@@ -63,7 +71,19 @@ def open_export(path: Path, export: ExportSpec) -> ExportSource:
             digest = content_hash(raw, drop_pages=True)
     except (OSError, ValueError) as exc:
         raise ValvemonError(f"{path}: cannot read the file ({getattr(exc, 'strerror', None) or exc})") from None
-    return ExportSource(path, fmt, digest, size)
+    src = ExportSource(path, fmt, digest, size)
+    if fmt == "tdms":
+        from flows.ingest.tdms import tdms_units
+
+        src.units = tdms_units(path, export)
+    elif fmt != "parquet" and export.header_rows != ExportSpec.header_rows:
+        try:
+            with gzip.open(path, "rb") if fmt == "csv.gz" else open(path, "rb") as fh:
+                src.header = read_header_rows(fh, export, str(path))
+        except (EOFError, gzip.BadGzipFile, zlib.error) as exc:
+            raise ValvemonError(f"{path}: truncated or corrupt gzip file ({exc})") from None
+        src.units = src.header.units
+    return src
 
 
 def export_batches(src: ExportSource, export: ExportSpec, tags: TagTable | None = None, batch_samples: int | None = None, csv_block_bytes: int | None = None) -> Iterator[tuple[pl.DataFrame, int, bool]]:
@@ -76,12 +96,19 @@ def export_batches(src: ExportSource, export: ExportSpec, tags: TagTable | None 
     ValvemonError
         Naming the file: not a readable CSV/Parquet export, a truncated gzip, no data rows.
     """
-    kind = "Parquet" if src.file_format == "parquet" else "CSV"
+    kind = {"parquet": "Parquet", "tdms": "TDMS"}.get(src.file_format, "CSV")
     batch_samples = batch_samples or BATCH_SAMPLES
     csv_block_bytes = csv_block_bytes or CSV_BLOCK_BYTES
     rows = 0
     try:
-        batches = _parquet_batches(src.path, export, tags, batch_samples) if src.file_format == "parquet" else _csv_batches(src, export, tags, csv_block_bytes)
+        if src.file_format == "parquet":
+            batches = _parquet_batches(src.path, export, tags, batch_samples)
+        elif src.file_format == "tdms":
+            from flows.ingest.tdms import tdms_batches
+
+            batches = tdms_batches(src.path, export, batch_samples)
+        else:
+            batches = _csv_batches(src, export, tags, csv_block_bytes)
         for df, first_line, final in batches:
             rows += df.height
             if final and rows == 0:
@@ -168,21 +195,30 @@ def _csv_batches(src: ExportSource, export: ExportSpec, tags: TagTable | None, b
     opener = gzip.open if src.file_format == "csv.gz" else open
     with opener(src.path, "rb") as fh:
         header = fh.readline()
-        if not header.strip():  # blank lines before the header (or nothing at all inside a gzip)
+        first = 2
+        if src.header is not None:  # several header lines: the tag line in front of every block
+            for _ in range(src.header.lines - 1):
+                fh.readline()
+            header, first = src.header.tag_line, src.header.lines + 1
+        elif not header.strip():  # blank lines before the header (or nothing at all inside a gzip)
             head = fh.read(1 << 16)
             if not head.strip():
                 raise ValvemonError(f"{src.path}: empty file inside the gzip (expected a {export.layout} export with a header line)")
             fh = _Prefixed(header + head, fh)
             header = b""
-        first = 2
         any_block = False
         for block, final in _lookahead(_blocks(fh, block_bytes)):
             any_block = True
-            df = read_csv_export(header + block, export, tags)
+            try:
+                df = read_csv_export(header + block, export, tags)
+            except RaggedLine as exc:
+                raise ValvemonError(f"{src.path}: {exc.at(first)}") from None
+            if tags is not None and export.tag_column in df.columns and not isinstance(df[export.tag_column].dtype, pl.Enum):
+                tags = None  # a tag no valve has (or a value that is no number): the next blocks read tags as text, not twice
             yield df, first, final
             first += block.count(b"\n")
         if not any_block:
-            yield read_csv_export(header, export, tags), 2, True
+            yield read_csv_export(header, export, tags), first, True
 
 
 class _Prefixed:

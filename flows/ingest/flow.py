@@ -38,9 +38,10 @@ from flows.ingest.read import (
     legacy_hash,
     read_export,
 )
-from schemas.fields import GAP_FIELDS, GAP_SCHEMA, INGEST_RUN_FIELDS, MANIFEST_FIELDS, QUARANTINE_FIELDS, QUARANTINE_SCHEMA, polars_schema
+from flows.ingest.spill import QuarantineRows, QuarantineSpill
+from schemas.fields import GAP_FIELDS, GAP_SCHEMA, INGEST_RUN_FIELDS, MANIFEST_FIELDS, polars_schema
 from schemas.plant_config import ConfigError, PlantConfig
-from transforms.ingest import Grid, IngestError, TagTable
+from transforms.ingest import ExportCounts, Grid, IngestError, TagTable
 
 
 @dataclass
@@ -185,22 +186,27 @@ def merge_batches(
         The export cannot be taken batch by batch (nothing of it reached the lake).
     """
     from flows.ingest.staging import LakeStager
-    from transforms.ingest.export import ExportResult
     from transforms.ingest.stream import ExportStream
+    from transforms.ingest.units import tags_with_file_units
 
-    stream = ExportStream(config, tags)
+    now = _now()
     stager = LakeStager(warehouse, config, lock)
+    spill = QuarantineSpill({"file_hash": source.file_hash, "source_file": str(path), "run_id": run_id, "ingested_at": now})
     try:
+        stream = ExportStream(config, tags_with_file_units(tags, config, source.units))  # the file's own units, where it states them
         for df, first_line, final in batches:
             for frame in stream.feed(df, first_line=first_line, final=final):
                 stager.add(frame)
             stager.flush(None if final else stream.given_to())
+            spill.take(stream.quarantine, final)
         stager.commit()
     except IngestError as exc:
         stager.discard()
+        spill.rows.remove()
         raise ValvemonError(f"{path}: {exc}") from None
     except BaseException:
         stager.discard()
+        spill.rows.remove()
         raise
     finally:
         stager.release()
@@ -211,19 +217,16 @@ def merge_batches(
     report.partitions = len(stager.days)
     report.partitions_written = len(stager.days_written)
     report.rows_added, report.lake_conflicts = stager.rows_added, stager.lake_conflicts
-    result = ExportResult([], stream.quarantine_frame(), stream.gap_frame(), c)
-    return report, file_records(path, source, result, report, run_id, config.export.layout)
+    return report, file_records(path, source, c, spill.rows, stream.gap_frame(), report, run_id, config.export.layout, now)
 
 
-def file_records(path: Path, ef, result, report: FileReport, run_id: str, layout: str) -> tuple[dict, pl.DataFrame, pl.DataFrame]:
-    """The manifest row, quarantine rows and gap rows of one ingested file, per the registry."""
-    now = _now()
-    extra = {"file_hash": ef.file_hash, "source_file": str(path), "run_id": run_id, "ingested_at": now}
-    quarantine = _table(result.quarantine.with_columns(**{k: pl.lit(v) for k, v in extra.items()}), QUARANTINE_FIELDS)
-    QUARANTINE_SCHEMA.validate(quarantine, lazy=True)
-    gaps = _table(result.gaps.with_columns(file_hash=pl.lit(ef.file_hash), source_file=pl.lit(str(path))), GAP_FIELDS)
+def file_records(
+    path: Path, ef, c: ExportCounts, quarantine: QuarantineRows, gap_frame: pl.DataFrame, report: FileReport, run_id: str, layout: str, now: datetime
+) -> tuple[dict, QuarantineRows, pl.DataFrame]:
+    """The manifest row, quarantine rows (already rows of the table) and gap rows of one
+    ingested file, per the registry."""
+    gaps = _table(gap_frame.with_columns(file_hash=pl.lit(ef.file_hash), source_file=pl.lit(str(path))), GAP_FIELDS)
     GAP_SCHEMA.validate(gaps, lazy=True)
-    c = result.counts
     manifest = {
         "file_hash": ef.file_hash,
         "source_file": str(path),
@@ -245,12 +248,19 @@ def file_records(path: Path, ef, result, report: FileReport, run_id: str, layout
         "time_end": c.time_end,
         "run_id": run_id,
         "ingested_at": now,
+        "bad_timestamp": c.bad_timestamp,
+        "implausible_time": c.implausible_time,
+        "out_of_range": c.out_of_range,
+        "other_tags": len(c.other_tags),
+        "other_samples": sum(c.other_tags.values()),
+        "other_tag_names": ",".join(c.other_tags),
     }
     return manifest, quarantine, gaps
 
 
-def record_file(warehouse: Path, manifest: dict, quarantine: pl.DataFrame, gaps: pl.DataFrame) -> None:
-    """Write one file's manifest row, quarantine and gaps in one transaction.
+def record_file(warehouse: Path, manifest: dict, quarantine: QuarantineRows, gaps: pl.DataFrame) -> None:
+    """Write one file's manifest row, quarantine (also the rows spilled to disk, which are then
+    removed) and gaps in one transaction.
 
     Earlier quarantine and gap rows of the same content hash are replaced, so a file ingested
     again (``force``, or after a crash) is never counted twice.
@@ -261,9 +271,12 @@ def record_file(warehouse: Path, manifest: dict, quarantine: pl.DataFrame, gaps:
         with transaction(con):
             con.execute("DELETE FROM quarantine WHERE file_hash = ?", [key])
             con.execute("DELETE FROM ingest_gaps WHERE file_hash = ?", [key])
-            insert_frame(con, "quarantine", quarantine)
+            for part in quarantine.spilled:
+                con.execute("INSERT INTO quarantine BY NAME SELECT * FROM read_parquet(?)", [str(part)])
+            insert_frame(con, "quarantine", quarantine.frame)
             insert_frame(con, "ingest_gaps", gaps)
             insert_frame(con, "ingest_manifest", pl.DataFrame([manifest], schema=polars_schema(MANIFEST_FIELDS)), replace=True)
+    quarantine.remove()
 
 
 # --- a run -----------------------------------------------------------------------------------

@@ -5,6 +5,7 @@ one (:mod:`flows.ingest.batches`)."""
 
 from __future__ import annotations
 
+import csv
 import gzip
 import hashlib
 import mmap
@@ -25,12 +26,16 @@ from blake3 import blake3
 from flows.common.errors import ValvemonError
 from schemas.plant_config import ExportSpec
 from transforms.ingest import TagTable
+from transforms.ingest.units import FileUnits
 
-EXPORT_SUFFIXES = (".csv", ".csv.gz", ".txt", ".tsv", ".tsv.gz", ".txt.gz", ".parquet", ".pq")
+EXPORT_SUFFIXES = (".csv", ".csv.gz", ".txt", ".tsv", ".tsv.gz", ".txt.gz", ".parquet", ".pq", ".tdms")
 """Files a folder argument contributes (searched recursively, sorted by path)."""
 
 _GZIP_MAGIC = b"\x1f\x8b"
 _PARQUET_MAGIC = b"PAR1"
+_TDMS_MAGIC = b"TDSm"
+"""A TDMS file's first bytes (its first segment's lead-in); ``flows.ingest.tdms`` reads it (npTDMS is
+imported only then)."""
 _NOT_BLANK = re.compile(rb"\S")
 
 HASH_PREFIX = "blake3:"
@@ -112,9 +117,11 @@ def discover_files(paths: list[str | Path]) -> list[Path]:
 
 
 def sniff_format(path: Path, head: bytes) -> str:
-    """``"parquet"``, ``"csv.gz"`` or ``"csv"``, from the file's first bytes (then its name)."""
+    """``"parquet"``, ``"tdms"``, ``"csv.gz"`` or ``"csv"``, from the file's first bytes (then its name)."""
     if head.startswith(_PARQUET_MAGIC):
         return "parquet"
+    if head.startswith(_TDMS_MAGIC):
+        return "tdms"
     if head.startswith(_GZIP_MAGIC):
         return "csv.gz"
     if path.name.lower().endswith((".parquet", ".pq")):
@@ -164,12 +171,53 @@ def read_csv_export(data: bytes | Path, export: ExportSpec, tags: TagTable | Non
         pass  # a value that is no number, a tag the plant does not have, bad UTF-8: the careful path
     opts = _csv_options(export, "utf8-lossy")
     overrides.pop(export.tag_column, None)
-    df = pl.read_csv(data, schema_overrides=overrides, ignore_errors=True, **opts)
+    try:
+        df = pl.read_csv(data, schema_overrides=overrides, ignore_errors=True, **opts)
+    except pl.exceptions.ComputeError as exc:
+        raise (ragged_line(data, export.separator) or exc) from None
     suspicious = [c for c in values if df[c].null_count()]
     if suspicious:
         text = pl.read_csv(data, columns=suspicious, **opts)
         df = df.with_columns([text[c] for c in suspicious])
     return df
+
+
+class RaggedLine(ValueError):
+    """A CSV line with more fields than the header; ``row`` counts the lines after the header
+    (the first data line is 1), blank ones included."""
+
+    def __init__(self, row: int, fields: int, expected: int):
+        self.row, self.fields, self.expected = row, fields, expected
+        super().__init__(f"{fields} fields where the header has {expected} (a separator too many?)")
+
+    def at(self, first_line: int) -> str:
+        """The message, with the file's line (``first_line``: the file's line of row 1)."""
+        return f"line {first_line + self.row - 1}: {self}"
+
+
+def ragged_line(data: bytes | Path, separator: str) -> RaggedLine | None:
+    """The first line of CSV text (header first) with more fields than the header, quotes
+    respected; None if there is none or the bytes are no text (NUL bytes: the caller's read failed
+    for another reason)."""
+    text = data.read_bytes() if isinstance(data, Path) else data
+    if b"\x00" in text[: 1 << 16]:
+        return None
+    sep = separator.encode()
+    lines = text.split(b"\n")
+
+    def fields(line: bytes) -> int:
+        if b'"' not in line:
+            return line.count(sep) + 1
+        try:
+            return len(next(csv.reader([line.decode("utf-8", "replace").rstrip("\r")], delimiter=separator)))
+        except csv.Error:  # not CSV at all (binary): not a ragged line
+            return 0
+
+    expected = fields(lines[0])
+    for row, line in enumerate(lines[1:], start=1):
+        if line.count(sep) >= expected and (n := fields(line)) > expected:
+            return RaggedLine(row, n, expected)
+    return None
 
 
 def _is_text(t: pa.DataType) -> bool:
@@ -242,10 +290,12 @@ class ExportFile:
     """:func:`content_hash` of the file's bytes."""
     size_bytes: int
     path: Path | None = None
+    units: FileUnits | None = None
+    """The units the file states (a unit header row, TDMS ``unit_string``); None: it states none."""
 
 
 def read_export(path: Path, export: ExportSpec, tags: TagTable | None = None) -> ExportFile:
-    """Read one export file (CSV, gzip CSV or Parquet) and hash its bytes.
+    """Read one export file (CSV, gzip CSV, Parquet or TDMS) and hash its bytes.
 
     The file is memory-mapped and hashed (:func:`content_hash`) without a copy; a plain CSV or
     Parquet file is then decoded from the file by polars / Arrow (a gzip file from the
@@ -277,22 +327,37 @@ def read_export(path: Path, export: ExportSpec, tags: TagTable | None = None) ->
                 raise ValvemonError(empty)
     except (OSError, ValueError) as exc:
         raise ValvemonError(f"{path}: cannot read the file ({getattr(exc, 'strerror', None) or exc})") from None
+    units = None
     try:
         if fmt == "parquet":
             df = read_parquet_export(path, export, tags)
             first_line = 1
+        elif fmt == "tdms":
+            from flows.ingest.tdms import tdms_batches, tdms_units
+
+            units = tdms_units(path, export)
+            df = pl.concat([b[0] for b in tdms_batches(path, export, 1 << 62)])
+            first_line = 1
+        elif export.header_rows != ExportSpec.header_rows:
+            from flows.ingest.header_rows import without_header_rows
+
+            data, header = without_header_rows(data, export, str(path))
+            df = read_csv_export(data, export, tags)
+            first_line, units = header.lines + 1, header.units
         else:
             df = read_csv_export(data, export, tags)
             first_line = 2
     except ValvemonError:
         raise
+    except RaggedLine as exc:
+        raise ValvemonError(f"{path}: {exc.at(2)}") from None
     except (pl.exceptions.PolarsError, pa.ArrowException, OSError, ValueError) as exc:
-        kind = "Parquet" if fmt == "parquet" else "CSV"
+        kind = {"parquet": "Parquet", "tdms": "TDMS"}.get(fmt, "CSV")
         reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise ValvemonError(f"{path}: not a readable {kind} export ({reason})") from None
     if df.height == 0:
         raise ValvemonError(f"{path}: no data rows (only a header)")
-    return ExportFile(df, first_line, fmt, digest, size, path)
+    return ExportFile(df, first_line, fmt, digest, size, path, units)
 
 
 # --- one file --------------------------------------------------------------------------------

@@ -43,11 +43,12 @@ from flows.common.errors import ValvemonError
 from flows.common.instants import utc_instant
 from flows.common.lake import list_partitions, read_lake
 from flows.common.prefect_run import flow, task
-from flows.common.warehouse_db import connect, ensure_tables, insert_frame, query_frame, transaction
+from flows.common.warehouse_db import add_missing_columns, connect, ensure_tables, insert_frame, query_frame, transaction
 from model.area import edge_area
 from schemas.fields import BASELINE_FIELDS, EDGE_FIT_FIELDS, EDGES, SELECTION_FIELDS, polars_schema
 from schemas.plant_config import PlantConfig, ValveSpec
 from transforms.characteristic import Characteristic, scaled_shifted
+from transforms.leakage import closed_leakage
 from transforms.monitor import LAKE_COLUMNS, MonitorResult, commissioning_baseline, monitor
 from transforms.params import MonitorParams
 from transforms.windows import LONG_RUN_FRACTION, window_starts
@@ -65,6 +66,10 @@ keep theirs by construction instead: every write deletes the spans it replaces a
 rows in one transaction (:func:`store_spans`). A unique (ART) index on them made each such write
 about 4× as expensive (~45 against ~12 ms CPU for a valve-week), BENCHMARKS.md "Monitoring"."""
 
+LEAK_Z95 = 1.959963984540054
+"""Normal 97.5 % quantile: the baselines' 95 % interval of ``leak_scale`` (a pooled commissioning
+fit of thousands of block means)."""
+
 CHUNK_DAYS = 7
 """Days of lake read at once per valve: a week of hourly 10 s windows at 1 kHz is 1.7 M rows."""
 
@@ -76,8 +81,10 @@ piecewise-linear interpolation error is below 0.01 mm² on the open branch)."""
 def ensure_monitor_tables(con) -> None:
     """Create ``baselines``, ``edge_fits`` and ``selection_stats`` if missing, with a unique index
     on the :data:`INDEXED_TABLES` (one on the others, made by earlier versions, is dropped).
-    Catalog queries first, so that a warehouse that has them costs no DDL."""
+    Catalog queries first, so that a warehouse that has them costs no DDL. A table made by an
+    earlier version gets the columns added since (after its own: ``leak_*``), NULL in old rows."""
     ensure_tables(con, {name: (fields, None) for name, (fields, _) in MONITOR_TABLES.items()})
+    add_missing_columns(con, {name: fields for name, (fields, _) in MONITOR_TABLES.items()})
     indexes = {r[0] for r in con.execute(
         "SELECT index_name FROM duckdb_indexes() WHERE database_name = current_database()"
     ).fetchall()}  # fmt: skip
@@ -125,7 +132,7 @@ def _design_definition(valve: ValveSpec) -> dict:
     }  # fmt: skip
 
 
-BASELINE_METHOD = "carrier-shaped step 4a, closed-edge leakage corrected"
+BASELINE_METHOD = "carrier-shaped step 4a, closed-edge leakage identified (λ₁ branch + λ₂ gap, block means)"
 """How baselines are built now (part of their definition: a change of method makes new versions)."""
 
 
@@ -159,18 +166,31 @@ class Baseline:
     leakage: Characteristic | None = None
     """α·A of the edge over the whole stroke at the baseline state (what the other edge of its
     port sees leaking): the nominal characteristic scaled and shifted by the stored
-    ``alpha_vs_nominal``, ``x_vs_nominal_mm`` (:meth:`from_row`)."""
+    ``alpha_vs_nominal``, ``x_vs_nominal_mm``, its closed branch that of the identified leakage
+    ``leak_branch_scale``, ``leak_gap_scale`` (:meth:`from_row`,
+    :func:`transforms.leakage.closed_leakage`)."""
+    leak_scale: float = 1.0
+    """The identified leakage over Eq. 3's 1 mm inside the edge (``baselines.leak_scale``)."""
+    leak_reference: Characteristic | None = None
+    """Eq. 3's α·A at the baseline state (the unit of the windows' ``leak_scale``)."""
 
     @classmethod
     def from_row(cls, valve: ValveSpec, params: MonitorParams, row: dict) -> Baseline:
-        """From a row of table ``baselines`` (as a dict)."""
+        """From a row of table ``baselines`` (as a dict); a row without the leakage columns (an
+        older version) leaks as Eq. 3."""
         a, x_mm = row.get("alpha_vs_nominal"), row.get("x_vs_nominal_mm")
         if a is None or x_mm is None or not (np.isfinite(a) and np.isfinite(x_mm) and a > 0):
             a, x_mm = 1.0, 0.0  # no state against the nominal: leak as designed
+        lam = (row.get("leak_branch_scale"), row.get("leak_gap_scale"))
+        if any(v is None or not np.isfinite(v) for v in lam):
+            lam = (1.0, 0.0)
+        eff = row.get("leak_scale")
+        state = scaled_shifted(nominal_characteristic(valve, row["edge"], params.x_hat_bound_m), a, x_mm * 1e-3)
         return cls(
             Characteristic.from_arrays(np.array(row["knots_u_mm"]) * 1e-3, np.array(row["values_mm2"]) * 1e-6),
             row["version"], row["source"], row["plausible"], row["plausibility_reasons"],
-            scaled_shifted(nominal_characteristic(valve, row["edge"], params.x_hat_bound_m), a, x_mm * 1e-3),
+            closed_leakage(state, -params.underlap(row["edge"]) - x_mm * 1e-3, lam),
+            1.0 if eff is None or not np.isfinite(eff) else float(eff), state,
         )  # fmt: skip
 
 
@@ -183,7 +203,7 @@ def _baseline_rows(valve: ValveSpec, params: MonitorParams, warehouse: Path, ver
     if valve.baseline_window is None:
         for e in EDGES:
             c = nominal[e]
-            rows.append((e, "nominal", c, 0, True, "", 1.0, 0.0))
+            rows.append((e, "nominal", c, 0, True, "", 1.0, 0.0, (1.0, 0.0), 1.0, float("nan")))
     else:
         start, end = valve.baseline_window
         lake = read_lake(warehouse, [valve.id], start, end).collect()
@@ -203,7 +223,8 @@ def _baseline_rows(valve: ValveSpec, params: MonitorParams, warehouse: Path, ver
                     " for the initial characteristic (step 4a)"
                 )
             check = b.plausibility
-            rows.append((e, "commissioning", b.characteristic, b.n_points, check.ok, "; ".join(check.reasons), b.alpha_vs_nominal, b.x_vs_nominal_m))
+            rows.append((e, "commissioning", b.characteristic, b.n_points, check.ok, "; ".join(check.reasons), b.alpha_vs_nominal,
+                         b.x_vs_nominal_m, b.leak_coefficients, b.leak_scale, b.leak_scale_se))  # fmt: skip
     return pl.DataFrame(
         {
             "valve_id": [valve.id] * len(rows),
@@ -219,6 +240,11 @@ def _baseline_rows(valve: ValveSpec, params: MonitorParams, warehouse: Path, ver
             "alpha_vs_nominal": [r[6] for r in rows],
             "x_vs_nominal_mm": [r[7] * 1e3 for r in rows],
             "created_at": [now] * len(rows),
+            "leak_branch_scale": [r[8][0] for r in rows],
+            "leak_gap_scale": [r[8][1] for r in rows],
+            "leak_scale": [r[9] for r in rows],
+            "leak_scale_ci_low": [max(r[9] - LEAK_Z95 * r[10], 0.0) if np.isfinite(r[10]) else None for r in rows],
+            "leak_scale_ci_high": [r[9] + LEAK_Z95 * r[10] if np.isfinite(r[10]) else None for r in rows],
         },
         schema=polars_schema(BASELINE_FIELDS),
     )
@@ -259,7 +285,9 @@ def monitor_rows(valve: ValveSpec, params: MonitorParams, baselines: dict[str, B
     if any(v is None for v in leaks.values()):
         leaks = {e: scaled_shifted(nominal_characteristic(valve, e, params.x_hat_bound_m), 1.0, 0.0) if v is None else v
                  for e, v in leaks.items()}  # fmt: skip
-    return monitor(rows, params, chars, leakage={valve.id: leaks}, points=False)
+    scales = {valve.id: {e: b.leak_scale for e, b in baselines.items()}}
+    refs = {valve.id: {e: b.leak_reference if b.leak_reference is not None else leaks[e] for e, b in baselines.items()}}
+    return monitor(rows, params, chars, leakage={valve.id: leaks}, leak_scale=scales, leak_reference=refs, points=False)
 
 
 def lake_chunks(
@@ -472,6 +500,9 @@ def _fits_table(fits: pl.DataFrame, valve: ValveSpec, baselines: dict[str, Basel
         (pl.col("u_max_m") * 1e3).alias("u_max_mm"),
         pl.col("edge").replace_strict(version, return_dtype=pl.Int32).alias("baseline_version"),
         pl.lit(now, dtype=pl.Datetime("us", "UTC")).alias("monitored_at"),
+        "leak_scale",
+        "leak_scale_ci_low",
+        "leak_scale_ci_high",
     ).cast(dict(polars_schema(EDGE_FIT_FIELDS))).with_columns(pl.col(pl.Float64).fill_nan(None))  # no estimate: NULL
 
 

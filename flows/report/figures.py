@@ -61,6 +61,30 @@ def _save(fig, path: Path) -> Path:
     return path
 
 
+def _leak_panel(ax, d: pl.DataFrame | None) -> None:
+    """The edge's closed-edge leakage per window (× Eq. 3, 95 % intervals) and at commissioning."""
+    ax.set_xlabel("operating hours (h)")
+    ax.grid(alpha=0.3)
+    if ax.get_subplotspec().is_first_col():
+        ax.set_ylabel("leakage (× Eq. 3)")
+    if d is None or d.height == 0:
+        ax.text(0.5, 0.5, "no leakage estimates", ha="center", va="center", transform=ax.transAxes)
+        return
+    d = d.sort("operating_hours")
+    h = d["operating_hours"].to_numpy()
+    y = d["leak_scale"].to_numpy()
+    lo = np.nan_to_num(y - d["leak_scale_ci_low"].to_numpy(), nan=0.0)
+    hi = np.nan_to_num(d["leak_scale_ci_high"].to_numpy() - y, nan=0.0)
+    ax.errorbar(h, y, yerr=[lo, hi], fmt=".", color="#37474f", ms=4, lw=0.6, alpha=0.7, label="window (95 %)")
+    base = d["leak_scale_baseline"].drop_nulls()
+    if base.len():
+        ax.axhline(float(base[0]), color="#1565c0", lw=1.2, label="commissioning")
+    ax.axhline(1.0, color="k", ls="--", lw=0.8, label="Eq. 3")
+    top = max(2.0, 1.5 * float(np.nanpercentile(y, 95)), 1.5 * (float(base[0]) if base.len() else 0.0))
+    ax.set_ylim(0.0, top)  # the estimates, not the widest intervals of 10 s windows
+    ax.legend(fontsize=7, loc="upper left")
+
+
 def characteristics_figure(valve_id: str, curves: dict[str, dict[str, np.ndarray]], latest: dict[str, dict], path: Path) -> Path:
     """Opening-area characteristics of one valve's four edges.
 
@@ -100,8 +124,8 @@ def characteristics_figure(valve_id: str, curves: dict[str, dict[str, np.ndarray
     return _save(fig, path)
 
 
-def trends_figure(valve_id: str, trend: pl.DataFrame, lines: pl.DataFrame, path: Path) -> Path:
-    """α̂, x̂ and e over operating hours for the four edges of one valve.
+def trends_figure(valve_id: str, trend: pl.DataFrame, lines: pl.DataFrame, path: Path, leak: pl.DataFrame | None = None) -> Path:
+    """α̂, x̂, e and the closed-edge leakage over operating hours for the four edges of one valve.
 
     Parameters
     ----------
@@ -109,9 +133,14 @@ def trends_figure(valve_id: str, trend: pl.DataFrame, lines: pl.DataFrame, path:
         Rows of view ``trend_operating_hours`` for the valve.
     lines : DataFrame
         Rows of view ``parameter_trends`` for the valve (slope, intercept, bounds, end of life).
+    leak : DataFrame, optional
+        edge, operating_hours, leak_scale, leak_scale_ci_low, leak_scale_ci_high of the valve's
+        ok windows (``stg_edge_fits``) and leak_scale_baseline per edge: the bottom row.
     """
     params = ("alpha_hat", "x_hat_pct", "e_mm2")
-    fig, axes = plt.subplots(3, 4, figsize=(16, 10), sharex="col", constrained_layout=True)
+    fig, axes = plt.subplots(4, 4, figsize=(16, 12.5), sharex="col", constrained_layout=True)
+    for j, edge in enumerate(EDGES):
+        _leak_panel(axes[3, j], None if leak is None else leak.filter(pl.col("edge") == edge))
     for j, edge in enumerate(EDGES):
         for i, p in enumerate(params):
             ax = axes[i, j]
@@ -120,8 +149,6 @@ def trends_figure(valve_id: str, trend: pl.DataFrame, lines: pl.DataFrame, path:
                 ax.set_title(f"{valve_id} edge {edge}", fontsize=11)
             if j == 0:
                 ax.set_ylabel(PARAM_LABELS[p])
-            if i == 2:
-                ax.set_xlabel("operating hours (h)")
             ax.grid(alpha=0.3)
             if d.height == 0:
                 ax.text(0.5, 0.5, "no ok fits", ha="center", va="center", transform=ax.transAxes)

@@ -13,7 +13,8 @@
 4. reads the views from the snapshot and writes the BI hand-off (:mod:`flows.report.export`), the PNG
    pictures (:mod:`flows.report.figures`, drawn in a pool of processes: :func:`render_figures`) and
    ``WAREHOUSE/reports/report.html`` (:mod:`flows.report.html`), which also shows the latest
-   ``valvemon discrepancy`` run of every valve analysed (:func:`discrepancy_results`; its overlay pictures are the workflow's own).
+   ``valvemon discrepancy`` run of every valve analysed (:func:`discrepancy_results`; its overlay pictures are the workflow's own)
+   and the ingest's data quality (:mod:`flows.report.quality`).
 
 Every write to ``valvemon.duckdb`` happens in a short-lived connection; the pictures and the
 export are made from the snapshot, without holding the live database.
@@ -39,6 +40,7 @@ from flows.report.export import export_bi
 from flows.report.figures import characteristics_figure, fleet_figure, render_figures, trends_figure
 from flows.report.html import render_report
 from flows.report.publish import publish
+from flows.report.quality import data_quality
 from flows.report.standstill import STANDSTILL_COLUMNS, standstill_rows
 from flows.report.views import connect_snapshot, ensure_report_tables
 from model.area import edge_area
@@ -119,7 +121,7 @@ def _edge_curves(config: PlantConfig, valve_id: str, baselines: pl.DataFrame, la
             lo_slope = (values[1] - values[0]) / (knots[1] - knots[0])
             hi_slope = (values[-1] - values[-2]) / (knots[-1] - knots[-2])
             y = np.where(u < knots[0], values[0] + lo_slope * (u - knots[0]), y)
-            return np.where(u > knots[-1], values[-1] + hi_slope * (u - knots[-1]), y)
+            return np.maximum(np.where(u > knots[-1], values[-1] + hi_slope * (u - knots[-1]), y), 0.0)  # an area is never negative
 
         nominal = d.contraction_coefficient * edge_area(
             u_mm * 1e-3, d.underlap_m[EDGES.index(edge)], d.taper_angle_rad(edge), d.bore_radius_m, d.spool_radius_m
@@ -185,9 +187,17 @@ def run_report(config_path: str | Path, warehouse: str | Path, *, detail: int = 
             )
             trend = query_frame(con, "SELECT * FROM trend_operating_hours WHERE valve_id = ?", [vid])
             lines = query_frame(con, "SELECT * FROM parameter_trends WHERE valve_id = ?", [vid])
+            leak = query_frame(
+                con,
+                "SELECT f.edge, f.operating_hours, f.leak_scale, f.leak_scale_ci_low, f.leak_scale_ci_high, "
+                "c.leak_scale_baseline FROM stg_edge_fits f JOIN valve_condition c USING (valve_id, edge) "
+                "WHERE f.valve_id = ? AND f.is_ok AND f.leak_scale IS NOT NULL",
+                [vid],
+            )
             jobs += [(characteristics_figure, (vid, _edge_curves(config, vid, baselines, latest), latest, out_dir / f"characteristics_{vid}.png")),
-                     (trends_figure, (vid, trend, lines, out_dir / f"trends_{vid}.png"))]  # fmt: skip
+                     (trends_figure, (vid, trend, lines, out_dir / f"trends_{vid}.png", leak))]  # fmt: skip
         discrepancy = discrepancy_results(con, warehouse)
+        quality = data_quality(con)
     finally:
         con.close()
     pngs = render_figures(jobs)
@@ -197,7 +207,7 @@ def run_report(config_path: str | Path, warehouse: str | Path, *, detail: int = 
     html_path = out_dir / REPORT_NAME
     _write_html(html_path, render_report(
         plant=config.name, generated_at=now, ranking=ranking, conditions=conditions,
-        fleet_png=pngs[0], valve_pngs=valve_pngs, discrepancy=discrepancy, snapshot=snapshot,
+        fleet_png=pngs[0], valve_pngs=valve_pngs, discrepancy=discrepancy, snapshot=snapshot, quality=quality,
     ))  # fmt: skip
     return ReportResult(html_path, snapshot, pngs, exports, views, n_standstill, ranking)
 

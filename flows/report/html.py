@@ -11,6 +11,7 @@ from pathlib import Path
 import polars as pl
 
 from flows.report.figures import STATE_COLOURS
+from flows.report.quality import DataQuality, quality_section
 
 CSS = """
 body { font-family: -apple-system, 'Segoe UI', Helvetica, Arial, sans-serif; margin: 24px; color: #212121; background: #fff; }
@@ -111,6 +112,7 @@ def render_report(
     valve_pngs: dict[str, list[tuple[str, Path]]],
     discrepancy: dict[str, list[dict]],
     snapshot: Path,
+    quality: DataQuality | None = None,
 ) -> str:
     """The report's HTML text.
 
@@ -127,6 +129,8 @@ def render_report(
         picture or None); a section "Model discrepancy" when not empty.
     snapshot : Path
         The database snapshot the report was made from (named for the reader's queries).
+    quality : DataQuality, optional
+        The ingest's ledger summed (:mod:`flows.report.quality`): a section "Data quality".
     """
     counts = {s: int((ranking["state"] == s).sum()) for s in STATE_COLOURS}
     parts = [
@@ -160,19 +164,23 @@ def render_report(
         "α̂, x̂ or e beyond a wear bound; <b>unknown</b> = too few ok windows to judge; otherwise <b>healthy</b>. "
         "Remaining hours: the least-squares trend over operating hours extrapolated to the wear bound, with the "
         "95 % interval of the crossing (Fieller). Eq. 9: the standstill pressure check, an indicator independent "
-        "of the fits. Bounds: the plant configuration's [valve_types.NAME.bounds].</p>"
+        "of the fits. Leakage: the closed edge's leakage over Eq. 3's 1 mm inside the edge (0 = none), median of the "
+        "ok windows and at commissioning; a growing leakage is wear of the lands (trend picture, bottom row). "
+        "Bounds: the plant configuration's [valve_types.NAME.bounds].</p>"
     )
     for vid, pngs in valve_pngs.items():
         parts.append(f"<h2 id='valve-{html.escape(vid)}'>Valve {html.escape(vid)}</h2>")
         parts.append(
             "<table><tr><th>edge</th><th>state</th><th>reason</th><th>α̂</th><th>x̂ (% x_max)</th><th>e (mm²)</th>"
-            "<th>remaining h (95 %)</th><th>ok windows</th></tr>"
+            "<th>leakage (× Eq. 3; commissioning)</th><th>remaining h (95 %)</th><th>ok windows</th></tr>"
         )
         for r in conditions.filter(pl.col("valve_id") == vid).sort("edge_order").iter_rows(named=True):
             parts.append(
                 f"<tr><td>{html.escape(r['edge'])}</td><td>{_state(r['state'])}</td><td>{html.escape(r['reason'] or '')}</td>"
                 f"<td class='num'>{_num(r['alpha_hat'], '{:.3f}')}</td><td class='num'>{_num(r['x_hat_pct'], '{:+.2f}')}</td>"
-                f"<td class='num'>{_num(r['e_mm2'], '{:.3f}')}</td><td class='num'>{_life(r)}</td>"
+                f"<td class='num'>{_num(r['e_mm2'], '{:.3f}')}</td>"
+                f"<td class='num'>{_num(r.get('leak_scale'), '{:.2f}')}; {_num(r.get('leak_scale_baseline'), '{:.2f}')}</td>"
+                f"<td class='num'>{_life(r)}</td>"
                 f"<td class='num'>{r['n_ok_windows']} / {r['n_windows']}</td></tr>"
             )
         parts.append("</table>")
@@ -181,5 +189,7 @@ def render_report(
             parts.append(_img(png, f"{vid}: {caption}"))
     if discrepancy:
         parts += _discrepancy_section(discrepancy)
+    if quality is not None:
+        parts += quality_section(quality)
     parts.append("</body></html>")
     return "\n".join(parts)

@@ -48,7 +48,7 @@ from flows.common.config import load_plant_config
 from flows.common.errors import ValvemonError
 from flows.common.instants import utc_instant
 from flows.simulate.simulator import default_workers, iso_us, run_ordered, simulate_measured, valve_key, window_rng  # noqa: F401 (window_rng: API)
-from flows.simulate.writers import ExportColumns, decimals_for_step, export_suffix, open_day_writer
+from flows.simulate.writers import FILE_SUFFIXES, ExportColumns, decimals_for_step, export_suffix, open_day_writer
 from model import condition as mcond
 from model.params import (
     EDGES,
@@ -240,13 +240,15 @@ def _scaled_channel(ch: SensorChannel, factor: float) -> SensorChannel:
 
 
 def plant_params_for_valve(valve: ValveSpec, export: ExportSpec, base: PlantParams = TABLE1) -> PlantParams:
-    """The simulator's parameters for a configured valve: its design data and positioning unit
-    from the configuration, sampled at the export's ``sample_rate_hz``; everything the
+    """The simulator's parameters for a configured valve: its design data (with its valve
+    family, ``area_law`` and ``leakage_factor``) and positioning unit from the configuration,
+    sampled at the export's ``sample_rate_hz``; everything the
     configuration does not name (spool dynamics, mass, friction, supply, controller, load,
     sensor noise) from ``base`` (Table 1). For a stroke or x_max other than Table 1's, the
     reference targets and the position sensors' ranges are scaled with them."""
     d = valve.design
-    geometry = ValveGeometry(d.x_max_m, d.bore_radius_m, d.spool_radius_m, d.taper_angle_port1_rad, d.taper_angle_port2_rad)
+    geometry = ValveGeometry(d.x_max_m, d.bore_radius_m, d.spool_radius_m, d.taper_angle_port1_rad, d.taper_angle_port2_rad,
+                             d.area_law, d.leakage_factor)
     nominal = ValveCondition(underlap_m=d.underlap_m, alpha=(d.contraction_coefficient,) * 4, x_l_fraction=base.nominal_condition.x_l_fraction)
     cylinder = dataclasses.replace(
         base.cylinder,
@@ -577,8 +579,13 @@ def archive_paths(out: Path) -> tuple[Path, Path, Path]:
 
 def check_archive(config: PlantConfig, plan: ArchivePlan, file_format: str) -> None:
     """Whether ``plan`` can be written for ``config`` (a :class:`ValvemonError` if not)."""
-    if file_format not in ("csv", "parquet"):
+    if file_format not in FILE_SUFFIXES:
         raise ValvemonError(f"unknown export file format {file_format!r}")
+    if file_format == "tdms" and config.export.layout != "wide":
+        raise ValvemonError(f"--format tdms: TDMS files hold a channel per tag (wide); the plant has export.layout = {config.export.layout!r}")
+    unitless = [(v.id, s) for v in config.valves for s, t in v.tags.items() if t.unit is None]
+    if unitless:
+        raise ValvemonError(f"valve {unitless[0][0]}, signal {unitless[0][1]}: the simulator writes values in the configured units; give [valves.tags] unit")
     if abs(plan.sample_rate_hz - config.export.sample_rate_hz) > 1e-9:
         raise ValvemonError("the plan's sample rate must be the export's sample_rate_hz")
     if config.export.timestamp_format == "epoch_ms" and plan.period_us % 1000:
@@ -776,7 +783,7 @@ def write_archive(
     toml_path.write_bytes(tomli_w.dumps(plant_config_to_dict(config)).encode())
 
     # Columns: every configured tag, valve by valve, signal by signal.
-    tags, decimals = [], []
+    tags, decimals, units, names = [], [], [], []
     cols_of: dict[int, list[tuple[int, str, float]]] = {}  # run → (column, signal, si_factor of the unit)
     for i, r in enumerate(runs):
         for s in SIGNALS:
@@ -784,7 +791,9 @@ def write_archive(
                 cols_of.setdefault(i, []).append((len(tags), s, r.spec.si_factor(s)))
                 tags.append(r.spec.tags[s].tag)
                 decimals.append(_tag_decimals(r.spec, s, r.params.sensors))
-    columns = ExportColumns(tuple(tags), tuple(decimals))
+                units.append(r.spec.tags[s].unit)
+                names.append(f"{r.spec.id} {s}")
+    columns = ExportColumns(tuple(tags), tuple(decimals), tuple(units), tuple(names))
 
     period = plan.period_us
     long_layout = config.export.layout == "long"
@@ -833,7 +842,7 @@ def write_archive(
                 file_key = keys[a]
                 path = exports / export_name(config, plan, int(t_us[a]), suffix)
                 partial = path.with_name(path.name + ".partial")
-                writer = open_day_writer(partial, config.export, columns, config.timezone, file_format, gzip)
+                writer = open_day_writer(partial, config.export, columns, config.timezone, file_format, gzip, continuous=plan.continuous)
             summary.rows += writer.write(t_us[a:b], block[a:b])
             summary.values += block[a:b].size
 
@@ -891,7 +900,11 @@ def write_archive(
 
 # --- the command -----------------------------------------------------------------------------
 
-FORMATS: tuple[str, ...] = ("long", "wide", "parquet")
+FORMATS: tuple[str, ...] = ("long", "wide", "parquet", "ascii", "tdms")
+"""``--format``: CSV long or wide, Parquet in the plant's layout, wide text with the plant's header
+rows (``ascii``; a generated plant gets iba's tag/name/unit lines, tab-separated), TDMS (wide)."""
+ASCII_HEADER_ROWS = ("tag", "name", "unit")
+"""The header rows of a generated plant's ``--format ascii`` files (iba's ASCII export)."""
 RECORDINGS: tuple[str, ...] = ("snapshot", "continuous")
 CONTINUOUS_FILE_MINUTES = 60.0
 """Length of the export files of a continuous recording unless ``--file-minutes`` says."""
@@ -942,9 +955,9 @@ def plan_request(req: SimulateRequest) -> tuple[PlantConfig, ArchivePlan, dict[s
     if req.layout is not None and req.layout not in ("long", "wide"):
         raise ValvemonError(f"--layout: {req.layout!r} is not one of long, wide")
     if req.layout is not None and fmt != "parquet":
-        raise ValvemonError("--layout: only with --format parquet (for CSV the format names the layout)")
-    if req.gzip and fmt == "parquet":
-        raise ValvemonError("--gzip: only for CSV formats (Parquet files are zstd-compressed)")
+        raise ValvemonError("--layout: only with --format parquet (for CSV the format names the layout; ascii and tdms are wide)")
+    if req.gzip and fmt in ("parquet", "tdms"):
+        raise ValvemonError(f"--gzip: only for text formats ({'Parquet files are zstd-compressed' if fmt == 'parquet' else 'TDMS is binary'})")
     if req.seed < 0:
         raise ValvemonError(f"--seed: {req.seed} must be >= 0")
     if req.workers is not None and not 0 <= req.workers <= 256:
@@ -956,16 +969,18 @@ def plan_request(req: SimulateRequest) -> tuple[PlantConfig, ArchivePlan, dict[s
                 raise ValvemonError(f"{opt}: only for a generated plant (without --config)")
         config = load_plant_config(req.config_path)
         layout = config.export.layout
-        want = fmt if fmt != "parquet" else req.layout
+        want = {"parquet": req.layout, "ascii": "wide", "tdms": "wide"}.get(fmt, fmt)
         if want is not None and want != layout:
             raise ValvemonError(f"--format/--layout: {want} contradicts export.layout = {layout!r} in {req.config_path}")
     else:
-        layout = fmt if fmt != "parquet" else (req.layout or "long")
+        layout = {"parquet": req.layout or "long", "ascii": "wide", "tdms": "wide"}.get(fmt, fmt)
         name = req.plant if req.plant is not None else "SIM1"
         if not re.match(r"^[A-Za-z0-9_-]+$", name):
             raise ValvemonError(f"--plant: {name!r} may hold only letters, digits, '-' and '_' (it names files and tags)")
         commissioned = utc_instant(req.commissioned, "--commissioned") if req.commissioned else DEFAULT_COMMISSIONED
         config = generate_plant_config(name, req.n_valves if req.n_valves is not None else 3, layout, commissioned)
+        if fmt == "ascii":
+            config = dataclasses.replace(config, export=dataclasses.replace(config.export, header_rows=ASCII_HEADER_ROWS, separator="\t"))
     scenarios = resolve_scenarios(config, default, per_valve)
 
     reference = max(v.commissioned for v in config.valves)
@@ -1000,7 +1015,7 @@ def plan_request(req: SimulateRequest) -> tuple[PlantConfig, ArchivePlan, dict[s
         segment_s=req.segment_s,
         file_s=None if file_minutes is None else file_minutes * 60.0,
     )
-    return config, plan, scenarios, "parquet" if fmt == "parquet" else "csv"
+    return config, plan, scenarios, fmt if fmt in ("parquet", "ascii", "tdms") else "csv"
 
 
 def run_simulate(req: SimulateRequest, *, show_progress: bool = True) -> ArchiveSummary:

@@ -1,4 +1,5 @@
-"""Historian export writers for synthetic archives: long CSV, wide CSV and Parquet, one file a day.
+"""Export writers for synthetic archives: long CSV, wide CSV (with the plant's header rows: iba's
+ASCII export), Parquet and TDMS, one file a day (or per ``--file-minutes``).
 
 A writer is opened on one file (one UTC day of a plant) and fed *chunks*: a block of
 consecutive samples for every tag of the plant, as an int64 array of µs-UTC timestamps (n,)
@@ -20,6 +21,7 @@ are reproducible.
 
 from __future__ import annotations
 
+import gzip as _gzip
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -66,10 +68,14 @@ class ExportColumns:
     tags: tuple[str, ...]
     decimals: tuple[int | None, ...]
     """Decimals each tag's values are rounded to (``None``: written at full precision)."""
+    units: tuple[str, ...] = ()
+    """Each tag's unit (header rows ``"unit"``, TDMS ``unit_string``); empty: none written."""
+    names: tuple[str, ...] = ()
+    """Each tag's description (header rows ``"name"``, TDMS ``description``); empty: none written."""
 
     def __post_init__(self):
-        if len(self.tags) != len(self.decimals):
-            raise ValueError("one decimals entry per tag")
+        if len(self.tags) != len(self.decimals) or len(self.units) not in (0, len(self.tags)) or len(self.names) not in (0, len(self.tags)):
+            raise ValueError("one decimals entry (and unit, name if given) per tag")
         if len(set(self.tags)) != len(self.tags):
             raise ValueError("tags must be unique")
 
@@ -93,11 +99,13 @@ def _repeated(strings, codes: np.ndarray, decode: bool) -> pl.Series:
     return pl.from_arrow(arr.dictionary_decode() if decode else arr)  # type: ignore[return-value]
 
 
+FILE_SUFFIXES = {"csv": ".csv", "ascii": ".txt", "parquet": ".parquet", "tdms": ".tdms"}
+"""File name suffix per file format (text formats get ``.gz`` with gzip)."""
+
+
 def export_suffix(file_format: str, gzip: bool) -> str:
-    """File name suffix: ``.csv``, ``.csv.gz`` or ``.parquet``."""
-    if file_format == "parquet":
-        return ".parquet"
-    return ".csv.gz" if gzip else ".csv"
+    """File name suffix: ``.csv``, ``.txt`` (ASCII with header rows), ``.parquet``, ``.tdms``; ``.gz`` added for gzip text."""
+    return FILE_SUFFIXES[file_format] + (".gz" if gzip and file_format in ("csv", "ascii") else "")
 
 
 class DayWriter:
@@ -188,20 +196,37 @@ class DayWriter:
 
 
 class CsvDayWriter(DayWriter):
-    """Long or wide CSV with the export's separator and decimal mark, optionally gzip."""
+    """Long or wide CSV with the export's separator and decimal mark, optionally gzip; a wide file
+    starts with the lines of ``export.header_rows`` (tags, names, units, ``skip`` lines as iba's
+    signal ids ``[0:k]``)."""
 
     def __init__(self, path: Path, export: ExportSpec, columns: ExportColumns, timezone: str, gzip: bool = False):
         super().__init__(path, export, columns, timezone)
         self.gzip = gzip
         self._fh: BinaryIO | None = open(self.path, "wb")
 
+    def _header_rows(self) -> bytes:
+        """The header lines of ``export.header_rows`` (wide layout)."""
+        e, c = self.export, self.columns
+        cells = {
+            "tag": [e.timestamp_column, *c.tags],
+            "name": ["", *(c.names or c.tags)],
+            "unit": ["", *(c.units or [""] * len(c.tags))],
+            "skip": ["", *(f"[0:{k}]" for k in range(len(c.tags)))],
+        }
+        text = "".join(e.separator.join(cells[kind]) + "\n" for kind in e.header_rows).encode()
+        return _gzip.compress(text, GZIP_LEVEL, mtime=0) if self.gzip else text
+
     def write(self, timestamps_us: np.ndarray, values: np.ndarray) -> int:
         if self._fh is None:
             raise ValueError(f"{self.path}: writer is closed")
         df = self._frame(timestamps_us, values, for_parquet=False)
+        rows = self.export.layout == "wide" and self.export.header_rows != ExportSpec.header_rows
+        if rows and self.rows == 0:
+            self._fh.write(self._header_rows())
         df.write_csv(
             self._fh,
-            include_header=self.rows == 0,
+            include_header=self.rows == 0 and not rows,
             separator=self.export.separator,
             decimal_comma=self.export.decimal == ",",
             datetime_format=self._csv_datetime_format(),
@@ -272,12 +297,82 @@ class ParquetDayWriter(DayWriter):
         self._closed = True
 
 
+TDMS_GROUP = "valvemon"
+"""The group a TDMS file's channels are written to unless ``export.tdms_group`` names one."""
+
+
+class TdmsDayWriter(DayWriter):
+    """TDMS (wide: one channel per tag, named by the tag, in one group), one segment per chunk.
+
+    ``waveform``: the samples are back to back on the export's grid (a continuous recording), and
+    the time is the channels' waveform properties ``wf_start_time`` (UTC) and ``wf_increment``;
+    otherwise (snapshots: windows with pauses between them) a time channel named
+    ``export.timestamp_column`` holds each sample's TDMS timestamp. Channel properties:
+    ``unit_string`` and ``description`` from :class:`ExportColumns`.
+    """
+
+    def __init__(self, path: Path, export: ExportSpec, columns: ExportColumns, timezone: str, waveform: bool = False):
+        from nptdms import TdmsWriter
+
+        if export.layout != "wide":
+            raise ValueError("TDMS files are written in the wide layout (a channel per tag)")
+        super().__init__(path, export, columns, timezone)
+        self.waveform = waveform
+        self.group = export.tdms_group or TDMS_GROUP
+        self.period_us = round(1e6 / export.sample_rate_hz)
+        self._next_us: int | None = None
+        self._writer = TdmsWriter(str(self.path))
+        self._writer.open()
+        self._closed = False
+
+    def _properties(self, k: int, t0_us: int) -> dict:
+        c = self.columns
+        props: dict = {}
+        if c.units:
+            props["unit_string"] = c.units[k]
+        if c.names:
+            props["description"] = c.names[k]
+        if self.waveform:
+            props |= {"wf_start_time": np.datetime64(int(t0_us), "us"), "wf_increment": self.period_us / 1e6, "wf_start_offset": 0.0}
+        return props
+
+    def write(self, timestamps_us: np.ndarray, values: np.ndarray) -> int:
+        from nptdms import ChannelObject
+
+        if self._closed:
+            raise ValueError(f"{self.path}: writer is closed")
+        self._frame(timestamps_us[:0], values[:0], for_parquet=True)  # the shape checks
+        n = len(timestamps_us)
+        self.columns.round(values)
+        first = self.rows == 0
+        if self.waveform and ((not first and int(timestamps_us[0]) != self._next_us) or np.any(np.diff(timestamps_us) != self.period_us)):
+            raise ValueError(f"{self.path}: a waveform TDMS file needs samples back to back on the {self.period_us} µs grid")
+        objects = []
+        if not self.waveform:
+            objects.append(ChannelObject(self.group, self.export.timestamp_column, timestamps_us.astype("datetime64[us]")))
+        for k, tag in enumerate(self.columns.tags):
+            objects.append(ChannelObject(self.group, tag, np.ascontiguousarray(values[:, k]), properties=self._properties(k, int(timestamps_us[0])) if first else None))
+        self._writer.write_segment(objects)
+        self._next_us = int(timestamps_us[-1]) + self.period_us
+        self.rows += n
+        return n
+
+    def close(self) -> None:
+        if not self._closed:
+            self._writer.close()
+            self._closed = True
+
+
 def open_day_writer(
-    path: Path, export: ExportSpec, columns: ExportColumns, timezone: str, file_format: str, gzip: bool = False
+    path: Path, export: ExportSpec, columns: ExportColumns, timezone: str, file_format: str, gzip: bool = False, continuous: bool = False
 ) -> DayWriter:
-    """A writer for one day's file: ``file_format`` is ``"csv"`` or ``"parquet"`` (layout from ``export``)."""
+    """A writer for one day's file: ``file_format`` is ``"csv"``, ``"ascii"`` (wide text with the
+    plant's header rows), ``"parquet"`` or ``"tdms"`` (layout from ``export``; ``continuous``: TDMS
+    time from waveform properties instead of a time channel)."""
     if file_format == "parquet":
         return ParquetDayWriter(path, export, columns, timezone)
-    if file_format == "csv":
+    if file_format in ("csv", "ascii"):
         return CsvDayWriter(path, export, columns, timezone, gzip=gzip)
+    if file_format == "tdms":
+        return TdmsDayWriter(path, export, columns, timezone, waveform=continuous)
     raise ValueError(f"unknown export file format {file_format!r}")

@@ -12,6 +12,9 @@
 -- remaining_hours (+ _low, _high, 95 % interval): for a healthy edge the soonest predicted
 -- crossing of a wear bound by a parameter's trend (parameter_trends); 0 for a worn edge; null
 -- for faulty and unknown edges and where no trend heads significantly toward a bound.
+-- leak_scale: the edge's closed-edge leakage over Eq. 3's, median over its ok windows (a
+-- growing leakage is a wear signal; the trend picture shows it per window), leak_scale_baseline
+-- the commissioning value (1 for a nominal baseline: Eq. 3 assumed).
 -- The Eq. 9 standstill check (standstill_indicator) is a valve-wide quick indicator: its
 -- result is appended to the reason and given in eq9_ok, it does not change an edge's state.
 with
@@ -43,7 +46,8 @@ windows as (
         max(operating_hours) filter (where is_ok) as operating_hours,
         arg_max(alpha_hat, window_start) filter (where is_ok) as alpha_hat,
         arg_max(x_hat_pct, window_start) filter (where is_ok) as x_hat_pct,
-        arg_max(e_mm2, window_start) filter (where is_ok) as e_mm2
+        arg_max(e_mm2, window_start) filter (where is_ok) as e_mm2,
+        median(leak_scale) filter (where is_ok and leak_scale is not null) as leak_scale
     from fits
     group by valve_id, edge
 ),
@@ -100,6 +104,11 @@ standstill as (
     select * from standstill_indicator
 ),
 
+baseline_leak as (
+    -- the commissioning (or nominal: 1) leakage of each edge's current baseline version
+    select valve_id, edge, arg_max(leak_scale, version) as leak_scale from baselines group by valve_id, edge
+),
+
 judged as (
     select
         grid.valve_id,
@@ -119,13 +128,15 @@ judged as (
         standstill.eq9_ok,
         standstill.eq9_residual,
         standstill.eq9_expected,
-        standstill.eq9_tolerance
+        standstill.eq9_tolerance,
+        baseline_leak.leak_scale as leak_scale_baseline
     from grid
     left join windows using (valve_id, edge)
     left join recent_alarms using (valve_id, edge)
     left join levels using (valve_id, edge)
     left join soonest using (valve_id, edge)
     left join standstill using (valve_id)
+    left join baseline_leak using (valve_id, edge)
 ),
 
 final as (
@@ -176,7 +187,9 @@ final as (
         coalesce(n_ok_windows, 0) as n_ok_windows,
         coalesce(n_recent_alarms, 0) as n_recent_alarms,
         eq9_ok,
-        edge_order
+        edge_order,
+        leak_scale,
+        leak_scale_baseline
     from judged
 )
 

@@ -2,6 +2,7 @@
 -- One row per valve, edge and monitoring window. A window fitted against an older baseline
 -- version (design data or commissioning window changed since) is left out: its α̂ and x̂ are
 -- relative to another characteristic. is_ok marks windows that gave all three estimates.
+-- leak_scale (+ interval): the edge's closed-edge leakage in the window over Eq. 3's (0 = none).
 with
 
 fits as (
@@ -28,6 +29,9 @@ final as (
         fits.e_mm2,
         fits.status,
         fits.baseline_version,
+        fits.leak_scale,
+        fits.leak_scale_ci_low,
+        fits.leak_scale_ci_high,
         (fits.status = 'ok'
             and isfinite(fits.alpha_hat) and isfinite(fits.x_hat_pct) and isfinite(fits.e_mm2)) as is_ok
     from fits

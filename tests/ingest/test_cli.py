@@ -48,7 +48,7 @@ def test_warehouse_from_the_environment(plant, tmp_path, monkeypatch, capsys):
     ],
 )
 def test_errors_are_one_line_with_exit_status_1(plant, tmp_path, monkeypatch, capsys, make, expected):
-    cfg, _ = plant()
+    cfg, _ = plant(other_tags="error")
     path = make(tmp_path)
     code, out, err = run_cli(["ingest", "--config", str(cfg), "--warehouse", str(tmp_path / "wh"), str(path)], monkeypatch, capsys)
     assert code == 1 and out == ""
@@ -82,7 +82,7 @@ def test_cli_runs_the_prefect_flow(prefect_server, plant, tmp_path, monkeypatch,
 
 
 def test_a_failing_flow_still_gives_one_line(prefect_server, plant, tmp_path, monkeypatch, capsys):
-    cfg, _ = plant()
+    cfg, _ = plant(other_tags="error")
     code, out, err = run_cli(["ingest", "--config", str(cfg), "--warehouse", str(tmp_path / "wh"), str(DATA / "unknown_tag.csv")], monkeypatch, capsys)
     assert code == 1
     assert err == f"valvemon: error: {DATA / 'unknown_tag.csv'}: line 4: unknown tag 'MILL1.V099.P1': no valve of the plant configuration has it\n"

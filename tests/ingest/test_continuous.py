@@ -44,6 +44,21 @@ def recording(path: Path, first_s: float, seconds: float, seed: int = 0, rate_hz
     return path
 
 
+def tdms_recording(path: Path, first_s: float, seconds: float, seed: int = 0, rate_hz: float = 10.0) -> Path:
+    """The same recording as :func:`recording`, as a TDMS file: a channel per tag, waveform time,
+    one segment per 5,000 samples (as a recorder writes blocks)."""
+    from nptdms import ChannelObject, TdmsWriter
+
+    df = pl.read_parquet(recording(path.with_suffix(".parquet"), first_s, seconds, seed, rate_hz))
+    path.with_suffix(".parquet").unlink()
+    start = np.datetime64(START_US + int(first_s * 1e6), "us")
+    with TdmsWriter(str(path)) as w:
+        for a in range(0, df.height, 5_000):
+            props = lambda tag: {"wf_start_time": start, "wf_increment": 1 / rate_hz, "unit_string": "mm" if tag[-2:] in ("XS", "XC") else "bar"}  # noqa: E731
+            w.write_segment([ChannelObject("rec", tag, df[tag].to_numpy()[a : a + 5_000], properties=props(tag) if a == 0 else None) for tag in df.columns[1:]])
+    return path
+
+
 @pytest.fixture
 def wide10(tmp_path):
     return write_plant(tmp_path, "wide10.toml", layout="wide", tag_column=None, value_column=None, quality_column=None, good_quality=None, sample_rate_hz=10.0, max_gap_s=0.25)
@@ -133,17 +148,22 @@ def _child(config: Path, path: Path, wh: Path, warm: Path, small: dict, kill_at:
 
 
 @pytest.mark.slow
-def test_memory_does_not_grow_with_the_file(wide10, tmp_path):
+@pytest.mark.parametrize("suffix", [".parquet", ".tdms"])
+def test_memory_does_not_grow_with_the_file(wide10, tmp_path, suffix):
     """A file of 600,000 rows (3.6 M samples, ~100 MB as float64 columns, ~17 h at 10 Hz)
-    ingests in a few tens of MB above the interpreter; taken whole, the same file needs far more."""
-    warm = recording(tmp_path / "warm.parquet", 0, 600)
-    big = recording(tmp_path / "big.parquet", 86_400, 600_000 / 10)
+    ingests in a few tens of MB above the interpreter; taken whole, the same file needs far more.
+    Wide Parquet read by record batches; TDMS by slices of every channel (that its lake is the one
+    of the same data as CSV: ``tests/archive/test_recorder_formats.py``)."""
+    make = recording if suffix == ".parquet" else tdms_recording
+    warm = make(tmp_path / f"warm{suffix}", 0, 600)
+    big = make(tmp_path / f"big{suffix}", 86_400, 600_000 / 10)
     streamed = _child(wide10, big, tmp_path / "wh_stream", warm, SMALL)
     assert streamed.returncode == 0, streamed.stderr
     whole = _child(wide10, big, tmp_path / "wh_whole", warm, {**SMALL, "BATCH_SAMPLES": 10**9, "DAY_FILE_MAX_ROWS": 10**9, "BUFFER_ROWS": 10**9})
     assert whole.returncode == 0, whole.stderr
     grow_stream = json.loads(streamed.stdout.splitlines()[-1])["growth_mb"]
     grow_whole = json.loads(whole.stdout.splitlines()[-1])["growth_mb"]
+    print(f"{suffix}: peak growth streamed {grow_stream:.1f} MB, whole {grow_whole:.1f} MB")
     assert grow_stream < 60, (grow_stream, grow_whole)
     assert grow_whole > 3 * grow_stream, (grow_stream, grow_whole)
     assert_frame_equal(lake(tmp_path / "wh_stream"), lake(tmp_path / "wh_whole"))

@@ -26,13 +26,13 @@ def test_spring_gap_local_time_is_refused_with_its_row(plant, tmp_path):
 
 
 def test_unknown_tag(plant, tmp_path):
-    cfg, _ = plant()
+    cfg, _ = plant(other_tags="error")
     msg = _error(cfg, DATA / "unknown_tag.csv", tmp_path / "wh")
     assert msg == f"{DATA / 'unknown_tag.csv'}: line 4: unknown tag 'MILL1.V099.P1': no valve of the plant configuration has it"
 
 
 def test_unknown_tag_column_in_a_wide_export(plant, tmp_path):
-    cfg, _ = plant(layout="wide", tag_column=None, value_column=None, quality_column=None, good_quality=None)
+    cfg, _ = plant(layout="wide", tag_column=None, value_column=None, quality_column=None, good_quality=None, other_tags="error")
     path = tmp_path / "wide.csv"
     path.write_text((DATA / "base_wide.csv").read_text().replace("MILL1.V017.PR", "MILL1.V017.PRX"))
     assert "unknown tag 'MILL1.V017.PRX' (column 3)" in _error(cfg, path, tmp_path / "wh")
@@ -71,11 +71,6 @@ def test_unreadable_parquet(plant, tmp_path):
     assert _error(cfg, DATA / "not_really.parquet", tmp_path / "wh").startswith(f"{DATA / 'not_really.parquet'}: not a readable Parquet export (")
 
 
-def test_unreadable_csv(plant, tmp_path):
-    cfg, _ = plant()
-    assert _error(cfg, DATA / "ragged.csv", tmp_path / "wh").startswith(f"{DATA / 'ragged.csv'}: not a readable CSV export (")
-
-
 def test_missing_file(plant, tmp_path):
     cfg, _ = plant()
     assert _error(cfg, tmp_path / "nope.csv", tmp_path / "wh") == f"{tmp_path / 'nope.csv'}: no such file or folder"
@@ -88,9 +83,13 @@ def test_missing_column_names_the_key(plant, tmp_path):
 
 
 def test_unreadable_timestamp_names_line_and_expected_format(plant, tmp_path):
+    """One of the five timestamps of a tag unreadable: 20 %, more than export.max_bad_share."""
     cfg, _ = plant()
-    msg = _error(cfg, DATA / "bad_timestamp.csv", tmp_path / "wh")
+    path = tmp_path / "bad_timestamp.csv"
+    path.write_text((DATA / "base_long.csv").read_text().replace("2025-03-01T12:00:00.000Z,MILL1.V017.PR", "2025-03-01 noon,MILL1.V017.PR"))
+    msg = _error(cfg, path, tmp_path / "wh")
     assert "line 3: tag MILL1.V017.PR: timestamp '2025-03-01 noon' does not match export.timestamp_format 'iso8601' (expected e.g." in msg
+    assert msg.endswith("1 of 5 samples of tag MILL1.V017.PR in the file (20.0%) are without a readable timestamp, more than export.max_bad_share = 0.05: a wrong export.timestamp_format? it is 'iso8601'")
 
 
 def test_duplicate_rule_error_names_tag_time_and_lines(plant, tmp_path):
@@ -109,7 +108,7 @@ def test_out_of_range_value_fails_the_sensor_schema_naming_tag_time_and_check(pl
 
 
 def test_a_failed_file_leaves_earlier_files_ingested_and_the_run_marked_failed(plant, tmp_path):
-    cfg, _ = plant()
+    cfg, _ = plant(other_tags="error")
     wh = tmp_path / "wh"
     with pytest.raises(ValvemonError):
         ingest(cfg, [DATA / "base_long.csv", DATA / "unknown_tag.csv"], wh)

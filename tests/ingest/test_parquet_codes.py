@@ -84,7 +84,7 @@ def test_bad_and_missing_quality_codes_in_parquet(plant, tmp_path):
 
 
 def test_unknown_tag_in_parquet_is_named_with_its_row(plant, tmp_path):
-    cfg, _ = plant()
+    cfg, _ = plant(other_tags="error")
     path = _as_parquet(DATA / "unknown_tag.csv", tmp_path / "unknown.parquet")
     with pytest.raises(ValvemonError) as err:
         ingest(cfg, path, tmp_path / "wh")

@@ -1,5 +1,6 @@
 """Eq. 3 opening areas: continuity, monotonicity, underlap shift, magnitudes of model.md."""
 
+import dataclasses
 import math
 
 import numpy as np
@@ -108,3 +109,63 @@ def test_valve_areas_order_and_edges():
     # x > 0 opens s1 and 2r, closes 1r and s2
     assert A[0, -1] > 30 * MM2 and A[3, -1] > 15 * MM2
     assert A[1, -1] < 0.1 * MM2 and A[2, -1] < 0.1 * MM2
+
+
+# --- the valve families: sharp-edged law and worn lands (model.area docstring) ---------------
+
+@pytest.mark.parametrize("port", [1, 2])
+@pytest.mark.parametrize("xu", [0.0, 4e-5, 1.5e-4])
+def test_sharp_edged_law_is_zero_below_the_underlap_and_linear_above(port, xu):
+    u = np.linspace(-3.5e-3, 3.5e-3, 2001)
+    a = edge_area(u, xu, PHIS[port], R, r, area_law="sharp")
+    assert np.all(a[u <= -xu] == 0.0)
+    slope = 2 * math.pi * R * math.sin(PHIS[port])
+    np.testing.assert_allclose(a[u > -xu], slope * (u[u > -xu] + xu), rtol=1e-12, atol=1e-20)
+    # Eq. 3's open-branch gradient at its start, without the clearance intercept
+    eq3 = area(u, xu, port)
+    near = (u > -xu + 0.2e-3) & (u < -xu + 1e-3)
+    assert np.all(eq3[near] > a[near])
+    assert np.all(np.abs(np.diff(eq3[near]) / np.diff(a[near]) - 1) < 0.02)
+
+
+@pytest.mark.parametrize("port", [1, 2])
+@pytest.mark.parametrize("k", [0.5, 3.0, 6.0])
+def test_leakage_factor_scales_the_far_leakage_and_keeps_the_rest(port, k):
+    xu = 4e-5
+    x_open, x_l = branch_points(xu, port)
+    u_open = np.linspace(x_l, 3.5e-3, 500)
+    np.testing.assert_array_equal(edge_area(u_open, xu, PHIS[port], R, r, leakage_factor=k), area(u_open, xu, port))
+    eps = 1e-13
+    below = edge_area(x_l - eps, xu, PHIS[port], R, r, leakage_factor=k)
+    assert abs(below - area(x_l + eps, xu, port)) <= 1e-7 * below  # continuous at x_l
+    u_far = np.array([-1e-3, -2e-3, -3.5e-3, -1.0])
+    ratio = edge_area(u_far, xu, PHIS[port], R, r, leakage_factor=k) / area(u_far, xu, port)
+    w = x_l + xu
+    c = (R - r) ** 2 + w**2
+    np.testing.assert_allclose(ratio, (c + (x_l - u_far) * w) / (c + (x_l - u_far) * w / k), rtol=1e-12)
+    assert np.all(np.diff(ratio) * (k - 1) > 0) and abs(ratio[-1] / k - 1) < 5e-3  # towards k far out
+    u_closed = np.linspace(-3.5e-3, x_l - 1e-9, 300)
+    assert np.all(np.diff(edge_area(u_closed, xu, PHIS[port], R, r, leakage_factor=k)) > 0)
+
+
+def test_family_arguments_are_checked():
+    with pytest.raises(ValueError, match="area_law"):
+        edge_area(0.0, 4e-5, PHIS[1], R, r, area_law="round")
+    with pytest.raises(ValueError, match="leakage_factor"):
+        edge_area(0.0, 4e-5, PHIS[1], R, r, leakage_factor=0.0)
+    with pytest.raises(ValueError, match="area_law"):
+        dataclasses.replace(G, area_law="round")
+    with pytest.raises(ValueError, match="leakage_factor"):
+        dataclasses.replace(G, leakage_factor=-1.0)
+
+
+@pytest.mark.parametrize("geometry", [dataclasses.replace(G, area_law="sharp"), dataclasses.replace(G, leakage_factor=4.0)])
+def test_valve_areas_follow_the_geometry_family(geometry):
+    cond = ValveCondition(underlap_m=(4e-5, 5e-5, 3e-5, 6e-5))
+    x = np.linspace(-3.5e-3, 3.5e-3, 301)
+    A = valve_areas(x, geometry, cond)
+    for i, e in enumerate(EDGES):
+        u = opening_coordinate(x, e)
+        expect = edge_area(u, cond.underlap_m[i], G.taper_angle(e), R, r, cond.x_l_m(G)[i],
+                           geometry.area_law, geometry.leakage_factor)
+        np.testing.assert_array_equal(A[i], expect)

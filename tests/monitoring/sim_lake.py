@@ -13,16 +13,20 @@ START = datetime(2025, 1, 1, tzinfo=timezone.utc)
 
 
 def simulated_lake(
-    conditions: list[ValveCondition], seed: int, valve_id: str = "V1", duration_s: float = 10.0, sensors=None, trajectory=None
+    conditions: list[ValveCondition], seed: int, valve_id: str = "V1", duration_s: float = 10.0, sensors=None, trajectory=None,
+    geometry=None,
 ) -> pl.DataFrame:
     """One 10 s window per condition, an hour apart, with Table 1 sensors (noise, quantisation).
 
-    ``trajectory``: a :class:`model.TrajectoryParams` instead of Table 1's default moves.
+    ``trajectory``: a :class:`model.TrajectoryParams` instead of Table 1's default moves;
+    ``geometry``: a :class:`model.ValveGeometry` instead of Table 1's (another valve family).
     Window i draws its inputs from (seed, i) alone, so two condition lists give the same
     reference trajectories, loads and supply (twins). A window longer than 10 s (a continuous
     recording) keeps Table 1's supply drift at most 10 bar over the whole window (the drift rate
     is drawn for a 10 s window; over 20 min it would reach the 250 bar sensor limit)."""
     plant = TABLE1 if trajectory is None else dataclasses.replace(TABLE1, trajectory=trajectory)
+    if geometry is not None:
+        plant = dataclasses.replace(plant, geometry=geometry)
     if duration_s > 10.0:
         drift = min(plant.supply.p_s_drift_max_pa_s, 10e5 / duration_s)
         plant = dataclasses.replace(plant, supply=dataclasses.replace(plant.supply, p_s_drift_max_pa_s=drift))

@@ -13,7 +13,7 @@ import pytest
 
 from flows.common.warehouse_db import create_table_sql, insert_frame, query_frame
 from flows.report.views import REPORT_TABLES, create_views
-from schemas.fields import CONDITION_BOUNDS_FIELDS, EDGE_FIT_FIELDS, EDGES, STANDSTILL_FIELDS, polars_schema
+from schemas.fields import BASELINE_FIELDS, CONDITION_BOUNDS_FIELDS, EDGE_FIT_FIELDS, EDGES, STANDSTILL_FIELDS, polars_schema
 from schemas.plant_config import ConditionBounds
 
 COMMISSIONED = datetime(2025, 1, 1, tzinfo=timezone.utc)
@@ -26,6 +26,7 @@ class Warehouse:
         self.con = duckdb.connect()
         self.con.execute("SET TimeZone = 'UTC'")
         self.con.execute(create_table_sql("edge_fits", EDGE_FIT_FIELDS))
+        self.con.execute(create_table_sql("baselines", BASELINE_FIELDS))
         for name, fields in REPORT_TABLES.items():
             self.con.execute(create_table_sql(name, fields))
         create_views(self.con)
@@ -64,6 +65,7 @@ class Warehouse:
                 "u_min_mm": None, "u_max_mm": None,
                 "baseline_version": [baseline_version] * n,
                 "monitored_at": [COMMISSIONED] * n,
+                "leak_scale": None, "leak_scale_ci_low": None, "leak_scale_ci_high": None,
             },
             schema_overrides={k: v for k, v in polars_schema(EDGE_FIT_FIELDS).items()},
         ).cast(dict(polars_schema(EDGE_FIT_FIELDS)))

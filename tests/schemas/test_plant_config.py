@@ -2,6 +2,7 @@
 
 import copy
 import math
+import re
 import tomllib
 from datetime import datetime, timezone
 from pathlib import Path
@@ -37,8 +38,11 @@ def test_example_is_accepted_in_si():
     assert cfg.tag_index()["MILL1.V017.XREF"] == ("V017", "x_ref")
 
 
-def test_round_trip_through_toml_is_lossless(raw, tmp_path):
+@pytest.mark.parametrize("export", [{}, {"max_bad_share": 0.2, "other_tags": "error"}])
+def test_round_trip_through_toml_is_lossless(raw, tmp_path, export):
+    raw["export"].update(export)
     cfg = parse_plant_config(raw)
+    assert (cfg.export.max_bad_share, cfg.export.other_tags) == (export.get("max_bad_share", 0.05), export.get("other_tags", "ignore"))
     path = tmp_path / "plant.toml"
     path.write_bytes(tomli_w.dumps(plant_config_to_dict(cfg)).encode())
     assert load_plant_config(path) == cfg
@@ -51,6 +55,22 @@ def test_valve_overrides_its_type(raw):
     assert v.design.underlap_m == pytest.approx((4e-5, 6e-5, 4e-5, 4e-5))
     assert v.design.contraction_coefficient == 0.7
     assert parse_plant_config(raw).valve_types["servo_4w"].contraction_coefficient == 0.675
+
+
+def test_valve_family_per_type_defaults_and_round_trips(raw, tmp_path):
+    assert parse_plant_config(raw).valve("V017").design.area_law == "eq3"
+    assert parse_plant_config(raw).valve("V017").design.leakage_factor == 1.0
+    raw["valve_types"]["sharp_4w"] = copy.deepcopy(raw["valve_types"]["servo_4w"]) | {"area_law": "sharp"}
+    raw["valve_types"]["servo_4w"]["leakage_factor"] = 4.0
+    cfg = parse_plant_config(raw)
+    assert (cfg.valve_types["sharp_4w"].area_law, cfg.valve_types["sharp_4w"].leakage_factor) == ("sharp", 1.0)
+    assert (cfg.valve("V017").design.area_law, cfg.valve("V017").design.leakage_factor) == ("eq3", 4.0)
+    path = tmp_path / "plant.toml"
+    path.write_bytes(tomli_w.dumps(plant_config_to_dict(cfg)).encode())
+    assert load_plant_config(path) == cfg
+    raw["valve_types"]["sharp_4w"]["leakage_factor"] = 2.0
+    with pytest.raises(ConfigError, match=r"valve_types.sharp_4w.leakage_factor: 2 needs area_law = \"eq3\""):
+        parse_plant_config(raw)
 
 
 def test_naive_commissioning_time_is_plant_local(raw):
@@ -93,6 +113,15 @@ _DELETE = object()
         ("valves.0.tags.x_spool.unit", "%", None),
         ("valves.0.tags.x_cyl.unit", "%", "valves[0].tags.x_cyl.unit: unknown position unit '%'"),
         ("export.good_quality", _DELETE, "export.good_quality: missing required key"),
+        ("export.max_bad_share", 0, "export.max_bad_share: 0 must be > 0"),
+        ("export.max_bad_share", 1.5, "export.max_bad_share: 1.5 must be <= 1"),
+        ("export.max_bad_share", "5%", "export.max_bad_share: expected a finite number, got '5%'"),
+        ("export.max_bad_share", 1, None),
+        ("export.other_tags", "skip", "export.other_tags: 'skip' is not one of 'ignore', 'error'"),
+        ("export.other_tags", "error", None),
+        ("valve_types.servo_4w.area_law", "round", "valve_types.servo_4w.area_law: 'round' is not one of 'eq3', 'sharp'"),
+        ("valve_types.servo_4w.leakage_factor", 0, "valve_types.servo_4w.leakage_factor: 0 must be > 0"),
+        ("valves.0.area_law", 3, "valves[0].area_law: expected a non-empty string, got 3"),
     ],
 )
 def test_broken_configurations_name_the_key(raw, path, value, message):
@@ -288,4 +317,50 @@ def test_tolerances_default_parse_and_round_trip(raw):
 def test_broken_tolerances_name_the_key(raw, value, message):
     raw["valves"][0]["tolerances"] = value
     with pytest.raises(ConfigError, match=message):
+        parse_plant_config(raw)
+
+
+def _wide(raw: dict, **export) -> dict:
+    for k in ("tag_column", "value_column", "quality_column", "good_quality"):
+        raw["export"].pop(k)
+    raw["export"] |= {"layout": "wide"} | export
+    return raw
+
+
+def test_header_rows_default_one_tag_line_and_round_trip(raw, tmp_path):
+    assert parse_plant_config(raw).export.header_rows == ("tag",)
+    _wide(raw, header_rows=["skip", "tag", "name", "unit"], tdms_group="fast")
+    del raw["valves"][0]["tags"]["p1"]["unit"]  # taken from the files' unit line
+    config = parse_plant_config(raw)
+    assert config.export.header_rows == ("skip", "tag", "name", "unit") and config.export.tdms_group == "fast"
+    assert config.valves[0].tags["p1"].unit is None and math.isnan(config.valves[0].si_factor("p1"))
+    assert config.valves[0].si_factor("p1", "psi") == pytest.approx(6894.757293168361)
+    path = tmp_path / "p.toml"
+    path.write_bytes(tomli_w.dumps(plant_config_to_dict(config)).encode())
+    assert load_plant_config(path) == config
+
+
+@pytest.mark.parametrize(
+    "rows, layout, message",
+    [
+        (["tag", "units"], "wide", "export.header_rows[1]: 'units' is not one of 'tag', 'name', 'unit', 'skip'"),
+        (["name", "unit"], "wide", "export.header_rows: needs one 'tag' line"),
+        (["tag", "tag"], "wide", "export.header_rows: 'tag' may occur only once"),
+        (["tag", "unit", "unit"], "wide", "export.header_rows: 'unit' may occur only once"),
+        ([], "wide", "export.header_rows: expected a non-empty list"),
+        ("tag", "wide", "export.header_rows: expected a non-empty list"),
+        (["tag", "unit"], "long", "export.header_rows: header rows other than 'tag' are only for export.layout = 'wide'"),
+    ],
+)
+def test_broken_header_rows_name_the_key(raw, rows, layout, message):
+    if layout == "wide":
+        _wide(raw)
+    raw["export"]["header_rows"] = rows
+    with pytest.raises(ConfigError, match=re.escape(message)):
+        parse_plant_config(raw)
+
+
+def test_a_unit_may_be_left_out_only_with_a_unit_line(raw):
+    del raw["valves"][0]["tags"]["ps"]["unit"]
+    with pytest.raises(ConfigError, match=re.escape("valves[0].tags.ps.unit: missing required key (it may be left out only when export.header_rows has a 'unit' line)")):
         parse_plant_config(raw)

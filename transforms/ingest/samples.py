@@ -14,28 +14,49 @@ missing_value  a long export's row without a value (an empty wide cell is no sam
 non_numeric    the value is text that is no number, e.g. PI digital states ``I/O Timeout``,
                ``Bad Input``, ``Shutdown``
 non_finite     NaN or ±inf
+bad_timestamp  the timestamp is missing or not in ``export.timestamp_format``
+implausible_time
+               the time is later than the ingest's time + :data:`FUTURE_TOLERANCE_NS`
+               or before the ``commissioned`` time of the tag's valve
+out_of_range   the value in SI lies outside the physical range of its lake column
+               (``schemas.fields.SENSOR_FIELDS``), e.g. a transmitter's 1e308
 ============== ======================================================================
 
-Refused outright (:class:`IngestError`): a missing column, a tag that is not in the plant
-configuration, a row without a readable timestamp, a local time that does not exist, and a valve
-of the export that lacks one of its required signals.
+The last three are *faults*: counted per tag (:attr:`Samples.faults`), and a file in which they
+exceed ``export.max_bad_share`` of a tag's samples is refused (``transforms.ingest.stream``).
+
+A tag no valve of the plant has (a row's tag in the long layout, a column in the wide one) is
+read past and counted (:attr:`Samples.other_tags`) under ``export.other_tags = "ignore"``, and
+refuses the file under ``"error"``.
+
+Refused outright (:class:`IngestError`): a missing column, an other tag under ``"error"``, a local
+time that does not exist, and a valve of the export that lacks one of its required signals.
 """
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
+from datetime import datetime, timedelta, timezone
 
 import numba
 import numpy as np
 import polars as pl
 
-from schemas.fields import REQUIRED_SIGNALS
+from schemas.fields import FAULT_REASONS, REQUIRED_SIGNALS, SENSOR_FIELDS, SIGNAL_COLUMN
 from schemas.plant_config import ExportSpec, PlantConfig
 from transforms.ingest.errors import IngestError
-from transforms.ingest.timestamps import UTC_NS, parse_timestamps
+from transforms.ingest.timestamps import UTC_NS, parse_timestamps, unreadable_timestamp
 
 QUARANTINE_COLUMNS = ("line", "tag", "timestamp_raw", "value_raw", "quality", "reason")
 """Columns of a file's quarantine frame (the flows add file, hash, run and time)."""
+
+FUTURE_TOLERANCE_NS = 86_400 * 10**9
+"""A sample later than the ingest's time plus this is ``implausible_time`` (one day: more than any
+time-zone offset and any drift of a recorder's clock that is merely not synchronised). [ns]"""
+
+BAD_TIMESTAMP, IMPLAUSIBLE_TIME, OUT_OF_RANGE = (FAULT_REASONS.index(r) for r in ("bad_timestamp", "implausible_time", "out_of_range"))
+_LIMITS = {f.name: f for f in SENSOR_FIELDS}
 
 
 @dataclass(frozen=True)
@@ -46,12 +67,28 @@ class TagTable:
     valve_ids: tuple[str, ...]
     signals: tuple[str, ...]
     factors: np.ndarray
+    lo: np.ndarray
+    """Lowest plausible value in SI: the ``ge`` of the signal's lake column."""
+    hi: np.ndarray
+    """Highest plausible value in SI: the ``le`` of the signal's lake column."""
+    commissioned_ns: np.ndarray
+    """The valve's ``commissioned`` time (UTC ns): earlier samples are implausible."""
 
     @classmethod
     def from_config(cls, config: PlantConfig) -> TagTable:
-        rows = [(t.tag, v.id, s, v.si_factor(s)) for v in config.valves for s, t in v.tags.items()]
-        tags, valves, signals, factors = zip(*rows)
-        return cls(tags, valves, signals, np.asarray(factors, dtype=np.float64))
+        rows = [(t.tag, v.id, s, v.si_factor(s), _LIMITS[SIGNAL_COLUMN[s]], v.commissioned) for v in config.valves for s, t in v.tags.items()]
+        tags, valves, signals, factors, limits, commissioned = zip(*rows)
+        lo = np.array([-np.inf if f.ge is None else f.ge for f in limits])
+        hi = np.array([np.inf if f.le is None else f.le for f in limits])
+        since = np.array([round(c.timestamp() * 1e6) * 1000 for c in commissioned], dtype=np.int64)
+        return cls(tags, valves, signals, np.asarray(factors, dtype=np.float64), lo, hi, since)
+
+    def check_name(self, tid: int, value_si: float) -> str:
+        """The range check of the tag's lake column that ``value_si`` fails, named as the
+        sensor-frame schema names it (``ps_pa <= 6e+07 Pa``)."""
+        f = _LIMITS[SIGNAL_COLUMN[self.signals[tid]]]
+        side = f"<= {f.le:g}" if value_si > self.hi[tid] or value_si != value_si else f">= {f.ge:g}"
+        return f"{f.name} {side} {f.unit}".rstrip()
 
     @property
     def enum(self) -> pl.Enum:
@@ -77,6 +114,14 @@ class Samples:
     """Samples of the file: accepted + quarantined."""
     tags_present: frozenset[str]
     """Tags that occur in the file (as a value of the tag column or as a column)."""
+    tag_samples: np.ndarray
+    """Samples per tag id, quarantined ones included (the base of a fault's share)."""
+    faults: np.ndarray
+    """Quarantined samples per tag id (rows) and fault (columns, :data:`FAULT_REASONS`)."""
+    first_faults: dict[tuple[int, int], str]
+    """(tag id, fault) → what is wrong with its first sample of the frame, naming line and tag."""
+    other_tags: dict[str, int]
+    """Tags (columns) no valve has → their samples, in the order of the frame (read past)."""
 
 
 def _require_columns(df: pl.DataFrame, wanted: dict[str, str]) -> None:
@@ -148,10 +193,14 @@ def empty_quarantine() -> pl.DataFrame:
     return pl.DataFrame(schema={c: (pl.Int64 if c == "line" else pl.String) for c in QUARANTINE_COLUMNS})
 
 
-def _reason(missing_tag, bad_quality, missing, non_numeric, non_finite) -> pl.Expr:
-    """The first reason that applies, in the order of the table in the module doc."""
+_MASK_REASONS = ("missing_tag", "bad_timestamp", "bad_quality", "missing_value", "non_numeric", "non_finite")
+
+
+def _reason(*masks) -> pl.Expr:
+    """The first reason that applies, in the order of :data:`_MASK_REASONS` (one mask each, None
+    where none applies)."""
     expr = None
-    for mask, name in ((missing_tag, "missing_tag"), (bad_quality, "bad_quality"), (missing, "missing_value"), (non_numeric, "non_numeric"), (non_finite, "non_finite")):
+    for mask, name in zip(masks, _MASK_REASONS):
         if mask is None:
             continue
         expr = pl.when(pl.lit(mask)).then(pl.lit(name)) if expr is None else expr.when(pl.lit(mask)).then(pl.lit(name))
@@ -185,12 +234,29 @@ def _tag_enum(col: pl.Series, tags: TagTable) -> pl.Series:
 
 
 @numba.njit(cache=True, nogil=True)
-def _to_si(values: np.ndarray, tag_id: np.ndarray, factors: np.ndarray) -> np.ndarray:
-    """``values * factors[tag_id]`` in one pass (numpy's gather and multiply take ~3× as long)."""
-    out = np.empty(len(values))
-    for i in range(len(values)):
-        out[i] = values[i] * factors[tag_id[i]]
-    return out
+def _to_si(values, tag_id, t_ns, factors, lo, hi, t_lo, t_hi):
+    """``values * factors[tag_id]`` and each sample's fault in one pass (numpy's gather and
+    multiply alone take ~3× as long): 0 none, 1 ``implausible_time`` (before ``t_lo[tag]`` or
+    after ``t_hi``; an empty ``t_ns``: no time is checked), 2 ``out_of_range`` (outside
+    ``[lo[tag], hi[tag]]`` in SI). A ``tag_id`` of length 1 is the tag of every sample (a wide
+    column). Returns (SI values, faults, how many)."""
+    n = len(values)
+    out = np.empty(n)
+    fault = np.zeros(n, dtype=np.int8)
+    bad = 0
+    one = len(tag_id) == 1
+    timed = len(t_ns) == n
+    for i in range(n):
+        k = tag_id[0] if one else tag_id[i]
+        v = values[i] * factors[k]
+        out[i] = v
+        if timed and (t_ns[i] < t_lo[k] or t_ns[i] > t_hi):
+            fault[i] = 1
+            bad += 1
+        elif not (lo[k] <= v <= hi[k]):
+            fault[i] = 2
+            bad += 1
+    return out, fault, bad
 
 
 @numba.njit(cache=True, nogil=True)
@@ -202,8 +268,66 @@ def _code_counts(codes: np.ndarray, n: int) -> np.ndarray:
     return counts
 
 
-def _accepted(lines: pl.Series, tag: pl.Series, ts: pl.Series, values: pl.Series, tags: TagTable) -> pl.DataFrame:
-    value_si = _to_si(values.to_numpy(), tag.to_physical().to_numpy(), tags.factors)
+def _iso(t_ns: int) -> str:
+    return (datetime(1970, 1, 1, tzinfo=timezone.utc) + timedelta(microseconds=int(t_ns) // 1000)).isoformat().replace("+00:00", "Z")
+
+
+class _Faults:
+    """The faults of one frame as they are found: counts per tag and the first of each."""
+
+    def __init__(self, tags: TagTable, now_ns: int):
+        self.tags = tags
+        self.t_hi = now_ns + FUTURE_TOLERANCE_NS
+        self.counts = np.zeros((len(tags.tags), len(FAULT_REASONS)), dtype=np.int64)
+        self.first: dict[tuple[int, int], str] = {}
+
+    def bad_timestamps(self, tag_id: np.ndarray, lines: np.ndarray, raw: pl.Series, fmt: str) -> None:
+        """Samples whose timestamp cannot be read (arrays of them only)."""
+        np.add.at(self.counts[:, BAD_TIMESTAMP], tag_id, 1)
+        ids, first = np.unique(tag_id, return_index=True)
+        for tid, i in zip(ids, first):
+            self.first.setdefault((int(tid), BAD_TIMESTAMP), f"line {lines[i]}: tag {self.tags.tags[tid]}: {unreadable_timestamp(raw[int(i)], fmt)}")
+
+    def checked(self, lines: pl.Series, tag_id: np.ndarray, ts: pl.Series, values: pl.Series, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        """Values in SI, and the faults per sample (None: none) of accepted samples; ``tag_id``
+        per sample, or one for all (a wide column); ``ids``: the tags of the frame. Times are
+        checked sample by sample only when the frame's earliest or latest is implausible for
+        one of its tags (else the times stay in polars: no copy of a chunked column)."""
+        tags = self.tags
+        t_ns = ts.cast(UTC_NS).to_physical()
+        if len(t_ns) and (t_ns.min() < tags.commissioned_ns[ids].max() or t_ns.max() > self.t_hi):
+            t = t_ns.to_numpy()
+        else:
+            t = np.zeros(0, dtype=np.int64)
+        value_si, fault, bad = _to_si(values.to_numpy(), tag_id, t, tags.factors, tags.lo, tags.hi, tags.commissioned_ns, self.t_hi)
+        if not bad:
+            return value_si, None
+        rows = np.flatnonzero(fault)
+        row_tags = tag_id[rows] if len(tag_id) > 1 else np.full(len(rows), tag_id[0])
+        kinds = np.where(fault[rows] == 1, IMPLAUSIBLE_TIME, OUT_OF_RANGE)
+        np.add.at(self.counts, (row_tags, kinds), 1)
+        if not len(t):
+            t = t_ns.gather(rows).to_numpy()
+            rows_t = np.arange(len(rows))
+        else:
+            rows_t = rows
+        for (tid, kind), j in zip(*np.unique(np.c_[row_tags, kinds], axis=0, return_index=True)):
+            r = rows[j]
+            self.first.setdefault((int(tid), int(kind)), self._what(int(tid), int(kind), int(lines[int(r)]), int(t[rows_t[j]]), float(value_si[r])))
+        return value_si, fault
+
+    def _what(self, tid: int, kind: int, line: int, t_ns: int, value_si: float) -> str:
+        tags = self.tags
+        tag, valve = tags.tags[tid], tags.valve_ids[tid]
+        if kind == OUT_OF_RANGE:  # as the sensor-frame schema said it before samples were checked
+            column = SIGNAL_COLUMN[tags.signals[tid]]
+            return f"tag {tag}: valve {valve}, column {column} at {_iso(t_ns)}: value {value_si!r} fails check {tags.check_name(tid, value_si)!r} (line {line})"
+        if t_ns > self.t_hi:
+            return f"line {line}: tag {tag}: time {_iso(t_ns)} is more than a day after the ingest's time {_iso((self.t_hi - FUTURE_TOLERANCE_NS) // 10**9 * 10**9)}"
+        return f"line {line}: tag {tag}: time {_iso(t_ns)} is before valve {valve} was commissioned ({_iso(int(tags.commissioned_ns[tid]))})"
+
+
+def _accepted(lines: pl.Series, tag: pl.Series, ts: pl.Series, value_si: np.ndarray) -> pl.DataFrame:
     return pl.DataFrame(
         {
             "line": lines.cast(pl.Int64),
@@ -218,7 +342,36 @@ def _empty_accepted(tags: TagTable) -> pl.DataFrame:
     return pl.DataFrame(schema={"line": pl.Int64, "tag": tags.enum, "timestamp_utc": UTC_NS, "value_si": pl.Float64})
 
 
-def long_samples(df: pl.DataFrame, export: ExportSpec, timezone: str, tags: TagTable, *, first_line: int = 2) -> Samples:
+def _rows(raw: dict, sub: pl.Series, reason: pl.Series) -> pl.DataFrame:
+    """Quarantine rows of the samples at positions ``sub``; ``raw``: line, tag, timestamp, value
+    and quality (or None) of every sample, the tag a Series or one name for all."""
+    picked = [c if c is None else pl.repeat(c, len(sub), dtype=pl.String, eager=True) if isinstance(c, str) else c.gather(sub) for c in raw.values()]
+    return _quarantine_frame(*picked, reason)
+
+
+def _set_aside(rejected: pl.Series | None, masks: tuple, raw: dict) -> pl.DataFrame | None:
+    """The quarantine rows of the samples ``rejected`` marks, with the first reason that applies
+    (``raw`` as :func:`_rows`)."""
+    if rejected is None or not rejected.any():
+        return None
+    sub = rejected.arg_true()
+    return _rows(raw, sub, pl.select(_reason(*(None if m is None else m.gather(sub) for m in masks))).to_series())
+
+
+def _faulted(fault: np.ndarray, kept: pl.Series | None, raw: dict) -> pl.DataFrame:
+    """The quarantine rows of the accepted samples the value/time checks fault (``kept``: the
+    positions of the accepted samples among all, None: all)."""
+    at = np.flatnonzero(fault)
+    sub = pl.Series(at) if kept is None else kept.gather(at)
+    return _rows(raw, sub, pl.Series(np.where(fault[at] == 1, "implausible_time", "out_of_range"), dtype=pl.String))
+
+
+def _concat(frames: list[pl.DataFrame | None]) -> pl.DataFrame:
+    used = [f for f in frames if f is not None]
+    return pl.concat(used) if used else empty_quarantine()
+
+
+def long_samples(df: pl.DataFrame, export: ExportSpec, timezone: str, tags: TagTable, *, first_line: int = 2, now_ns: int | None = None) -> Samples:
     """Samples of a long export: one row per tag and time.
 
     Parameters
@@ -227,58 +380,71 @@ def long_samples(df: pl.DataFrame, export: ExportSpec, timezone: str, tags: TagT
         The file as read, in file order; a blank line may appear as an all-null row. Extra
         columns are ignored. The tag column may be text or already an Enum of the plant's tags.
     export : ExportSpec
-        Column names, timestamp format, quality codes, decimal mark.
+        Column names, timestamp format, quality codes, decimal mark, ``other_tags``.
     timezone : str
         ``plant.timezone`` for timestamps without an offset.
     tags : TagTable
         The plant's tags.
     first_line : int
         Line number of the frame's first row (2 below a CSV header, 1 for Parquet rows).
+    now_ns : int, optional
+        The ingest's time (UTC ns) for ``implausible_time``; default: now.
     """
     wanted = {"timestamp_column": export.timestamp_column, "tag_column": export.tag_column, "value_column": export.value_column}
     if export.quality_column:
         wanted["quality_column"] = export.quality_column
     _require_columns(df, wanted)
     df, lines = _drop_blank(df.select(list(wanted.values())), first_line)
-    n = df.height
+    rows_in = df.height
     tag_raw = df[export.tag_column]
     tag = _tag_enum(tag_raw, tags)
     missing_tag = None
+    other: dict[str, int] = {}
     if tag.null_count():
         missing_tag = tag_raw.is_null() | (_text(tag_raw).str.strip_chars().str.len_bytes() == 0)
         unknown = tag.is_null() & ~missing_tag
         if unknown.any():
-            i = int(unknown.arg_true()[0])
-            raise IngestError(f"unknown tag {tag_raw[i]!r}: no valve of the plant configuration has it", line=int(lines[i]))
+            if export.other_tags == "error":
+                i = int(unknown.arg_true()[0])
+                raise IngestError(f"unknown tag {tag_raw[i]!r}: no valve of the plant configuration has it", line=int(lines[i]))
+            other = dict(_text(tag_raw.filter(unknown)).to_frame("tag").group_by("tag", maintain_order=True).len().rows())
+            keep = ~unknown
+            df, lines, tag_raw, tag, missing_tag = df.filter(keep), lines.filter(keep), tag_raw.filter(keep), tag.filter(keep), missing_tag.filter(keep)
         if not missing_tag.any():
             missing_tag = None
+    n = df.height
     tag_id = tag.to_physical()
+    faults = _Faults(tags, time.time_ns() if now_ns is None else now_ns)
     ts_raw = df[export.timestamp_column]
-    ts = parse_timestamps(ts_raw, export.timestamp_format, timezone, groups=tag_id, lines=lines, tags=tag)
+    ts = parse_timestamps(ts_raw, export.timestamp_format, timezone, groups=tag_id, lines=lines, tags=tag, unreadable="null")
+    bad_ts = None
     if ts.null_count():
-        i = int(ts.is_null().arg_true()[0])
-        raise IngestError("missing timestamp", line=int(lines[i]), tag=tag[i])
+        bad_ts = ts.is_null() if missing_tag is None else ts.is_null() & ~missing_tag
+        if bad_ts.any():
+            at = bad_ts.arg_true()
+            faults.bad_timestamps(tag_id.gather(at).to_numpy(), lines.gather(at).to_numpy(), ts_raw.gather(at), export.timestamp_format)
+        else:
+            bad_ts = None
     values, missing, non_numeric, non_finite = _value_checks(df[export.value_column], export.decimal)
     bad_quality = _bad_quality(df[export.quality_column], export.good_quality) if export.quality_column else None
-    masks = (missing_tag, bad_quality, missing, non_numeric, non_finite)
+    masks = (missing_tag, bad_ts, bad_quality, missing, non_numeric, non_finite)
     rejected = _any(masks)
     counts = _code_counts(tag_id.drop_nulls().to_numpy(), len(tags.tags))
     tags_present = frozenset(tags.tags[i] for i in np.flatnonzero(counts))
-    if rejected is not None and rejected.any():
-        sub = rejected.arg_true()
-        quarantine = _quarantine_frame(
-            lines.gather(sub),
-            tag_raw.gather(sub),
-            ts_raw.gather(sub),
-            df[export.value_column].gather(sub),
-            df[export.quality_column].gather(sub) if export.quality_column else None,
-            pl.select(_reason(*(None if m is None else m.gather(sub) for m in masks))).to_series(),
-        )
+    raw = {"line": lines, "tag": tag_raw, "ts": ts_raw, "value": df[export.value_column], "quality": df[export.quality_column] if export.quality_column else None}
+    set_aside = _set_aside(rejected, masks, raw)
+    kept = None
+    if set_aside is not None:
         ok = ~rejected
+        kept = ok.arg_true()
         lines, tag, ts, values = lines.filter(ok), tag.filter(ok), ts.filter(ok), values.filter(ok)
-    else:
-        quarantine = empty_quarantine()
-    return Samples(_accepted(lines, tag, ts, values, tags), quarantine, n, n, tags_present)
+    value_si, fault = faults.checked(lines, tag.to_physical().to_numpy(), ts, values, np.flatnonzero(counts))
+    faulted = None
+    if fault is not None:
+        faulted = _faulted(fault, kept, raw)
+        ok = pl.Series(fault == 0)
+        lines, tag, ts, value_si = lines.filter(ok), tag.filter(ok), ts.filter(ok), value_si[fault == 0]
+    return Samples(_accepted(lines, tag, ts, value_si), _concat([set_aside, faulted]), rows_in, n, tags_present, counts, faults.counts, faults.first, other)
 
 
 def _is_placeholder(df: pl.DataFrame, name: str) -> bool:
@@ -286,11 +452,11 @@ def _is_placeholder(df: pl.DataFrame, name: str) -> bool:
     return (name == "" or name.startswith("_duplicated_")) and df[name].null_count() == df.height
 
 
-def wide_samples(df: pl.DataFrame, export: ExportSpec, timezone: str, tags: TagTable, *, first_line: int = 2) -> Samples:
+def wide_samples(df: pl.DataFrame, export: ExportSpec, timezone: str, tags: TagTable, *, first_line: int = 2, now_ns: int | None = None) -> Samples:
     """Samples of a wide export: a time column (and optionally a quality column) and a column per tag.
 
-    An empty cell is no sample. A row whose quality code is bad quarantines every sample in it.
-    Parameters as :func:`long_samples`.
+    An empty cell is no sample. A row whose quality code is bad, or whose timestamp cannot be
+    read, quarantines every sample in it. Parameters as :func:`long_samples`.
     """
     wanted = {"timestamp_column": export.timestamp_column}
     if export.quality_column:
@@ -298,19 +464,24 @@ def wide_samples(df: pl.DataFrame, export: ExportSpec, timezone: str, tags: TagT
     _require_columns(df, wanted)
     tag_columns = [c for c in df.columns if c not in wanted.values() and not _is_placeholder(df, c)]
     ids = tags.ids
+    other: dict[str, int] = {}
     for c in tag_columns:
         if c not in ids:
-            raise IngestError(f"unknown tag {c!r} (column {df.columns.index(c) + 1}): no valve of the plant configuration has it")
+            if export.other_tags == "error":
+                raise IngestError(f"unknown tag {c!r} (column {df.columns.index(c) + 1}): no valve of the plant configuration has it")
+            other[c] = df.height - df[c].null_count()
+    tag_columns = [c for c in tag_columns if c in ids]
     df, lines = _drop_blank(df.select([*wanted.values(), *tag_columns]), first_line)
     n = df.height
     ts_raw = df[export.timestamp_column]
-    ts = parse_timestamps(ts_raw, export.timestamp_format, timezone, lines=lines)
-    if ts.null_count():
-        i = int(ts.is_null().arg_true()[0])
-        raise IngestError("missing timestamp", line=int(lines[i]))
+    ts = parse_timestamps(ts_raw, export.timestamp_format, timezone, lines=lines, unreadable="null")
+    bad_ts = ts.is_null() if ts.null_count() else None
+    faults = _Faults(tags, time.time_ns() if now_ns is None else now_ns)
     bad_quality = _bad_quality(df[export.quality_column], export.good_quality) if export.quality_column else None
     accepted, quarantined = [], []
     samples_in = 0
+    tag_samples = np.zeros(len(tags.tags), dtype=np.int64)
+    code_dtype = pl.Series(dtype=tags.enum).to_physical().to_numpy().dtype  # as a long frame's codes: one compiled kernel
     for c in tag_columns:
         values, missing, non_numeric, non_finite = _value_checks(df[c], export.decimal)
         present = None if missing is None else ~missing
@@ -318,38 +489,48 @@ def wide_samples(df: pl.DataFrame, export: ExportSpec, timezone: str, tags: TagT
         if n_present == 0:
             continue
         samples_in += n_present
+        tid = ids[c]
+        tag_samples[tid] = n_present
         bad_q = None if bad_quality is None else (bad_quality if present is None else bad_quality & present)
-        masks = (None, bad_q, None, non_numeric, non_finite)
+        bad_t = None if bad_ts is None else (bad_ts if present is None else bad_ts & present)
+        if bad_t is not None and bad_t.any():
+            at = bad_t.arg_true()
+            faults.bad_timestamps(np.full(len(at), tid), lines.gather(at).to_numpy(), ts_raw.gather(at), export.timestamp_format)
+        masks = (None, bad_t, bad_q, None, non_numeric, non_finite)
         rejected = _any(masks)
-        if rejected is not None and rejected.any():
-            sub = rejected.arg_true()
-            quarantined.append(
-                _quarantine_frame(
-                    lines.gather(sub),
-                    pl.repeat(c, len(sub), dtype=pl.String, eager=True),
-                    ts_raw.gather(sub),
-                    df[c].gather(sub),
-                    df[export.quality_column].gather(sub) if export.quality_column else None,
-                    pl.select(_reason(*(None if m is None else m.gather(sub) for m in masks))).to_series(),
-                )
-            )
+        raw = {
+            "line": lines,
+            "tag": c,
+            "ts": ts_raw,
+            "value": df[c],
+            "quality": df[export.quality_column] if export.quality_column else None,
+        }
+        set_aside = _set_aside(rejected, masks, raw)
+        quarantined.append(set_aside)
         if rejected is None:
             keep = present
         else:
             keep = ~rejected if present is None else present & ~rejected
         k = n if keep is None else int(keep.sum())
         sel = (lambda s: s) if k == n else (lambda s: s.filter(keep))
-        accepted.append(_accepted(sel(lines), pl.repeat(c, k, dtype=tags.enum, eager=True), sel(ts), sel(values), tags))
+        tag = pl.repeat(c, k, dtype=tags.enum, eager=True)
+        col_lines, col_ts = sel(lines), sel(ts)
+        value_si, fault = faults.checked(col_lines, np.array([tid], dtype=code_dtype), col_ts, sel(values), np.array([tid]))
+        if fault is not None:
+            quarantined.append(_faulted(fault, None if keep is None else keep.arg_true(), raw))
+            ok = fault == 0
+            col_lines, col_ts, value_si = col_lines.filter(pl.Series(ok)), col_ts.filter(pl.Series(ok)), value_si[ok]
+            tag = tag.head(len(value_si))
+        accepted.append(_accepted(col_lines, tag, col_ts, value_si))
     acc = pl.concat(accepted) if accepted else _empty_accepted(tags)
-    quarantine = pl.concat(quarantined) if quarantined else empty_quarantine()
-    return Samples(acc, quarantine, n, samples_in, frozenset(tag_columns))
+    return Samples(acc, _concat(quarantined), n, samples_in, frozenset(tag_columns), tag_samples, faults.counts, faults.first, other)
 
 
-def samples_of(df: pl.DataFrame, config: PlantConfig, tags: TagTable | None = None, *, first_line: int = 2) -> Samples:
+def samples_of(df: pl.DataFrame, config: PlantConfig, tags: TagTable | None = None, *, first_line: int = 2, now_ns: int | None = None) -> Samples:
     """Samples of an export in the configured layout (``export.layout``)."""
     tags = tags or TagTable.from_config(config)
     reader = long_samples if config.export.layout == "long" else wide_samples
-    return reader(df, config.export, config.timezone, tags, first_line=first_line)
+    return reader(df, config.export, config.timezone, tags, first_line=first_line, now_ns=now_ns)
 
 
 def check_required_signals(tags_present: frozenset[str], config: PlantConfig) -> list[str]:

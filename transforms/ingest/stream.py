@@ -23,6 +23,7 @@ Memory per batch is the batch plus the carry (a few samples per tag, rows of at 
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field
 from datetime import datetime, timedelta, timezone
 from zoneinfo import ZoneInfo
@@ -30,7 +31,7 @@ from zoneinfo import ZoneInfo
 import numpy as np
 import polars as pl
 
-from schemas.fields import REQUIRED_SIGNALS, SIGNAL_COLUMN
+from schemas.fields import FAULT_REASONS, REQUIRED_SIGNALS, SIGNAL_COLUMN
 from schemas.plant_config import PlantConfig
 from transforms.ingest.errors import IngestError
 from transforms.ingest.frames import assemble_valve, validate_raw_rows, validate_sensor_frame
@@ -69,6 +70,12 @@ class ExportCounts:
     time_start: datetime | None = None
     time_end: datetime | None = None
     valves: tuple[str, ...] = ()
+    bad_timestamp: int = 0
+    implausible_time: int = 0
+    out_of_range: int = 0
+    """Of ``quarantined``: the faults whose share ``export.max_bad_share`` bounds."""
+    other_tags: dict[str, int] = field(default_factory=dict)
+    """Tags (columns) no valve has → their samples, read past (not in ``samples_in``)."""
 
 
 @dataclass
@@ -146,11 +153,16 @@ class ExportStream:
         ``TagTable.from_config(config)``, when the caller already has it.
     """
 
-    def __init__(self, config: PlantConfig, tags: TagTable | None = None):
+    def __init__(self, config: PlantConfig, tags: TagTable | None = None, *, now: datetime | None = None):
         self.config = config
         self.tags = tags or TagTable.from_config(config)
         self.grid = Grid.from_export(config.export.sample_rate_hz, config.export.max_gap_s)
+        self.now_ns = time.time_ns() if now is None else round(now.timestamp() * 1e6) * 1000
         self.counts = ExportCounts()
+        n_tags = len(self.tags.tags)
+        self._tag_samples = np.zeros(n_tags, dtype=np.int64)
+        self._faults = np.zeros((n_tags, len(FAULT_REASONS)), dtype=np.int64)
+        self._first_faults: dict[tuple[int, int], str] = {}
         self.quarantine: list[pl.DataFrame] = []
         self.gaps: list[pl.DataFrame] = []
         self._present: set[str] = set()
@@ -180,7 +192,7 @@ class ExportStream:
         """
         self._batches += 1
         export, tags = self.config.export, self.tags
-        samples = samples_of(df, self.config, tags, first_line=first_line)
+        samples = samples_of(df, self.config, tags, first_line=first_line, now_ns=self.now_ns)
         c = self.counts
         c.rows_in += samples.rows_in
         c.samples_in += samples.samples_in
@@ -188,8 +200,19 @@ class ExportStream:
         if samples.quarantine.height:
             self.quarantine.append(samples.quarantine)
         self._present |= samples.tags_present
+        self._tag_samples += samples.tag_samples
+        self._faults += samples.faults
+        for key, what in samples.first_faults.items():
+            self._first_faults.setdefault(key, what)
+        for name, k in samples.other_tags.items():
+            c.other_tags[name] = c.other_tags.get(name, 0) + k
         if final:
+            c.bad_timestamp, c.implausible_time, c.out_of_range = (int(x) for x in self._faults.sum(axis=0))
+            if c.other_tags and not self._present:
+                names = ", ".join(list(c.other_tags)[:5]) + (", …" if len(c.other_tags) > 5 else "")
+                raise IngestError(f"no tag of the plant configuration in the file, only {len(c.other_tags)} other tags ({names})")
             c.valves = tuple(check_required_signals(frozenset(self._present), self.config))
+            self._refuse_if_mostly_faulty()
         acc = samples.accepted
         validate_raw_rows(acc)
         tag_id = acc["tag"].to_physical().to_numpy()
@@ -218,6 +241,35 @@ class ExportStream:
         if final and self._span:
             c.time_start, c.time_end = pl.Series([min(self._span), max(self._span)], dtype=pl.Int64).cast(pl.Datetime("ns", "UTC")).to_list()
         return frames
+
+    def _refuse_if_mostly_faulty(self) -> None:
+        """Refuse the file (after its last batch, before anything is committed) when a tag's
+        faults of one kind exceed ``export.max_bad_share`` of its samples, naming the first such
+        sample and the likely cause."""
+        export = self.config.export
+        limit = export.max_bad_share
+        share = self._faults / np.maximum(self._tag_samples, 1)[:, None]
+        over = np.argwhere(share.T > limit)  # (fault, tag id), faults in FAULT_REASONS order
+        if not len(over):
+            return
+        kind, tid = (int(x) for x in over[0])
+        tag, signal = self.tags.tags[tid], self.tags.signals[tid]
+        n, m = int(self._faults[tid, kind]), int(self._tag_samples[tid])
+        reason = FAULT_REASONS[kind]
+        if reason == "out_of_range":
+            i = next(i for i, v in enumerate(self.config.valves) if v.id == self.tags.valve_ids[tid])
+            what = "out of range"
+            cause = f"a wrong unit? valves[{i}].tags.{signal}.unit is {self.config.valves[i].tags[signal].unit!r}"
+        elif reason == "bad_timestamp":
+            what = "without a readable timestamp"
+            cause = f"a wrong export.timestamp_format? it is {export.timestamp_format!r}"
+        else:
+            what = "at implausible times"
+            cause = "a recorder clock that is off, or a wrong plant.timezone or export.timestamp_format?"
+        raise IngestError(
+            f"{self._first_faults[(tid, kind)]}; {n:,} of {m:,} samples of tag {tag} in the file ({n / m:.1%}) are {what}, "
+            f"more than export.max_bad_share = {limit:g}: {cause}"
+        )
 
     def _tag(self, tid: int, t: np.ndarray, v: np.ndarray, lines, carry: _TagCarry | None, final: bool) -> None:
         """One tag's samples of this batch (after the held ones): resolve, grid, carry."""

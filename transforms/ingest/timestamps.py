@@ -60,18 +60,16 @@ def _line(lines: pl.Series | None, i: int) -> int:
     return i + 1 if lines is None else int(lines[i])
 
 
-def _first_failure(raw: pl.Series, ok: pl.Series, lines: pl.Series | None, fmt: str, tags: pl.Series | None) -> IngestError:
-    bad = (~ok.fill_null(False)).arg_true()
-    i = int(bad[0])
-    text = raw[i]
-    tag = None if tags is None else tags[i]
+def unreadable_timestamp(text: object, fmt: str) -> str:
+    """What is wrong with a timestamp the ingest cannot read (``text`` as in the file)."""
     if text is None or (isinstance(text, str) and not text.strip()):
-        return IngestError("missing timestamp", line=_line(lines, i), tag=tag)
-    return IngestError(
-        f"timestamp {str(text)!r} does not match export.timestamp_format {fmt!r} (expected {_example(fmt)})",
-        line=_line(lines, i),
-        tag=tag,
-    )
+        return "missing timestamp"
+    return f"timestamp {str(text)!r} does not match export.timestamp_format {fmt!r} (expected {_example(fmt)})"
+
+
+def _first_failure(raw: pl.Series, ok: pl.Series, lines: pl.Series | None, fmt: str, tags: pl.Series | None) -> IngestError:
+    i = int((~ok.fill_null(False)).arg_true()[0])
+    return IngestError(unreadable_timestamp(raw[i], fmt), line=_line(lines, i), tag=None if tags is None else tags[i])
 
 
 def localize(
@@ -148,10 +146,13 @@ def parse_timestamps(
     groups: pl.Series | None = None,
     lines: pl.Series | None = None,
     tags: pl.Series | None = None,
+    unreadable: str = "raise",
 ) -> pl.Series:
     """Timestamps of an export (text, epoch numbers or typed) → Datetime(ns, UTC).
 
-    Every non-null element must be readable; nulls stay null (the caller decides about them).
+    Every non-null element must be readable (``unreadable="raise"``), or an element that is not
+    becomes null (``"null"``: the ingest quarantines its row, :func:`unreadable_timestamp` says
+    why); nulls stay null (the caller decides about them).
 
     Parameters
     ----------
@@ -163,6 +164,8 @@ def parse_timestamps(
         ``plant.timezone``, for timestamps without an offset.
     groups, lines, tags
         See :func:`localize`.
+    unreadable : str
+        ``"raise"`` or ``"null"`` (above).
 
     Raises
     ------
@@ -192,7 +195,7 @@ def parse_timestamps(
             exact = stripped.cast(pl.Decimal(38, 6), strict=False) * 1_000_000
             out = pl.select(pl.coalesce(out, exact.cast(pl.Int64).cast(UTC_NS))).to_series()
         ok = out.is_not_null() | ~present
-        if not ok.all():
+        if unreadable == "raise" and not ok.all():
             raise _first_failure(text, ok, lines, fmt, tags)
         return out
     if fmt == "iso8601":
@@ -205,7 +208,7 @@ def parse_timestamps(
     else:
         zoned = any(d in fmt for d in _ZONED_DIRECTIVES)
         candidates = [(fmt, zoned)]
-    return _parse_text(text, candidates, fmt, timezone, groups=groups, lines=lines, tags=tags)
+    return _parse_text(text, candidates, fmt, timezone, groups=groups, lines=lines, tags=tags, strict=unreadable == "raise")
 
 
 def _arrow_iso(text: pl.Series, *, zoned: bool) -> pl.Series | None:
@@ -243,8 +246,10 @@ def _parse_text(
     groups: pl.Series | None,
     lines: pl.Series | None,
     tags: pl.Series | None,
+    strict: bool = True,
 ) -> pl.Series:
-    """Try the candidate formats in turn on the rows still unread; local ones are localised."""
+    """Try the candidate formats in turn on the rows still unread; local ones are localised.
+    Rows no format reads raise (``strict``) or stay null."""
     n = len(text)
     todo = text.is_not_null().arg_true()
     zoned_out: pl.Series | None = None
@@ -271,7 +276,7 @@ def _parse_text(
             else:
                 naive_out = placed if naive_out is None else pl.select(pl.coalesce(naive_out, placed)).to_series()
         todo = todo.filter(~ok)
-    if len(todo):
+    if len(todo) and strict:
         ok = pl.Series([True] * n).scatter(todo, False)
         raise _first_failure(text, ok, lines, fmt, tags)
     if naive_out is not None:
