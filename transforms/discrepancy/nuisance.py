@@ -39,8 +39,6 @@ NUISANCES: tuple[str, ...] = tuple(f"alpha_{e}" for e in EDGES) + tuple(f"underl
 """Names of the nuisance parameters, in the order of every nuisance vector."""
 NUISANCE_UNITS: dict[str, str] = {**{f"alpha_{e}": "-" for e in EDGES}, **{f"underlap_{e}": "m" for e in EDGES},
                                   "bulk_modulus": "Pa", "v01": "m3", "v02": "m3", "d_v": "N*s/m", "d_c": "N", "d_s": "N", "mass": "kg"}
-CONDITION_NUISANCES = tuple(range(8))
-"""Indices of the valve-condition nuisances (α and underlap per edge): they enter the chamber equations only."""
 
 
 @dataclass(frozen=True)
