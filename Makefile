@@ -24,8 +24,16 @@ $(VENV)/.synced: $(UV) uv.lock pyproject.toml
 
 # our own packages are installed editable (uv compiles only site-packages): compile them too,
 # on every setup (compileall skips what is up to date)
-setup: $(VENV)/.synced
+setup: $(VENV)/.synced $(VENV)/.numba-cache-checked
 	$(VENV)/bin/python -m compileall -q flows transforms model schemas
+
+# numba's on-disk cache (__pycache__/*.nbi, *.nbc) checks only the kernel's own file: a kernel that
+# calls one of another module compiled in keeps the old callee after that module changes (a pull
+# or a merge). Drop every cached kernel when any of our sources is newer than the last check.
+SOURCES := $(shell find flows transforms model schemas -name '*.py' 2>/dev/null)
+$(VENV)/.numba-cache-checked: $(SOURCES) | $(VENV)/.synced
+	find flows transforms model schemas -name '*.nb[ic]' -delete
+	touch $@
 
 demo: setup
 	$(VENV)/bin/valvemon demo

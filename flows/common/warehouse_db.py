@@ -231,8 +231,9 @@ def ensure_tables(con: duckdb.DuckDBPyConnection, tables: Mapping[str, tuple[tup
 
 
 def add_missing_columns(con: duckdb.DuckDBPyConnection, tables: Mapping[str, tuple[Field, ...]]) -> None:
-    """Add to existing ``tables`` (name → fields) the fields they lack, as nullable columns after
-    their own (a warehouse made before the fields existed); one catalog query, DDL only when
+    """Add to existing ``tables`` (name → fields) the fields the registry gained after the
+    warehouse was created, after their own columns, with the value that means "none" for the rows
+    already there (null, or '' / 0 for a non-nullable field); one catalog query, DDL only when
     something is missing."""
     names = list(tables)
     have: dict[str, set[str]] = {}
@@ -242,11 +243,10 @@ def add_missing_columns(con: duckdb.DuckDBPyConnection, tables: Mapping[str, tup
     ).fetchall():  # fmt: skip
         have.setdefault(t, set()).add(c)
     for name, fields in tables.items():
-        if name not in have:
-            continue
         for f in fields:
-            if f.name not in have[name]:
-                con.execute(f'ALTER TABLE {name} ADD COLUMN "{f.name}" {duckdb_type(f.dtype)}')
+            if name in have and f.name not in have[name]:
+                default = "NULL" if f.nullable else ("''" if f.dtype == pl.Utf8 else "0")
+                con.execute(f'ALTER TABLE {name} ADD COLUMN "{f.name}" {duckdb_type(f.dtype)} DEFAULT {default}')
 
 
 def ensure_ingest_tables(con: duckdb.DuckDBPyConnection) -> None:
@@ -260,19 +260,7 @@ def ensure_ingest_tables(con: duckdb.DuckDBPyConnection) -> None:
         if "file_sha256" in have.get(name, ()):
             migrate_hash_column(con, name)
     ensure_tables(con, INGEST_TABLES)
-    for name, (fields, _) in INGEST_TABLES.items():
-        if name in have:
-            add_missing_columns(con, name, fields, have[name])
-
-
-def add_missing_columns(con: duckdb.DuckDBPyConnection, table: str, fields: tuple[Field, ...], have: set[str]) -> None:
-    """Columns the registry added to a table after the warehouse was created, appended with the
-    value that means "none" for the rows already there (0, '' or null)."""
-    for f in fields:
-        if f.name in have or f.name == "file_hash":
-            continue
-        default = "NULL" if f.nullable else ("''" if f.dtype == pl.Utf8 else "0")
-        con.execute(f'ALTER TABLE {table} ADD COLUMN "{f.name}" {duckdb_type(f.dtype)} DEFAULT {default}')
+    add_missing_columns(con, {name: fields for name, (fields, _) in INGEST_TABLES.items()})
 
 
 def migrate_hash_column(con: duckdb.DuckDBPyConnection, table: str) -> None:
