@@ -508,6 +508,19 @@ DISCREPANCY_FINDING_FIELDS: tuple[Field, ...] = (
 """One row per discrepancy run and named effect (table ``discrepancy_findings``, interfaces.md);
 the first nine columns are the specified ones."""
 
+# --- discrepancy verdicts with nuisance parameters (issue 17) ---------------------------------
+
+DISCREPANCY_VERDICTS = ("named", "ambiguous", "none")
+DISCREPANCY_FINDING_FIELDS = DISCREPANCY_FINDING_FIELDS + (
+    Field("verdict", pl.Utf8, "", "named (the effect explains what the base model's uncertain parameters cannot within their tolerances), ambiguous (another reading explains the same data: see alternatives) or none.", isin=DISCREPANCY_VERDICTS, nullable=True),
+    Field("confidence", pl.Float64, "", "How sure the verdict's first reading is, in [0, 1] (docs/discrepancy.md, Verdicts).", ge=0.0, le=1.0, nullable=True),
+    Field("alternatives", pl.Utf8, "", "The other readings of the same data ('; '-separated: effects with their values, or the base model with nuisance values); null if none.", nullable=True),
+    Field("separate_by", pl.Utf8, "", "What data would tell the readings apart (ambiguous verdicts).", nullable=True),
+    Field("verdict_reason", pl.Utf8, "", "One sentence: why this verdict.", nullable=True),
+    Field("nuisances", pl.Utf8, "", "The calibrated nuisance parameters, 'name=value unit (zσ)' '; '-separated, z = deviation from nominal in prior σ; null when the model was taken as exact.", nullable=True),
+    Field("gap_nominal", pl.Float64, "", "Normalised replay gap of the nominal (design-data, uncalibrated) base model.", ge=0.0, nullable=True),
+)
+
 DISCREPANCY_CANDIDATE_FIELDS: tuple[Field, ...] = _RUN_FIELDS + (
     Field("effect", pl.Utf8, "", "Library effect.", isin=DISCREPANCY_EFFECTS),
     Field("variant", pl.Utf8, "", "p1, p2 or empty."),

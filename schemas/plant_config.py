@@ -34,6 +34,9 @@ Keys the project adds to the specification (all optional; every key is documente
   (``"drop"`` or ``"thin"``) and ``thin_keep_s_per_hour`` (:class:`RetentionSpec`), what
   ``valvemon retention`` and the nightly run do with old lake partitions (``docs/warehouse.md``,
   "Retention").
+- ``[valves.tolerances]`` (issue 17, optional; every key optional with a documented default,
+  :class:`ModelTolerances`): how well the base model's uncertain parameters are known -- the
+  one-σ tolerances of the nuisance priors of ``valvemon discrepancy`` (docs/discrepancy.md).
 - ``[monitor] window_s`` (default :data:`DEFAULT_WINDOW_S`): the length of a monitoring window;
   a recording at least half as long is cut at every multiple of it since the UTC epoch
   (``transforms.windows``). It must divide a day, so windows start at the same times every day. [s]
@@ -214,6 +217,56 @@ class ValveDesign:
         return self.taper_angle_port1_rad if edge in ("s1", "1r") else self.taper_angle_port2_rad
 
 
+# --- model tolerances (issue 17: nuisance priors of the discrepancy workflow) -----------------
+
+
+@dataclass(frozen=True)
+class ModelTolerances:
+    """One-σ tolerances of the base model's uncertain parameters (``[valves.tolerances]``), the
+    priors of the discrepancy workflow's nuisance parameters. Defaults: manufacturing scatter of
+    servo valve edges (α 3 %, underlap 5 µm), Table 1's β range 1.4–1.6 GPa and dead volumes from
+    piping drawings (7 %), seal-friction datasheets (30 %), a weighed moving mass (2 %).
+
+    Attributes (SI, relative values as fractions)
+    ----------
+    alpha_rel, underlap_m, bulk_modulus_rel, volume_rel, friction_rel, mass_rel : float
+    """
+
+    alpha_rel: float = 0.03
+    underlap_m: float = 5.0e-6
+    bulk_modulus_rel: float = 0.07
+    volume_rel: float = 0.07
+    friction_rel: float = 0.30
+    mass_rel: float = 0.02
+
+
+_TOLERANCE_KEYS = {  # file key: (attribute, scale to SI, largest value in the file's unit)
+    "alpha_pct": ("alpha_rel", 0.01, 50.0),
+    "underlap_um": ("underlap_m", 1e-6, 1000.0),
+    "bulk_modulus_pct": ("bulk_modulus_rel", 0.01, 50.0),
+    "volume_pct": ("volume_rel", 0.01, 50.0),
+    "friction_pct": ("friction_rel", 0.01, 100.0),
+    "mass_pct": ("mass_rel", 0.01, 50.0),
+}
+
+
+def _parse_tolerances(raw: Any, key: str) -> ModelTolerances:
+    t = _table(raw, key)
+    _no_unknown(t, set(_TOLERANCE_KEYS), key)
+    kw = {}
+    for name, (attr, scale, hi) in _TOLERANCE_KEYS.items():
+        if name in t:
+            kw[attr] = _number(t[name], f"{key}.{name}", 0.0, hi) * scale
+    return ModelTolerances(**kw)
+
+
+def _tolerances_dict(tol: ModelTolerances) -> dict[str, float]:
+    return {name: _r(getattr(tol, attr) / scale) for name, (attr, scale, _) in _TOLERANCE_KEYS.items()}
+
+
+# --- valves ------------------------------------------------------------------------------------
+
+
 @dataclass(frozen=True)
 class ValveSpec:
     """One monitored valve with its positioning unit, SI."""
@@ -234,6 +287,8 @@ class ValveSpec:
     scenario: str | None = None
     overrides: frozenset[str] = field(default_factory=frozenset)
     """Design keys this valve sets itself (kept for writing the file back)."""
+    tolerances: ModelTolerances | None = None
+    """``[valves.tolerances]`` as given (None: the documented defaults of :class:`ModelTolerances`)."""
 
     @property
     def piston_area_m2(self) -> float:
@@ -547,7 +602,7 @@ def _parse_design(t: dict, key: str, base: ValveDesign | None) -> ValveDesign:
 
 _VALVE_KEYS = {
     "id", "type", "commissioned", "piston_diameter_mm", "rod_diameter_mm", "stroke_mm", "v01_l",
-    "v02_l", "bulk_modulus_gpa", "density_kg_m3", "tags", "baseline_window", "scenario",
+    "v02_l", "bulk_modulus_gpa", "density_kg_m3", "tags", "baseline_window", "scenario", "tolerances",
 } | _DESIGN_KEYS  # fmt: skip
 
 
@@ -632,6 +687,7 @@ def _parse_valve(raw: Any, key: str, types: dict[str, ValveDesign], tz: ZoneInfo
         baseline_window=baseline,
         scenario=_str(t["scenario"], f"{key}.scenario") if "scenario" in t else None,
         overrides=overrides,
+        tolerances=_parse_tolerances(t["tolerances"], f"{key}.tolerances") if "tolerances" in t else None,
     )
 
 
@@ -766,6 +822,8 @@ def plant_config_to_dict(config: PlantConfig) -> dict:
             d["baseline_window"] = {"start": _iso(v.baseline_window[0]), "end": _iso(v.baseline_window[1])}
         if v.scenario is not None:
             d["scenario"] = v.scenario
+        if v.tolerances is not None:
+            d["tolerances"] = _tolerances_dict(v.tolerances)
         d["tags"] = {s: {"tag": t.tag} | ({"unit": t.unit} if t.unit is not None else {}) for s, t in v.tags.items()}
         valves.append(d)
     out: dict[str, Any] = {"plant": {"name": config.name, "timezone": config.timezone}, "export": export}

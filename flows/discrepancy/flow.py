@@ -5,10 +5,11 @@ effect explains it, what adding it does to the gap and to the monitoring (issue 
 (:func:`flows.discrepancy.lake_records.lake_records`: the records are chosen from the time stamps,
 read in chunks, then only their rows are read; on a continuous recording no record straddles a
 monitoring window of the configuration's ``[monitor] window_s``, ``DiscrepancySettings.window_s``), builds the plant model from the plant
-configuration (:func:`plant_params_for`) with the valve's condition -- fitted on its commissioning
-window (the configuration's ``baseline_window``) when there is one, else its design data
-(:func:`valve_condition`) --, runs :func:`transforms.discrepancy.pipeline.diagnose` and stores, in one
-transaction,
+configuration (:func:`plant_params_for`) -- its uncertain parameters (edges, β, volumes, friction,
+mass) calibrated on its commissioning window (the configuration's ``baseline_window``) when there
+is one, else calibrated by the diagnosis itself within the valve's ``[valves.tolerances]``
+(:func:`valve_condition`, :func:`nuisance_priors`) --, runs :func:`transforms.discrepancy.pipeline.diagnose`
+and stores, in one transaction,
 
 * ``discrepancy_findings`` -- one row per named effect (or one ``none`` row), interfaces.md;
 * ``discrepancy_candidates`` -- every library candidate scored against the base model;
@@ -30,6 +31,7 @@ from dataclasses import dataclass, replace
 from datetime import datetime, timezone
 from pathlib import Path
 
+import numpy as np
 import polars as pl
 
 from flows.common.config import load_plant_config, plant_valves
@@ -49,7 +51,8 @@ from schemas.fields import (
     polars_schema,
 )
 from schemas.plant_config import ValveSpec
-from transforms.discrepancy.pipeline import ConditionFit, Diagnosis, diagnose, fit_condition
+from transforms.discrepancy.nuisance import NuisancePriors
+from transforms.discrepancy.pipeline import ConditionFit, Diagnosis, diagnose
 from transforms.discrepancy.settings import DiscrepancySettings
 
 DISCREPANCY_TABLES = {
@@ -123,24 +126,40 @@ class DiscrepancyReport:
     condition_source: str = "design"
 
 
-def valve_condition(valve: ValveSpec, plant: PlantParams, warehouse: Path, mode: str, settings: DiscrepancySettings) -> tuple[str, ValveCondition, ConditionFit | None]:
-    """The valve condition of the model: ``design`` (the configured design data), or
-    ``commissioning`` (α and underlap of every edge fitted on the lake rows of the configured
-    ``baseline_window``, :func:`transforms.discrepancy.pipeline.fit_condition`); ``auto`` is
-    commissioning when the valve has a baseline_window, else design. Returns (source,
+def nuisance_priors(valve: ValveSpec) -> NuisancePriors:
+    """The nuisance priors of a valve: its ``[valves.tolerances]`` or the documented defaults."""
+    from dataclasses import asdict
+
+    return NuisancePriors(**asdict(valve.tolerances)) if valve.tolerances is not None else NuisancePriors()
+
+
+def valve_condition(valve: ValveSpec, plant: PlantParams, warehouse: Path, mode: str, settings: DiscrepancySettings) -> tuple[str, PlantParams, ValveCondition, ConditionFit | None]:
+    """The base model of the diagnosis: ``design`` (the configured design data; the diagnosis then
+    calibrates the uncertain parameters itself, within the valve's tolerances), or
+    ``commissioning`` (the uncertain parameters -- α and underlap per edge, β, V01, V02, friction,
+    mass -- calibrated on the lake rows of the configured ``baseline_window``,
+    :func:`transforms.discrepancy.calibration.calibrate`, and then taken as exact); ``auto`` is
+    commissioning when the valve has a baseline_window, else design. Returns (source, plant,
     condition, fit or None)."""
+    from transforms.discrepancy.calibration import calibrate
+
     if mode not in CONDITION_MODES:
         raise ValvemonError(f"--valve-condition must be one of {', '.join(CONDITION_MODES)}, got {mode!r}")
     if mode == "design" or (mode == "auto" and valve.baseline_window is None):
-        return "design", plant.nominal_condition, None
+        return "design", plant, plant.nominal_condition, None
     if valve.baseline_window is None:
         raise ValvemonError(f"valve {valve.id}: --valve-condition commissioning needs a baseline_window in the plant configuration")
     a, b = valve.baseline_window
     records, _ = lake_records(warehouse, valve.id, a, b, replace(settings, max_records=max(settings.max_records, 12)))
     if not records:
         raise ValvemonError(f"valve {valve.id}: its baseline_window {a.isoformat()} – {b.isoformat()} holds no record of at least {settings.min_record_s:g} s in the lake")
-    fit = fit_condition(records, plant, plant.nominal_condition, settings)
-    return "commissioning", fit.condition, fit
+    cal = calibrate(records, plant, plant.nominal_condition, nuisance_priors(valve), settings)
+    sig = cal.nm.sigma
+    se = np.zeros(sig.size)
+    se[list(cal.nm.active)] = cal.z_se * sig[list(cal.nm.active)]
+    fit = ConditionFit(condition=cal.condition, alpha_se=tuple(float(x) for x in se[0:4]), underlap_se_m=tuple(float(x) for x in se[4:8]),
+                       gap_design=cal.gap_nominal, gap_fitted=cal.gap_calibrated, n_records=len(records))
+    return "commissioning", cal.plant, cal.condition, fit
 
 
 def _condition_rows(common: dict, source: str, cond: ValveCondition, fit: ConditionFit | None) -> list[dict]:
@@ -153,6 +172,44 @@ def _condition_rows(common: dict, source: str, cond: ValveCondition, fit: Condit
          "gap_design": None if fit is None else _nn(fit.gap_design), "gap_fitted": None if fit is None else _nn(fit.gap_fitted)}
         for i, e in enumerate(EDGES)
     ]
+
+
+def nuisance_text(rows: list[dict]) -> str:
+    """'name=value unit (zσ); …' of calibrated nuisances (underlaps in µm)."""
+    out = []
+    for r in rows:
+        if r["prior_sigma"] <= 0:
+            continue
+        if r["unit"] == "m":
+            out.append(f"{r['name']}={r['value'] * 1e6:.2f} µm ({r['z']:+.1f}σ)")
+        else:
+            out.append(f"{r['name']}={r['value']:.4g} {r['unit']} ({r['z']:+.1f}σ)")
+    return "; ".join(out)
+
+
+def verdict_columns(d: Diagnosis, rank: int) -> dict:
+    """The issue-17 columns of a findings row: the verdict, how sure, the other readings, why,
+    and the calibrated nuisances (exact model: the verdict of the selection alone)."""
+    from scipy import stats
+
+    v = d.verdict
+    if v is not None:
+        if rank > 1:
+            return {"verdict": "named", "confidence": None, "alternatives": None, "separate_by": None, "verdict_reason": None,
+                    "nuisances": nuisance_text(v.nuisances), "gap_nominal": _nn(d.gap_nominal)}
+        return {"verdict": v.verdict, "confidence": _nn(v.confidence), "alternatives": "; ".join(v.alternatives) or None,
+                "separate_by": v.separate_by or None, "verdict_reason": v.reason or None, "nuisances": nuisance_text(v.nuisances),
+                "gap_nominal": _nn(d.gap_nominal)}
+    if not d.named:
+        return {"verdict": "none", "confidence": None, "alternatives": None, "separate_by": None,
+                "verdict_reason": "no library effect explains a significant share of the residuals of the model taken as exact",
+                "nuisances": None, "gap_nominal": _nn(d.gap_nominal)}
+    n = d.named[rank - 1]
+    conf = float(min(0.999, stats.norm.cdf(n.alternative_t))) if math.isfinite(n.alternative_t) else 0.999
+    return {"verdict": "ambiguous" if n.alternative else "named", "confidence": conf,
+            "alternatives": n.alternative.key if n.alternative else None, "separate_by": None,
+            "verdict_reason": f"explains {n.relative_gain:.0%} of the cross-validated residuals of the model taken as exact (t = {n.t_stat:.3g})",
+            "nuisances": None, "gap_nominal": _nn(d.gap_nominal)}
 
 
 def _tables(valve_id: str, run_id: str, run_at: datetime, d: Diagnosis, plots: list[Path | None], level: float, source: str = "design", cond: ValveCondition | None = None, fit: ConditionFit | None = None) -> dict[str, pl.DataFrame]:
@@ -174,7 +231,23 @@ def _tables(valve_id: str, run_id: str, run_at: datetime, d: Diagnosis, plots: l
                 "window_start": t0, "window_end": t1, "n_records": d.n_records, "plot_path": str(path) if path else None,
                 "condition_source": source, "gap_explained": _nn(1.0 - (n.gap_after / n.gap_before) ** 2) if n.gap_before > 0 else None,
                 "alternative_effect": n.alternative.key if n.alternative else None, "alternative_t": _nn(n.alternative_t),
+                **verdict_columns(d, k),
             })
+    elif d.verdict is not None and d.verdict.effect is not None:
+        # named or ambiguous against the nuisance tolerances (no residual left for the selection)
+        v = d.verdict
+        g0, g1 = v.gap_before, v.gap_after if math.isfinite(v.gap_after) else v.gap_before
+        findings.append({
+            **common, "effect": v.effect.name, "parameter_name": v.effect.parameter_name, "parameter_value": v.value,
+            "parameter_unit": v.effect.unit, "gap_before": g0, "gap_after": g1, "rank": 1, "parameter_ci_low": None,
+            "parameter_ci_high": None, "ci_level": level, "variant": v.effect.variant, "cv_relative_gain": None, "t_stat": None,
+            "z_score": None, "gap_p1_before_bar": _gap_rms(d, 0, "p1") / 1e5, "gap_p1_after_bar": _gap_rms(d, 0, "p1") / 1e5,
+            "gap_p2_before_bar": _gap_rms(d, 0, "p2") / 1e5, "gap_p2_after_bar": _gap_rms(d, 0, "p2") / 1e5,
+            "gap_x_before_mm": _gap_rms(d, 0, "X") * 1e3, "gap_x_after_mm": _gap_rms(d, 0, "X") * 1e3,
+            "window_start": t0, "window_end": t1, "n_records": d.n_records, "plot_path": str(plots[0]) if plots and plots[0] else None,
+            "condition_source": source, "gap_explained": _nn(1.0 - (g1 / g0) ** 2) if g0 > 0 else None,
+            "alternative_effect": None, "alternative_t": None, **verdict_columns(d, 1),
+        })
     else:
         g = d.stage_gaps[0]
         findings.append({
@@ -186,6 +259,7 @@ def _tables(valve_id: str, run_id: str, run_at: datetime, d: Diagnosis, plots: l
             "gap_x_before_mm": _gap_rms(d, 0, "X") * 1e3, "gap_x_after_mm": _gap_rms(d, 0, "X") * 1e3,
             "window_start": t0, "window_end": t1, "n_records": d.n_records, "plot_path": str(plots[0]) if plots and plots[0] else None,
             "condition_source": source, "gap_explained": None, "alternative_effect": None, "alternative_t": None,
+            **verdict_columns(d, 1),
         })
     candidates = [
         {**common, "effect": c["effect"], "variant": c["variant"], "parameter_name": c["parameter_name"],
@@ -261,8 +335,8 @@ def discrepancy_valve(config, valve_id: str, warehouse: Path, start: datetime | 
     if not records:
         raise ValvemonError(f"valve {valve.id}: no contiguous record of at least {settings.min_record_s:g} s in the span")
     plant = plant_params_for(valve, config.export)
-    source, cond, fit = valve_condition(valve, plant, warehouse, condition_mode, settings)
-    d = diagnose(records, plant, cond, settings)
+    source, plant, cond, fit = valve_condition(valve, plant, warehouse, condition_mode, settings)
+    d = diagnose(records, plant, cond, settings, priors=nuisance_priors(valve) if source == "design" else None)
     plots = _plots(valve.id, run_id, d, warehouse)
     tables = _tables(valve.id, run_id, run_at, d, plots, settings.ci_level, source, cond, fit)
     store_run(warehouse, tables)
@@ -311,10 +385,33 @@ def discrepancy_flow(config_path: str, warehouse: str, valve_id: str, start: str
 
 def summary_lines(report: DiscrepancyReport) -> list[str]:
     """The command line's account of a run."""
-    lines = [f"{report.valve_id}: model with the {report.condition_source} valve condition, {report.n_records} records"]
+    src = ("the base model calibrated on the commissioning window" if report.condition_source == "commissioning"
+           else "the design data, its uncertain parameters calibrated within their tolerances")
+    lines = [f"{report.valve_id}: model from {src}, {report.n_records} records"]
+    first = report.findings[0] if report.findings else {}
+    if first.get("verdict"):
+        conf = f", confidence {first['confidence']:.0%}" if first.get("confidence") is not None else ""
+        what = {"named": f"found {first['effect']}", "ambiguous": f"cannot tell: {first['effect']} or another reading",
+                "none": "found no effect beyond the base model"}[first["verdict"]]
+        lines.append(f"{report.valve_id}: verdict {first['verdict'].upper()} -- {what}{conf}")
+        if first.get("verdict_reason"):
+            lines.append(f"    why: {first['verdict_reason']}")
+        if first.get("alternatives"):
+            lines.append(f"    other readings: {first['alternatives']}")
+        if first.get("separate_by"):
+            lines.append(f"    to tell them apart: {first['separate_by']}")
+        if first.get("nuisances"):
+            off = [p for p in first["nuisances"].split("; ") if abs(float(p.split("(")[-1].rstrip("σ)"))) >= 1.0]
+            gn = first.get("gap_nominal")
+            gaps = f"gap {gn:.3g} with the design data → {first['gap_before']:.3g}; " if gn is not None else ""
+            lines.append(f"    calibrated base model ({gaps}off nominal by ≥ 1σ: {', '.join(off) or 'nothing'})")
     for f in report.findings:
         if f["effect"] == "none":
             lines.append(f"{report.valve_id}: no library effect named; gap {f['gap_before']:.3g}")
+        elif f.get("parameter_ci_low") is None:
+            var = f"[{f['variant']}]" if f["variant"] else ""
+            lines.append(f"{report.valve_id}: #{f['rank']} {f['effect']}{var} {f['parameter_name']} = {_fmt(f['parameter_value'])} {f['parameter_unit']}, "
+                         f"gap {f['gap_before']:.3g} → {f['gap_after']:.3g}")
         else:
             var = f"[{f['variant']}]" if f["variant"] else ""
             lines.append(

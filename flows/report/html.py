@@ -82,6 +82,12 @@ def _discrepancy_section(discrepancy: dict[str, list[dict]]) -> list[str]:
             f'{first["window_start"]:%Y-%m-%d %H:%M} – {first["window_end"]:%Y-%m-%d %H:%M} UTC; '
             f"valve condition: {html.escape(first['condition_source'] or '—')}</div>"
         )
+        if first.get("verdict"):  # issue 17: the verdict, how sure, why, and the other readings
+            conf = f", confidence {first['confidence']:.0%}" if first.get("confidence") is not None else ""
+            parts.append(f"<p><b>verdict: {html.escape(first['verdict'])}</b>{conf}. {html.escape(first.get('verdict_reason') or '')}</p>")
+            for label, key in (("other readings", "alternatives"), ("to tell them apart", "separate_by"), ("calibrated base model", "nuisances")):
+                if first.get(key):
+                    parts.append(f"<p class='note'>{label}: {html.escape(first[key])}</p>")
         parts.append("<table><tr><th>rank</th><th>effect</th><th>parameter</th><th>gap before</th><th>gap after</th></tr>")
         for r in rows:
             parameter = "—" if r["parameter_name"] is None else html.escape(

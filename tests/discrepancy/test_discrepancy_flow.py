@@ -106,3 +106,22 @@ def test_cli_checks_before_starting_prefect(tmp_path):
         result = runner.invoke(app, args + ["--warehouse", str(tmp_path / "wh")])
         assert result.exit_code != 0
         assert isinstance(result.exception, (ValvemonError, ConfigError)) and message in str(result.exception), (args, result.exception)
+
+
+def test_command_line_says_what_it_found_how_sure_and_why():
+    from flows.discrepancy.flow import DiscrepancyReport, summary_lines
+
+    finding = {
+        "effect": "spool_sensor_offset", "variant": "", "rank": 1, "parameter_name": "delta_x", "parameter_value": 9e-6,
+        "parameter_unit": "m", "parameter_ci_low": None, "parameter_ci_high": None, "gap_before": 0.3, "gap_after": 0.1,
+        "gap_explained": None, "alternative_effect": None, "alternative_t": None, "verdict": "ambiguous", "confidence": 0.71,
+        "verdict_reason": "the data fit either spool_sensor_offset or the base model with an underlap pattern",
+        "alternatives": "the base model with underlap_s1 -9.0 µm (-1.8σ)", "separate_by": "a commissioning window",
+        "nuisances": "alpha_s1=0.68 - (+0.3σ); underlap_s1=31.00 µm (-1.8σ)", "gap_nominal": 2.4,
+    }
+    lines = summary_lines(DiscrepancyReport("V1", "r" * 32, 4, [finding], [], 0.3, 0.1, "design"))
+    text = "\n".join(lines)
+    assert "verdict AMBIGUOUS" in text and "confidence 71%" in text
+    assert "why: the data fit either" in text and "other readings: the base model with underlap_s1" in text
+    assert "to tell them apart: a commissioning window" in text
+    assert "gap 2.4 with the design data → 0.3" in text and "underlap_s1=31.00 µm (-1.8σ)" in text and "alpha_s1" not in text

@@ -27,6 +27,7 @@ KEY_SETS = {
     "valves": pc._VALVE_KEYS,
     "bounds": set(pc.BOUND_KEYS),
     "tags": set(SIGNALS),
+    "tolerances": set(pc._TOLERANCE_KEYS),
 }
 
 

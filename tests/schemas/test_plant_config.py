@@ -294,6 +294,32 @@ def test_broken_monitor_window_names_the_key(raw, monitor, message):
     assert message in str(err.value)
 
 
+# --- [valves.tolerances] (issue 17: nuisance priors of the discrepancy workflow) ------------
+
+
+def test_tolerances_default_parse_and_round_trip(raw):
+    from schemas.plant_config import ModelTolerances
+
+    assert parse_plant_config(raw).valves[0].tolerances is None
+    raw["valves"][0]["tolerances"] = {"underlap_um": 8, "friction_pct": 40}
+    v = parse_plant_config(raw).valves[0]
+    assert v.tolerances == ModelTolerances(underlap_m=8e-6, friction_rel=0.4)
+    again = parse_plant_config(tomllib.loads(tomli_w.dumps(plant_config_to_dict(parse_plant_config(raw)))))
+    assert again.valves[0].tolerances == v.tolerances
+
+
+@pytest.mark.parametrize("value,message", [
+    ({"friction_pct": -1}, r"valves\[0\]\.tolerances\.friction_pct: .*"),
+    ({"underlap_um": 5000}, r"valves\[0\]\.tolerances\.underlap_um: .*"),
+    ({"beta_pct": 5}, r"valves\[0\]\.tolerances\.beta_pct: unknown key \(expected one of alpha_pct"),
+    ({"mass_pct": "two"}, r"valves\[0\]\.tolerances\.mass_pct: .*"),
+])
+def test_broken_tolerances_name_the_key(raw, value, message):
+    raw["valves"][0]["tolerances"] = value
+    with pytest.raises(ConfigError, match=message):
+        parse_plant_config(raw)
+
+
 def _wide(raw: dict, **export) -> dict:
     for k in ("tag_column", "value_column", "quality_column", "good_quality"):
         raw["export"].pop(k)

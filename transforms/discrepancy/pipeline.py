@@ -28,20 +28,11 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from model.effects import EFFECT_LIBRARY, Effects, EffectSpec, equation_terms, sensor_readings, true_signals
+from model.effects import EFFECT_LIBRARY, Effects, EffectSpec, true_signals
 from model.params import PlantParams, ValveCondition
-from model.replay import replay
 from model.simulate import DEFAULT_REG_BAND_PA
-from transforms.discrepancy.gaps import GapAccumulator
-from transforms.discrepancy.load import LoadEstimate, estimate_load, replay_load, stuck_spans
-from transforms.discrepancy.records import REGIONS, Record, operating_regions, prepare_record
-from transforms.discrepancy.residuals import (
-    demean_by_group,
-    interval_edges,
-    interval_residuals,
-    pointwise_residuals,
-    triangular_force_balance,
-)
+from transforms.discrepancy.nuisance import NuisancePriors
+from transforms.discrepancy.records import Record
 from transforms.discrepancy.selection import SelectionResult, block_stats, cv_losses, forward_select
 from transforms.discrepancy.settings import DiscrepancySettings
 
@@ -56,338 +47,20 @@ __all__ = [
     "perturbed",
     "prepare_records",
 ]
-
-EQUATIONS = ("chamber1", "chamber2", "motion")
-FD_FRACTION = 0.01
-"""Finite-difference step of the regressors: this fraction of the candidate's typical magnitude."""
-
-
-def perturbed(effects: Effects, spec: EffectSpec, delta: float) -> Effects:
-    """``effects`` with the candidate's parameter moved by ``delta``."""
-    return replace(effects, **{spec.attribute: spec.value(effects) + delta})
-
-
-@dataclass
-class _Prepared:
-    rec: Record
-    regions: dict[str, np.ndarray]
-    edges: np.ndarray
-    base_load: LoadEstimate
-    loads: dict = field(default_factory=dict)  # Effects -> LoadEstimate of that model
-    seg: LoadEstimate | None = None  # the load segments of the regression (default base_load)
-
-    @property
-    def segmentation(self) -> LoadEstimate:
-        return self.base_load if self.seg is None else self.seg
-
-
-def prepare_records(records: list[Record], plant: PlantParams, condition: ValveCondition, settings: DiscrepancySettings) -> list[_Prepared]:
-    """Savitzky–Golay values, operating regions, interval edges and the base model's load."""
-    out = []
-    h = settings.savgol_window // 2
-    k = settings.interval_smoothing // 2
-    for rec in records:
-        prepare_record(rec, settings)
-        sg = rec.sg
-        regions = operating_regions(sg["v"], sg["p1"], sg["p2"], sg["ps"], settings)
-        edges = interval_edges(rec.n - max(h, k), settings.interval_samples, max(h, k))
-        if edges.size < 4:
-            continue
-        load = _estimate_load(rec, plant, condition, Effects(), settings)
-        out.append(_Prepared(rec, regions, edges, load, {Effects(): load}))
-    return out
-
-
-def _signals(rec: Record, smooth: bool) -> dict:
-    src = rec.sg if smooth else rec.raw
-    return {"x": src["x"], "p1": src["p1"], "p2": src["p2"], "ps": src["ps"], "pr": src["pr"], "X": rec.raw["X"], "v": rec.sg["v"]}
-
-
-def _terms_raw(rec, plant, condition, effects):
-    return equation_terms(_signals(rec, False), plant, condition, effects, DEFAULT_REG_BAND_PA)
-
-
-def _terms_sg(rec, plant, condition, effects):
-    return equation_terms(_signals(rec, True), plant, condition, effects, DEFAULT_REG_BAND_PA)
-
-
-def _force_balance(rec: Record, plant, condition, effects, settings) -> np.ndarray:
-    t = _terms_raw(rec, plant, condition, effects)
-    return triangular_force_balance(t["force"], rec.raw["X"], t["mass"], rec.dt, settings.interval_samples)
-
-
-def _estimate_load(rec: Record, plant, condition, effects, settings) -> LoadEstimate:
-    """The piecewise-constant load of one record under the model with ``effects``."""
-    f_hat = _force_balance(rec, plant, condition, effects, settings)
-    t = _terms_sg(rec, plant, condition, effects)
-    load = estimate_load(f_hat, rec.sg["v"], settings, f_point=t["force"] - t["mass"] * rec.sg["a"])
-    return _refine_rest_steps(rec, load, f_hat, plant, condition, effects, settings)
-
-
-def _load_for(p: _Prepared, plant, condition, effects, settings) -> np.ndarray:
-    """The load at every sample under the model with ``effects`` (estimated once per model)."""
-    if effects not in p.loads:
-        p.loads[effects] = _estimate_load(p.rec, plant, condition, effects, settings)
-    return p.loads[effects].load
-
-
-def _holding(rec: Record, plant, condition, effects) -> tuple[np.ndarray, np.ndarray]:
-    """(m g + A1 p1 − A2 p2 with the true smoothed pressures [N], stuck mask) of a record."""
-    t = _terms_sg(rec, plant, condition, effects)
-    c = plant.cylinder
-    hold = t["mass"] * plant.cylinder.g_m_s2 + c.A1 * t["p1"] - c.A2 * t["p2"]
-    return hold, stuck_spans(rec.sg["v"], DEFAULT_STUCK_V)
-
-
-DEFAULT_STUCK_V = 1.0e-3
-"""|v_X| below which the measured cylinder counts as sticking for the replay's load. [m/s]"""
-
-
-def _replay_load_for(p: _Prepared, plant, condition, effects, settings) -> np.ndarray:
-    level = _load_for(p, plant, condition, effects, settings)
-    est = p.loads[effects]
-    if est.hold_until <= 0:
-        return level
-    hold, stuck = _holding(p.rec, plant, condition, effects)
-    stuck = stuck & (np.arange(stuck.size) < est.hold_until)
-    return replay_load(level, hold, stuck)
-
-
-REST_STEP_GRID = 5
-"""Candidate spacing (samples) when a load step found across a standstill is placed by replay."""
-REST_STEP_TAIL = 300
-"""Samples replayed after the standstill to judge a placement."""
-
-
-def _replay_span(rec: Record, plant, condition, effects, a: int, b: int, load: np.ndarray):
-    """Replay samples [a, b) of a record from its measured state at a; returns the readings
-    (p1, p2, X) or None if the replay diverged."""
-    x_src = np.where(np.isfinite(rec.sg["x"]), rec.sg["x"], rec.raw["x"])
-    x_true, p1_true, p2_true = true_signals(x_src[a:b], rec.sg["p1"][a:a + 1], rec.sg["p2"][a:a + 1], effects)
-    v0 = rec.sg["v"][a]
-    state = [[rec.raw["X"][a], 0.0 if abs(v0) < 1e-3 else v0, p1_true[0], p2_true[0]]]
-    try:
-        r = replay(plant, x_true, rec.raw["ps"][a:b], rec.raw["pr"][a:b], load, [0], state, condition=condition, effects=effects)
-    except FloatingPointError:
-        return None
-    _, p1r, p2r = sensor_readings(np.zeros(1), r.p1_pa, r.p2_pa, effects)
-    return p1r, p2r, r.X_m
-
-
-def _initial_hold(rec: Record, load: LoadEstimate, plant, condition, effects, settings) -> LoadEstimate:
-    """Does the record start at rest with another load than the first level? Replay its start
-    (to ``REST_STEP_TAIL`` samples past the first valid sample) both ways -- the first level from
-    the start, or the holding force until the cylinder first moves -- and keep the better."""
-    h = settings.savgol_window // 2
-    hold, stuck = _holding(rec, plant, condition, effects)
-    if not stuck[h] or not np.any(load.valid):
-        return load
-    first_move = int(np.argmin(stuck[h:])) + h  # first non-stuck sample
-    first_valid = int(np.flatnonzero(load.valid)[0])
-    if first_move <= h + 1 or first_move > first_valid:
-        return load
-    a, b = h, min(first_valid + REST_STEP_TAIL, rec.n - h - 1)
-    if b - a < 10:
-        return load
-    level = load.load[a:b]
-    sel = stuck[a:b] & (np.arange(a, b) < first_move)
-    errs = []
-    for F in (level, replay_load(level, hold[a:b], sel)):
-        out = _replay_span(rec, plant, condition, effects, a, b, F)
-        if out is None:
-            errs.append(np.inf)
-            continue
-        p1r, p2r, Xr = out
-        errs.append((np.sum((p1r - rec.raw["p1"][a:b]) ** 2) + np.sum((p2r - rec.raw["p2"][a:b]) ** 2)) / 1e10 + np.sum((Xr - rec.raw["X"][a:b]) ** 2) / 1e-6)
-    if errs[1] < errs[0]:
-        return replace(load, hold_until=first_move)
-    return load
-
-
-def _refine_rest_steps(rec: Record, load: LoadEstimate, f_hat: np.ndarray, plant, condition, effects, settings) -> LoadEstimate:
-    """Place each load step found across a standstill where a replay of the standstill (from
-    the measured state before it to ``REST_STEP_TAIL`` samples after it) fits the recorded
-    p1, p2 and X best: while the cylinder sticks the load does not show in the motion equation,
-    but when it changed decides when and how the cylinder breaks away."""
-    h = settings.savgol_window // 2
-    load = _initial_hold(rec, load, plant, condition, effects, settings)
-    if not np.any(load.brackets[:, 0] >= 0):
-        return load
-    steps = load.steps.copy()
-    hold, stuck = _holding(rec, plant, condition, effects)
-    stuck = stuck & (np.arange(stuck.size) < load.hold_until)
-    for i, (lo, hi) in enumerate(load.brackets):
-        if lo < 0:
-            continue
-        a = max(int(lo), h)
-        b = min(int(hi) + REST_STEP_TAIL, rec.n - h - 1)
-        prev_s = steps[i - 1] if i > 0 else 0
-        next_s = steps[i + 1] if i + 1 < steps.size else rec.n
-        cands = np.unique(np.r_[np.arange(max(lo + 1, prev_s + 1), min(hi, next_s - 1) + 1, REST_STEP_GRID), steps[i]])
-        if b - a < 10 or cands.size < 2:
-            continue
-        old, new = load.levels[i], load.levels[i + 1]
-        best, best_err = steps[i], np.inf
-        for c in cands:
-            F = replay_load(np.where(np.arange(a, b) < c, old, new), hold[a:b], stuck[a:b])
-            out = _replay_span(rec, plant, condition, effects, a, b, F)
-            if out is None:
-                continue
-            p1r, p2r, Xr = out
-            err = (np.sum((p1r - rec.raw["p1"][a:b]) ** 2) + np.sum((p2r - rec.raw["p2"][a:b]) ** 2)) / 1e10 + np.sum((Xr - rec.raw["X"][a:b]) ** 2) / 1e-6
-            if err < best_err:
-                best, best_err = int(c), err
-        steps[i] = best
-    return load.with_steps(steps, f_hat)
-
-
-# --- step 2: regression data ---------------------------------------------------------------
-
-
-@dataclass
-class _Rows:
-    """Stacked integrated residuals of all records (one model)."""
-
-    y: np.ndarray  # residuals (not yet weighted)
-    eq: np.ndarray  # equation index per row (0 chamber 1, 1 chamber 2, 2 motion)
-    block: np.ndarray
-    group: np.ndarray  # motion rows: (record, load segment) id; -1 otherwise
-
-
-def _rows(prepared: list[_Prepared], plant, condition, effects, settings) -> _Rows:
-    c = plant.cylinder
-    ys, eqs, blocks, groups = [], [], [], []
-    for i, p in enumerate(prepared):
-        rec = p.rec
-        ir = interval_residuals(_terms_raw(rec, plant, condition, effects), rec.raw["X"], c.A1, c.A2, rec.dt, p.edges, settings.interval_smoothing)
-        e = p.edges
-        nb = 100000
-        bc = (ir.t_cont // settings.block_s).astype(np.int64) + i * nb
-        bm = (ir.t_motion // settings.block_s).astype(np.int64) + i * nb
-        # motion rows: every sample of [e_{i-1}, e_{i+1}] usable and in one load segment
-        us = p.segmentation.usable.astype(np.int64)
-        cus = np.r_[0, np.cumsum(us)]
-        lo, hi = e[:-2], e[2:] + 1
-        all_usable = (cus[hi] - cus[lo]) == (hi - lo)
-        seg = p.segmentation.segment
-        same = seg[lo] == seg[np.minimum(hi - 1, rec.n - 1)]
-        mrow = all_usable & same & np.isfinite(ir.rm)
-        ys += [ir.r1, ir.r2, ir.rm[mrow]]
-        eqs += [np.zeros(ir.r1.size, int), np.ones(ir.r2.size, int), np.full(int(mrow.sum()), 2)]
-        blocks += [bc, bc, bm[mrow]]
-        groups += [np.full(ir.r1.size, -1), np.full(ir.r2.size, -1), (i * nb + seg[e[1:-1]])[mrow]]
-    return _Rows(np.concatenate(ys), np.concatenate(eqs), np.concatenate(blocks), np.concatenate(groups))
-
-
-def _demean_motion(values: np.ndarray, rows: _Rows) -> np.ndarray:
-    out = np.array(values, dtype=float, copy=True)
-    m = rows.eq == 2
-    if m.any():
-        out[m] = demean_by_group(out[m], rows.group[m])
-    return out
-
-
-def _equation_sigmas(y: np.ndarray, rows: _Rows) -> np.ndarray:
-    """Robust scale (1.4826 MAD) of each equation's residual rows."""
-    sig = np.ones(3)
-    for k in range(3):
-        v = y[(rows.eq == k) & np.isfinite(y)]
-        if v.size > 10:
-            s = 1.4826 * float(np.median(np.abs(v - np.median(v))))
-            sig[k] = s if s > 0 else (float(np.std(v)) or 1.0)
-    return sig
-
-
-def _jacobian(prepared, plant, condition, effects, specs: list[EffectSpec], rows: _Rows, settings, r_here: np.ndarray | None = None) -> np.ndarray:
-    """Forward differences (step FD_FRACTION x typical, towards the physical side) of the
-    residual rows with respect to each candidate's parameter at ``effects``."""
-    if r_here is None:
-        r_here = _rows(prepared, plant, condition, effects, settings).y
-    cols = []
-    for spec in specs:
-        d = FD_FRACTION * spec.typical
-        rp = _rows(prepared, plant, condition, perturbed(effects, spec, d), settings).y
-        cols.append(_demean_motion((rp - r_here) / d, rows))
-    return np.column_stack(cols) if cols else np.zeros((rows.y.size, 0))
-
-
-# --- step 3 and 1: replays and gaps ---------------------------------------------------------
-
-
-@dataclass
-class ReplayTrace:
-    """One record's recorded signals and replayed readings (for the overlay plots)."""
-
-    record_index: int
-    start_us: int
-    t: np.ndarray
-    measured: dict[str, np.ndarray]
-    replayed: dict[str, np.ndarray]
-
-
-def _replay_record(p: _Prepared, plant, condition, effects, settings) -> dict[str, np.ndarray]:
-    rec = p.rec
-    h = settings.savgol_window // 2
-    n = rec.n
-    x_src = np.where(np.isfinite(rec.sg["x"]), rec.sg["x"], rec.raw["x"])
-    x_true, p1_true, p2_true = true_signals(x_src, rec.sg["p1"], rec.sg["p2"], effects)
-    seg = max(2, int(round(settings.replay_segment_s / rec.dt)))
-    starts = np.arange(h, n - h - 1, seg)
-    v = rec.sg["v"][starts]
-    v = np.where(np.abs(v) < 1e-3, 0.0, v)
-    states = np.column_stack([rec.raw["X"][starts], v, p1_true[starts], p2_true[starts]])
-    load = _replay_load_for(p, plant, condition, effects, settings)
-    res = replay(plant, x_true, rec.raw["ps"], rec.raw["pr"], load, starts, states, condition=condition, effects=effects)
-    _, p1r, p2r = sensor_readings(np.zeros(1), res.p1_pa, res.p2_pa, effects)
-    out = {"p1": np.asarray(p1r, float).copy(), "p2": np.asarray(p2r, float).copy(), "X": res.X_m.copy()}
-    for k in out:
-        out[k][n - h:] = np.nan  # the record's tail has no Savitzky–Golay regions
-    return out
-
-
-def _gaps(prepared, plant, condition, effects, settings, keep: set[int]) -> tuple[GapAccumulator, dict[int, dict]]:
-    acc = GapAccumulator()
-    kept = {}
-    for i, p in enumerate(prepared):
-        rr = _replay_record(p, plant, condition, effects, settings)
-        for s, meas in (("p1", p.rec.raw["p1"]), ("p2", p.rec.raw["p2"]), ("X", p.rec.raw["X"])):
-            acc.add(s, rr[s] - meas, p.regions)
-        if i in keep:
-            kept[i] = rr
-    return acc, kept
-
-
-def _residual_summary(prepared, plant, condition, effects, settings) -> list[dict]:
-    """RMS and mean of the pointwise residuals per equation and region."""
-    c = plant.cylinder
-    sums: dict[tuple[str, str], list[float]] = {}
-    for p in prepared:
-        rec = p.rec
-        t = _terms_sg(rec, plant, condition, effects)
-        g1 = effects.p1_sensor_gain
-        g2 = effects.p2_sensor_gain
-        r = pointwise_residuals(t, rec.sg["v"], rec.sg["a"], rec.sg["dp1"] / g1, rec.sg["dp2"] / g2, c.A1, c.A2, _load_for(p, plant, condition, effects, settings))
-        for eq, key in (("chamber1", "r1"), ("chamber2", "r2"), ("motion", "rm")):
-            val = r[key]
-            base = np.isfinite(val)
-            if eq == "motion":
-                base &= p.base_load.usable
-            for reg in REGIONS:
-                m = base & p.regions[reg]
-                acc = sums.setdefault((eq, reg), [0.0, 0.0, 0])
-                acc[0] += float(np.sum(val[m] ** 2))
-                acc[1] += float(np.sum(val[m]))
-                acc[2] += int(m.sum())
-    rows = []
-    for (eq, reg), (ss, s, n) in sorted(sums.items()):
-        rows.append({
-            "equation": eq, "region": reg, "n_samples": n,
-            "rms": float(np.sqrt(ss / n)) if n else float("nan"),
-            "mean": float(s / n) if n else float("nan"),
-            "unit": "N" if eq == "motion" else "m3/s",
-        })
-    return rows
-
+from transforms.discrepancy.rows import (  # noqa: F401 (ReplayTrace, prepare_records, perturbed: part of this module's interface)
+    FD_FRACTION,
+    ReplayTrace,
+    _Rows,
+    _demean_motion,
+    _equation_sigmas,
+    _estimate_load,
+    _gaps,
+    _jacobian,
+    _residual_summary,
+    _rows,
+    perturbed,
+    prepare_records,
+)
 
 # --- the diagnosis ---------------------------------------------------------------------------
 
@@ -453,6 +126,13 @@ class Diagnosis:
     equation_sigmas: tuple[float, float, float] = (1.0, 1.0, 1.0)
     monitoring: list[dict] = field(default_factory=list)
     """Step 4 per edge (:func:`monitoring_bias`); empty if not run."""
+    verdict: object = None
+    """With nuisance priors: the :class:`transforms.discrepancy.verdict.Verdict` (named / ambiguous /
+    none, confidence, readings, calibrated nuisances); None when the model was taken as exact."""
+    gap_nominal: float = float("nan")
+    """Normalised gap of the nominal (uncalibrated) base model; = stage 0 without nuisances."""
+    model: tuple = ()
+    """(plant, condition) of the final stage (calibrated nuisances when priors were given)."""
 
     @property
     def final_effects(self) -> Effects:
@@ -508,24 +188,64 @@ def _refine(prepared, plant, condition, specs: list[EffectSpec], start: Effects,
     return fx, se, J
 
 
-def _select(prepared, plant, condition, specs, settings):
-    """Rows, weights and forward selection against the base model (module docstring)."""
+def _project_out(Nw: np.ndarray, *cols: np.ndarray) -> list[np.ndarray]:
+    """Each of ``cols`` (weighted rows) minus its ridge regression on the weighted nuisance
+    columns Nw (z units, prior N(0, I): v − Nw (NwᵀNw + I)⁻¹ Nwᵀ v; rows with a non-finite entry
+    are left as they are (block_stats drops them))."""
+    ok = np.all(np.isfinite(Nw), axis=1)
+    for c in cols:
+        ok &= np.isfinite(c) if c.ndim == 1 else np.all(np.isfinite(c), axis=1)
+    N = Nw[ok]
+    H = N.T @ N + np.eye(N.shape[1])
+    out = []
+    for c in cols:
+        c2 = np.array(c, float, copy=True)
+        c2[ok] = c[ok] - N @ np.linalg.solve(H, N.T @ c[ok])
+        out.append(c2)
+    return out
+
+
+NUISANCE_COLLINEAR = 0.05
+"""A candidate whose regressor keeps less than this fraction of its norm once the nuisance
+directions are projected out is not selected on the residuals (it is a nuisance pattern)."""
+
+
+def _select(prepared, plant, condition, specs, settings, nuisance=None):
+    """Rows, weights and forward selection against the base model (module docstring). With
+    ``nuisance`` = (NuisanceModel, z) the plant and condition are the nuisance model at z and the
+    residual and every candidate's regressor are first cleared of what the nuisances (within
+    their priors) explain (:func:`_project_out`): a candidate is then scored only on what the
+    nuisances cannot explain."""
     base = Effects()
     rows0 = _rows(prepared, plant, condition, base, settings)
     r0 = _demean_motion(rows0.y, rows0)
     sig = _equation_sigmas(r0, rows0)
     w_rows = 1.0 / sig[rows0.eq]
     J0 = _jacobian(prepared, plant, condition, base, specs, rows0, settings, rows0.y)
-    st = block_stats(-r0 * w_rows, J0 * w_rows[:, None], rows0.block)
+    yw, Jw = -r0 * w_rows, J0 * w_rows[:, None]
+    cand = list(range(len(specs)))
+    if nuisance is not None:
+        from transforms.discrepancy.calibration import jacobians
+
+        nm, z = nuisance
+        _, Jz, _ = jacobians(prepared, nm, z, base, [], rows0, settings, r0)
+        ok = np.isfinite(yw) & np.all(np.isfinite(Jw), axis=1)
+        before = np.sqrt(np.sum(Jw[ok] ** 2, axis=0))
+        yw, Jw = _project_out(Jz * w_rows[:, None], yw, Jw)
+        after = np.sqrt(np.sum(Jw[ok] ** 2, axis=0))
+        # a candidate the nuisances reproduce (a spool offset is an underlap pattern, a mass change
+        # the mass) has nothing left to select on; the verdict weighs it against the priors
+        cand = [j for j in cand if after[j] > NUISANCE_COLLINEAR * before[j]]
+    st = block_stats(yw, Jw, rows0.block)
     sel: SelectionResult = forward_select(
-        st, list(range(len(specs))), max_effects=settings.max_effects, min_t_stat=settings.min_t_stat,
+        st, cand, max_effects=settings.max_effects, min_t_stat=settings.min_t_stat,
         min_relative_gain=settings.min_relative_gain, min_z=settings.min_z,
         positive=frozenset(j for j, spec in enumerate(specs) if spec.lower is not None),
     )
     return rows0, w_rows, sel, sig
 
 
-def diagnose(records: list[Record], plant: PlantParams, condition: ValveCondition | None = None, settings: DiscrepancySettings | None = None, *, library: tuple[EffectSpec, ...] = EFFECT_LIBRARY, trace_records: int = 1, monitoring: bool = True) -> Diagnosis:
+def diagnose(records: list[Record], plant: PlantParams, condition: ValveCondition | None = None, settings: DiscrepancySettings | None = None, *, library: tuple[EffectSpec, ...] = EFFECT_LIBRARY, trace_records: int = 1, monitoring: bool = True, priors: NuisancePriors | None = None) -> Diagnosis:
     """Run steps 1–3 on ``records`` of one valve (module docstring).
 
     Parameters
@@ -544,8 +264,17 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
     monitoring : bool
         Run step 4 (:func:`monitoring_bias`) with the named effects (with none named, the
         as-recorded and corrected estimates coincide).
+    priors : NuisancePriors, optional
+        Tolerances of the base model's uncertain parameters (:mod:`transforms.discrepancy.nuisance`):
+        they are calibrated on the records with the effects, an effect is selected only on what
+        the nuisances cannot explain within their priors, and the verdict weighs an effect against
+        the nuisance reading of the same data (:mod:`transforms.discrepancy.verdict`). None or
+        :meth:`NuisancePriors.exact`: ``plant`` and ``condition`` are taken as exact (the method
+        of before, e.g. after a commissioning calibration).
     """
     from scipy import stats as _stats
+
+    from transforms.discrepancy.calibration import NuisanceModel, calibrate_prepared, joint_fit, refine_breakaway
 
     settings = settings or DiscrepancySettings()
     condition = plant.nominal_condition if condition is None else condition
@@ -554,20 +283,44 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
         raise ValueError("no record long enough to diagnose")
     base = Effects()
     specs = list(library)
+    nominal = (plant, condition)
+    nm = None if priors is None or priors.is_exact else NuisanceModel.of(plant, condition, priors)
+    z_cal = None
+    if nm is not None:
+        # calibrate the nuisances (loads from the nominal model), then again on the loads of the
+        # calibrated model; the calibrated base model is stage 0
+        z_cal = calibrate_prepared(prepared, nm, settings)[0].z
+        nm = refine_breakaway(prepared, nm, z_cal, settings)
+        plant, condition = nm.model(z_cal)
+        prepared = prepare_records(records, plant, condition, settings)
+        z_cal = calibrate_prepared(prepared, nm, settings, z0=z_cal)[0].z
+        plant, condition = nm.model(z_cal)
     # step 2: the base model's residuals and the library's regressors; the load segments come
     # from the base model's motion equation, which a friction or mass change disturbs (where the
     # inertia mismatch changes fast it can pass for a load step and absorb part of the effect):
     # once effects are named, the load is segmented again with the fitted model and the
     # selection repeated (alternating between the nuisance load and the effects)
-    rows0, w_rows, sel, sig = _select(prepared, plant, condition, specs, settings)
+    rows0, w_rows, sel, sig = _select(prepared, plant, condition, specs, settings, None if nm is None else (nm, z_cal))
+
+    def refine(named_specs, start):
+        """(effects, SEs, stage model) of the named effects fitted (with the nuisances)."""
+        if nm is None:
+            fx, se_, _ = _refine(prepared, plant, condition, named_specs, start, rows0, w_rows, settings)
+            return fx, se_, (plant, condition), None
+        jf = joint_fit(prepared, nm, z_cal, named_specs, start, rows0, w_rows, settings)
+        return jf.effects, jf.effect_se, nm.model(jf.z), jf
+
     if sel.named:
         start = base
         for cs in sel.named:
             start = perturbed(start, specs[cs.column], cs.theta)
-        fitted, _, _ = _refine(prepared, plant, condition, [specs[cs.column] for cs in sel.named], start, rows0, w_rows, settings)
+        fitted, _, (fp, fc), _ = refine([specs[cs.column] for cs in sel.named], start)
         for p in prepared:
-            p.seg = _estimate_load(p.rec, plant, condition, fitted, settings)
-        rows0, w_rows, sel, sig = _select(prepared, plant, condition, specs, settings)
+            p.seg = _estimate_load(p.rec, fp, fc, fitted, settings)
+        if nm is not None:
+            z_cal = calibrate_prepared(prepared, nm, settings, z0=z_cal)[0].z
+            plant, condition = nm.model(z_cal)
+        rows0, w_rows, sel, sig = _select(prepared, plant, condition, specs, settings, None if nm is None else (nm, z_cal))
     B = sel.n_blocks
     q = float(_stats.t.ppf(0.5 + settings.ci_level / 2.0, max(B - 1, 1)))
     candidates = []
@@ -595,12 +348,12 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
     while True:
         named_specs = [specs[cs.column] for cs in named_sel]
         stage_effects = [base]
-        refined, se = base, np.zeros(0)
+        refined, se, stage_model, final_fit = base, np.zeros(0), (plant, condition), None
         if named_specs:
             start = base
             for spec, cs in zip(named_specs, named_sel):
                 start = perturbed(start, spec, cs.theta)
-            refined, se, _ = _refine(prepared, plant, condition, named_specs, start, rows0, w_rows, settings)
+            refined, se, stage_model, final_fit = refine(named_specs, start)
             cur = base
             for spec in named_specs:
                 cur = replace(cur, **{spec.attribute: spec.value(refined)})
@@ -609,7 +362,7 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
         kept_all = [{i: kept0[i] for i in kept_idx}]
         drop = None
         for k, fx in enumerate(stage_effects[1:], start=1):
-            acc, kept = _gaps(prepared, plant, condition, fx, settings, kept_idx)
+            acc, kept = _gaps(prepared, *stage_model, fx, settings, kept_idx)
             if not acc.gap() < stage_acc[-1].gap():
                 drop = k - 1
                 break
@@ -638,7 +391,7 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
             gap_rows.append({"stage": k, **row})
     residual_rows = [{"stage": 0, **r} for r in _residual_summary(prepared, plant, condition, base, settings)]
     if len(stage_effects) > 1:
-        residual_rows += [{"stage": len(stage_effects) - 1, **r} for r in _residual_summary(prepared, plant, condition, stage_effects[-1], settings)]
+        residual_rows += [{"stage": len(stage_effects) - 1, **r} for r in _residual_summary(prepared, *stage_model, stage_effects[-1], settings)]
     traces = []
     for i in sorted(kept_all[0]):
         p = prepared[i]
@@ -647,12 +400,24 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
             measured={"p1": p.rec.raw["p1"], "p2": p.rec.raw["p2"], "X": p.rec.raw["X"]},
             replayed={f"stage{k}_{s}": kept_all[k][i][s] for k in range(len(stage_effects)) for s in ("p1", "p2", "X")},
         ))
-    mon = monitoring_bias([p.rec for p in prepared], plant, condition, stage_effects[-1], settings.window_s) if monitoring else []
+    mon = monitoring_bias([p.rec for p in prepared], *stage_model, stage_effects[-1], settings.window_s) if monitoring else []
+    verdict = None
+    gap_nominal = stage_gaps[0]
+    if nm is not None:
+        from transforms.discrepancy.verdict import nuisance_verdict
+
+        if final_fit is None:
+            final_fit = joint_fit(prepared, nm, z_cal, [], base, rows0, w_rows, settings, iterations=0)
+        def gap_of(fx, model):
+            return _gaps(prepared, *model, fx, settings, set())[0].gap()
+
+        verdict = nuisance_verdict(prepared, nm, final_fit, named_specs, specs, rows0, w_rows, settings, named, gap_of, stage_gaps[0])
+        gap_nominal = _gaps(prepared, *nominal, base, settings, set())[0].gap()
     return Diagnosis(
         n_records=len(prepared), records=[(p.rec.start_us, p.rec.end_us) for p in prepared], named=named,
         candidates=candidates, gap_rows=gap_rows, residual_rows=residual_rows, stage_effects=stage_effects,
         stage_gaps=stage_gaps, traces=traces, n_blocks=B, equation_sigmas=tuple(float(s) for s in sig),
-        monitoring=mon,
+        monitoring=mon, verdict=verdict, gap_nominal=gap_nominal, model=stage_model,
     )
 
 

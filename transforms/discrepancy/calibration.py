@@ -1,0 +1,324 @@
+"""Calibrating the base model's nuisance parameters (:mod:`transforms.discrepancy.nuisance`) on
+records, alone or jointly with library effects.
+
+The fit is a maximum a-posteriori Gauss–Newton on the same integrated residual rows the effect
+selection regresses (:func:`transforms.discrepancy.rows._rows`: both chamber equations over
+20-sample intervals and the motion equation integrated twice, the load eliminated per
+segment), each row weighted by 1/σ of its equation, with the prior as extra rows: it minimises
+
+    Σ_rows (w r(z, θ))² + |z|²
+
+over the standardised nuisances z (prior N(0, I)) and the effect parameters θ (flat prior, kept
+on their physical side). Derivatives are finite differences of the exact residual functions
+(central, step :data:`Z_STEP` σ for a nuisance). The equation weights are re-estimated from the calibrated
+residuals once (the nominal model's residuals carry its own error and would under-weight the data).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from model.effects import Effects, EffectSpec
+from model.params import PlantParams, ValveCondition
+from transforms.discrepancy.nuisance import NUISANCES, NuisancePriors, apply_nuisances, nuisance_sigmas, nuisance_values
+
+__all__ = ["Calibration", "NuisanceModel", "calibrate", "joint_fit"]
+
+BREAKAWAY = NUISANCES.index("d_s")
+BREAKAWAY_RANGE = 3.0
+"""The breakaway force is searched within ±this many prior σ."""
+Z_STEP = 0.05
+"""Finite-difference step of a nuisance, in prior standard deviations."""
+
+
+@dataclass(frozen=True)
+class NuisanceModel:
+    """The nominal model, its nuisances' priors and the active (σ > 0) ones.
+
+    Attributes
+    ----------
+    plant, condition : the nominal (design-data) model
+    theta0, sigma : ndarray (15,)
+        Nominal values and prior σ of :data:`NUISANCES` (SI).
+    active : tuple of int
+        Indices of the nuisances with σ > 0 fitted by Gauss–Newton (all but the breakaway force).
+    breakaway_z : float
+        The breakaway force d_s in prior σ: it shows only in when the cylinder breaks away, not in
+        the integrated equations of moving samples, and is fitted on the replay
+        (:func:`refine_breakaway`).
+    """
+
+    plant: PlantParams
+    condition: ValveCondition
+    theta0: np.ndarray
+    sigma: np.ndarray
+    active: tuple[int, ...]
+    breakaway_z: float = 0.0
+
+    @classmethod
+    def of(cls, plant: PlantParams, condition: ValveCondition, priors: NuisancePriors) -> "NuisanceModel":
+        sig = nuisance_sigmas(plant, condition, priors)
+        return cls(plant, condition, nuisance_values(plant, condition), sig, tuple(int(i) for i in np.flatnonzero(sig > 0) if i != BREAKAWAY))
+
+    def values(self, z: np.ndarray) -> np.ndarray:
+        """θ = θ0 + σ z (z over the active nuisances; d_s at ``breakaway_z``)."""
+        v = self.theta0.copy()
+        v[list(self.active)] += self.sigma[list(self.active)] * np.asarray(z, float)
+        v[BREAKAWAY] += self.sigma[BREAKAWAY] * self.breakaway_z
+        return v
+
+    def model(self, z: np.ndarray) -> tuple[PlantParams, ValveCondition]:
+        """(plant, condition) at standardised nuisances z."""
+        return apply_nuisances(self.plant, self.condition, self.values(z))
+
+    def names(self) -> list[str]:
+        return [NUISANCES[i] for i in self.active]
+
+
+def _residuals(prepared, nm: NuisanceModel, z, effects, rows0, settings):
+    from transforms.discrepancy.rows import _demean_motion, _rows
+
+    plant, cond = nm.model(z)
+    return _demean_motion(_rows(prepared, plant, cond, effects, settings).y, rows0)
+
+
+def jacobians(prepared, nm: NuisanceModel, z, effects: Effects, specs: list[EffectSpec], rows0, settings, r_here=None):
+    """(r, J_z, J_θ): the demeaned residual rows at (z, effects) and their central-difference
+    derivatives with respect to the active standardised nuisances and the effects' parameters
+    (forward differences for a parameter at its physical bound). Central, because the verdict
+    compares an effect with the nuisance pattern it resembles: a spool sensor offset is exactly an
+    underlap pattern, and forward differences of different steps would make them differ by the
+    curvature of the orifice law, which the heavily weighted data rows then take for a real difference."""
+    from transforms.discrepancy.rows import FD_FRACTION, perturbed
+
+    r = _residuals(prepared, nm, z, effects, rows0, settings) if r_here is None else r_here
+    cols = []
+    for j in range(len(nm.active)):
+        zp, zm = np.array(z, float), np.array(z, float)
+        zp[j] += Z_STEP
+        zm[j] -= Z_STEP
+        cols.append((_residuals(prepared, nm, zp, effects, rows0, settings) - _residuals(prepared, nm, zm, effects, rows0, settings)) / (2 * Z_STEP))
+    Jz = np.column_stack(cols) if cols else np.zeros((r.size, 0))
+    ecols = []
+    for spec in specs:
+        d = FD_FRACTION * spec.typical
+        lo = spec.value(effects) - d
+        if spec.lower is not None and lo < spec.lower:  # one-sided at the physical bound
+            ecols.append((_residuals(prepared, nm, z, perturbed(effects, spec, d), rows0, settings) - r) / d)
+            continue
+        ecols.append((_residuals(prepared, nm, z, perturbed(effects, spec, d), rows0, settings)
+                      - _residuals(prepared, nm, z, perturbed(effects, spec, -d), rows0, settings)) / (2 * d))
+    Je = np.column_stack(ecols) if ecols else np.zeros((r.size, 0))
+    return r, Jz, Je
+
+
+def _with_params(effects: Effects, specs, values) -> Effects | None:
+    new = effects
+    for spec, v in zip(specs, values):
+        if spec.lower is not None and v < spec.lower:
+            v = spec.lower
+        new = replace(new, **{spec.attribute: float(v)})
+    try:
+        return Effects(**{f: getattr(new, f) for f in new.__dataclass_fields__})
+    except ValueError:
+        return None
+
+
+@dataclass
+class JointFit:
+    """Outcome of :func:`joint_fit`.
+
+    Attributes
+    ----------
+    z : standardised active nuisances
+    effects : Effects with the fitted parameters
+    z_se, effect_se : posterior standard deviations (Gauss–Newton, data rows taken independent)
+    data_ss, prior_ss : Σ (w r)² and |z|² at the optimum
+    r, Jz, Je : residual rows and derivatives at the optimum (unweighted)
+    """
+
+    z: np.ndarray
+    effects: Effects
+    z_se: np.ndarray
+    effect_se: np.ndarray
+    data_ss: float
+    prior_ss: float
+    r: np.ndarray
+    Jz: np.ndarray
+    Je: np.ndarray
+
+
+def joint_fit(prepared, nm: NuisanceModel, z0, specs: list[EffectSpec], effects0: Effects, rows0, w_rows, settings, iterations: int = 8) -> JointFit:
+    """MAP Gauss–Newton for the active nuisances and the parameters of ``specs`` (module docstring)."""
+    z = np.array(z0, float)
+    fx = effects0
+    q, p = len(nm.active), len(specs)
+    r, Jz, Je = jacobians(prepared, nm, z, fx, specs, rows0, settings)
+
+    def objective(rr, zz):
+        ok = np.isfinite(rr)
+        return float(np.sum((rr[ok] * w_rows[ok]) ** 2) + zz @ zz)
+
+    obj = objective(r, z)
+    for _ in range(iterations):
+        ok = np.isfinite(r) & np.all(np.isfinite(Jz), axis=1) & np.all(np.isfinite(Je), axis=1)
+        A = np.vstack([np.column_stack([Jz[ok], Je[ok]]) * w_rows[ok, None], np.hstack([np.eye(q), np.zeros((q, p))])])
+        b = np.r_[-r[ok] * w_rows[ok], -z]
+        sc = np.sqrt(np.mean(A * A, axis=0))
+        sc = np.where(sc > 0, sc, 1.0)
+        step, *_ = np.linalg.lstsq(A / sc, b, rcond=None)
+        step = step / sc
+        accepted = False
+        for lam in (1.0, 0.5, 0.25, 0.1):
+            z_new = z + lam * step[:q]
+            fx_new = _with_params(fx, specs, [spec.value(fx) + lam * d for spec, d in zip(specs, step[q:])])
+            if fx_new is None:
+                continue
+            r_new = _residuals(prepared, nm, z_new, fx_new, rows0, settings)
+            o = objective(r_new, z_new)
+            if np.isfinite(o) and o <= obj:
+                accepted = True
+                break
+        if not accepted:
+            break
+        small = np.all(np.abs(lam * step[:q]) < 1e-3) and all(abs(lam * d) < 1e-4 * spec.typical for spec, d in zip(specs, step[q:]))
+        z, fx, obj = z_new, fx_new, o
+        r, Jz, Je = jacobians(prepared, nm, z, fx, specs, rows0, settings, r_new)
+        if small:
+            break
+    ok = np.isfinite(r) & np.all(np.isfinite(Jz), axis=1) & np.all(np.isfinite(Je), axis=1)
+    A = np.column_stack([Jz[ok], Je[ok]]) * w_rows[ok, None]
+    H = A.T @ A
+    H[:q, :q] += np.eye(q)
+    try:
+        cov = np.linalg.pinv(H)
+        se = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    except np.linalg.LinAlgError:
+        se = np.full(q + p, np.inf)
+    data_ss = float(np.sum((r[ok] * w_rows[ok]) ** 2))
+    return JointFit(z=z, effects=fx, z_se=se[:q], effect_se=se[q:], data_ss=data_ss, prior_ss=float(z @ z), r=r, Jz=Jz, Je=Je)
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """The base model calibrated on records (no library effect).
+
+    Attributes
+    ----------
+    nm : NuisanceModel
+    z, z_se : standardised nuisances and their posterior SDs (over ``nm.active``)
+    plant, condition : the calibrated model
+    sigmas : equation weights' scales used (chamber 1, chamber 2 [m³/s], motion [N])
+    """
+
+    nm: NuisanceModel
+    z: np.ndarray
+    z_se: np.ndarray
+    plant: PlantParams
+    condition: ValveCondition
+    sigmas: tuple[float, float, float]
+    gap_nominal: float = float("nan")
+    gap_calibrated: float = float("nan")
+    """Normalised replay gaps of the records with the nominal and the calibrated model."""
+
+    def table(self) -> list[dict]:
+        """One dict per nuisance: name, nominal, value, prior σ, z (SI units, :data:`NUISANCE_UNITS`)."""
+        from transforms.discrepancy.nuisance import NUISANCE_UNITS
+
+        vals = self.nm.values(self.z)
+        zfull = np.zeros(len(NUISANCES))
+        sefull = np.zeros(len(NUISANCES))
+        zfull[list(self.nm.active)] = self.z
+        sefull[list(self.nm.active)] = self.z_se
+        zfull[BREAKAWAY] = self.nm.breakaway_z
+        return [{"name": n, "unit": NUISANCE_UNITS[n], "nominal": float(self.nm.theta0[i]), "value": float(vals[i]),
+                 "prior_sigma": float(self.nm.sigma[i]), "z": float(zfull[i]), "se": float(sefull[i] * self.nm.sigma[i])}
+                for i, n in enumerate(NUISANCES)]
+
+
+def refine_breakaway(prepared, nm: NuisanceModel, z, settings, effects: Effects | None = None) -> NuisanceModel:
+    """The breakaway force d_s that makes the replay fit best (a grid over ±``BREAKAWAY_RANGE`` σ,
+    then golden-section search), the other nuisances held at z and the loads those of the model at
+    the start. Returns the nuisance model with ``breakaway_z`` set."""
+    from transforms.discrepancy.rows import _gaps, _load_for
+
+    if nm.sigma[BREAKAWAY] <= 0:
+        return nm
+    fx = Effects() if effects is None else effects
+    ref = nm.model(z)
+    for p in prepared:
+        _load_for(p, *ref, fx, settings)
+
+    def gap(zb: float) -> float:
+        m = replace(nm, breakaway_z=float(zb))
+        plant, cond = m.model(z)
+        for p in prepared:
+            p.loads.setdefault((plant, cond, fx), p.loads[(*ref, fx)])
+        return _gaps(prepared, plant, cond, fx, settings, set())[0].gap()
+
+    grid = np.linspace(-BREAKAWAY_RANGE, BREAKAWAY_RANGE, 13)
+    vals = [gap(g) for g in grid]
+    k = int(np.argmin(vals))
+    a, b = grid[max(k - 1, 0)], grid[min(k + 1, grid.size - 1)]
+    phi = (np.sqrt(5.0) - 1.0) / 2.0
+    c, d = b - phi * (b - a), a + phi * (b - a)
+    gc, gd = gap(c), gap(d)
+    for _ in range(8):
+        if gc < gd:
+            b, d, gd = d, c, gc
+            c = b - phi * (b - a)
+            gc = gap(c)
+        else:
+            a, c, gc = c, d, gd
+            d = a + phi * (b - a)
+            gd = gap(d)
+    best = min([(vals[k], grid[k]), (gc, c), (gd, d)])[1]
+    return replace(nm, breakaway_z=float(best))
+
+
+def calibrate_prepared(prepared, nm: NuisanceModel, settings, effects: Effects | None = None, z0=None) -> tuple[JointFit, object, np.ndarray, np.ndarray]:
+    """Calibrate the nuisances on prepared records with ``effects`` held (default none).
+    Returns (fit, rows, weights, equation sigmas)."""
+    from transforms.discrepancy.rows import _demean_motion, _equation_sigmas, _rows
+
+    fx = Effects() if effects is None else effects
+    z = np.zeros(len(nm.active)) if z0 is None else np.asarray(z0, float)
+    plant, cond = nm.model(z)
+    rows0 = _rows(prepared, plant, cond, fx, settings)
+    sig = _equation_sigmas(_demean_motion(rows0.y, rows0), rows0)
+    fit = None
+    for _ in range(2):  # weights from the nominal residuals, then from the calibrated ones
+        w = 1.0 / sig[rows0.eq]
+        fit = joint_fit(prepared, nm, z, [], fx, rows0, w, settings)
+        z = fit.z
+        new = _equation_sigmas(fit.r, rows0)
+        if np.allclose(new, sig, rtol=0.2):
+            sig = new
+            break
+        sig = new
+    return fit, rows0, 1.0 / sig[rows0.eq], sig
+
+
+def calibrate(records, plant: PlantParams, condition: ValveCondition, priors: NuisancePriors, settings, effects: Effects | None = None) -> Calibration:
+    """Calibrate the base model's nuisances on ``records`` (e.g. a commissioning window): the
+    loads are estimated with the nominal model, the nuisances fitted, the loads estimated again
+    with the calibrated model and the nuisances refitted."""
+    from transforms.discrepancy.rows import _gaps, prepare_records
+
+    fx = Effects() if effects is None else effects
+    nm = NuisanceModel.of(plant, condition, priors)
+    prepared = prepare_records(records, plant, condition, settings)
+    if not prepared:
+        raise ValueError("no record long enough to calibrate on")
+    g0 = _gaps(prepared, plant, condition, fx, settings, set())[0].gap()
+    fit, _, _, sig = calibrate_prepared(prepared, nm, settings, effects)
+    nm = refine_breakaway(prepared, nm, fit.z, settings, effects)
+    p1, c1 = nm.model(fit.z)
+    prepared = prepare_records(records, p1, c1, settings)
+    fit, _, _, sig = calibrate_prepared(prepared, nm, settings, effects, fit.z)
+    p1, c1 = nm.model(fit.z)
+    prepared = prepare_records(records, p1, c1, settings)
+    g1 = _gaps(prepared, p1, c1, fx, settings, set())[0].gap()
+    return Calibration(nm=nm, z=fit.z, z_se=fit.z_se, plant=p1, condition=c1, sigmas=tuple(float(s) for s in sig), gap_nominal=g0, gap_calibrated=g1)

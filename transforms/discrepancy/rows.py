@@ -1,0 +1,359 @@
+"""The machinery of one model on prepared records: loads, residual rows and their derivatives, replays
+and gaps (steps 1 and 2 of :mod:`transforms.discrepancy.pipeline`, which runs them; also used by
+:mod:`transforms.discrepancy.calibration`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from model.effects import Effects, EffectSpec, equation_terms, sensor_readings, true_signals
+from model.params import PlantParams, ValveCondition
+from model.replay import replay
+from model.simulate import DEFAULT_REG_BAND_PA
+from transforms.discrepancy.gaps import GapAccumulator
+from transforms.discrepancy.load import LoadEstimate, estimate_load, replay_load, stuck_spans
+from transforms.discrepancy.records import REGIONS, Record, operating_regions, prepare_record
+from transforms.discrepancy.residuals import (
+    demean_by_group,
+    interval_edges,
+    interval_residuals,
+    pointwise_residuals,
+    triangular_force_balance,
+)
+from transforms.discrepancy.settings import DiscrepancySettings
+
+EQUATIONS = ("chamber1", "chamber2", "motion")
+FD_FRACTION = 0.01
+"""Finite-difference step of the regressors: this fraction of the candidate's typical magnitude."""
+
+
+def perturbed(effects: Effects, spec: EffectSpec, delta: float) -> Effects:
+    """``effects`` with the candidate's parameter moved by ``delta``."""
+    return replace(effects, **{spec.attribute: spec.value(effects) + delta})
+
+
+@dataclass
+class _Prepared:
+    rec: Record
+    regions: dict[str, np.ndarray]
+    edges: np.ndarray
+    base_load: LoadEstimate
+    loads: dict = field(default_factory=dict)  # (plant, condition, Effects) -> LoadEstimate of that model
+    seg: LoadEstimate | None = None  # the load segments of the regression (default base_load)
+
+    @property
+    def segmentation(self) -> LoadEstimate:
+        return self.base_load if self.seg is None else self.seg
+
+
+def prepare_records(records: list[Record], plant: PlantParams, condition: ValveCondition, settings: DiscrepancySettings) -> list[_Prepared]:
+    """Savitzky–Golay values, operating regions, interval edges and the base model's load."""
+    out = []
+    h = settings.savgol_window // 2
+    k = settings.interval_smoothing // 2
+    for rec in records:
+        prepare_record(rec, settings)
+        sg = rec.sg
+        regions = operating_regions(sg["v"], sg["p1"], sg["p2"], sg["ps"], settings)
+        edges = interval_edges(rec.n - max(h, k), settings.interval_samples, max(h, k))
+        if edges.size < 4:
+            continue
+        load = _estimate_load(rec, plant, condition, Effects(), settings)
+        out.append(_Prepared(rec, regions, edges, load, {(plant, condition, Effects()): load}))
+    return out
+
+
+def _signals(rec: Record, smooth: bool) -> dict:
+    src = rec.sg if smooth else rec.raw
+    return {"x": src["x"], "p1": src["p1"], "p2": src["p2"], "ps": src["ps"], "pr": src["pr"], "X": rec.raw["X"], "v": rec.sg["v"]}
+
+
+def _terms_raw(rec, plant, condition, effects):
+    return equation_terms(_signals(rec, False), plant, condition, effects, DEFAULT_REG_BAND_PA)
+
+
+def _terms_sg(rec, plant, condition, effects):
+    return equation_terms(_signals(rec, True), plant, condition, effects, DEFAULT_REG_BAND_PA)
+
+
+def _force_balance(rec: Record, plant, condition, effects, settings) -> np.ndarray:
+    t = _terms_raw(rec, plant, condition, effects)
+    return triangular_force_balance(t["force"], rec.raw["X"], t["mass"], rec.dt, settings.interval_samples)
+
+
+def _estimate_load(rec: Record, plant, condition, effects, settings) -> LoadEstimate:
+    """The piecewise-constant load of one record under the model with ``effects``."""
+    f_hat = _force_balance(rec, plant, condition, effects, settings)
+    t = _terms_sg(rec, plant, condition, effects)
+    load = estimate_load(f_hat, rec.sg["v"], settings, f_point=t["force"] - t["mass"] * rec.sg["a"])
+    return _refine_rest_steps(rec, load, f_hat, plant, condition, effects, settings)
+
+
+def _load_for(p: _Prepared, plant, condition, effects, settings) -> np.ndarray:
+    """The load at every sample under the model with ``effects`` (estimated once per model)."""
+    key = (plant, condition, effects)
+    if key not in p.loads:
+        p.loads[key] = _estimate_load(p.rec, plant, condition, effects, settings)
+    return p.loads[key].load
+
+
+def _holding(rec: Record, plant, condition, effects) -> tuple[np.ndarray, np.ndarray]:
+    """(m g + A1 p1 − A2 p2 with the true smoothed pressures [N], stuck mask) of a record."""
+    t = _terms_sg(rec, plant, condition, effects)
+    c = plant.cylinder
+    hold = t["mass"] * plant.cylinder.g_m_s2 + c.A1 * t["p1"] - c.A2 * t["p2"]
+    return hold, stuck_spans(rec.sg["v"], DEFAULT_STUCK_V)
+
+
+DEFAULT_STUCK_V = 1.0e-3
+"""|v_X| below which the measured cylinder counts as sticking for the replay's load. [m/s]"""
+
+
+def _replay_load_for(p: _Prepared, plant, condition, effects, settings) -> np.ndarray:
+    level = _load_for(p, plant, condition, effects, settings)
+    est = p.loads[(plant, condition, effects)]
+    if est.hold_until <= 0:
+        return level
+    hold, stuck = _holding(p.rec, plant, condition, effects)
+    stuck = stuck & (np.arange(stuck.size) < est.hold_until)
+    return replay_load(level, hold, stuck)
+
+
+REST_STEP_GRID = 5
+"""Candidate spacing (samples) when a load step found across a standstill is placed by replay."""
+REST_STEP_TAIL = 300
+"""Samples replayed after the standstill to judge a placement."""
+
+
+def _replay_span(rec: Record, plant, condition, effects, a: int, b: int, load: np.ndarray):
+    """Replay samples [a, b) of a record from its measured state at a; returns the readings
+    (p1, p2, X) or None if the replay diverged."""
+    x_src = np.where(np.isfinite(rec.sg["x"]), rec.sg["x"], rec.raw["x"])
+    x_true, p1_true, p2_true = true_signals(x_src[a:b], rec.sg["p1"][a:a + 1], rec.sg["p2"][a:a + 1], effects)
+    v0 = rec.sg["v"][a]
+    state = [[rec.raw["X"][a], 0.0 if abs(v0) < 1e-3 else v0, p1_true[0], p2_true[0]]]
+    try:
+        r = replay(plant, x_true, rec.raw["ps"][a:b], rec.raw["pr"][a:b], load, [0], state, condition=condition, effects=effects)
+    except FloatingPointError:
+        return None
+    _, p1r, p2r = sensor_readings(np.zeros(1), r.p1_pa, r.p2_pa, effects)
+    return p1r, p2r, r.X_m
+
+
+def _initial_hold(rec: Record, load: LoadEstimate, plant, condition, effects, settings) -> LoadEstimate:
+    """Does the record start at rest with another load than the first level? Replay its start
+    (to ``REST_STEP_TAIL`` samples past the first valid sample) both ways -- the first level from
+    the start, or the holding force until the cylinder first moves -- and keep the better."""
+    h = settings.savgol_window // 2
+    hold, stuck = _holding(rec, plant, condition, effects)
+    if not stuck[h] or not np.any(load.valid):
+        return load
+    first_move = int(np.argmin(stuck[h:])) + h  # first non-stuck sample
+    first_valid = int(np.flatnonzero(load.valid)[0])
+    if first_move <= h + 1 or first_move > first_valid:
+        return load
+    a, b = h, min(first_valid + REST_STEP_TAIL, rec.n - h - 1)
+    if b - a < 10:
+        return load
+    level = load.load[a:b]
+    sel = stuck[a:b] & (np.arange(a, b) < first_move)
+    errs = []
+    for F in (level, replay_load(level, hold[a:b], sel)):
+        out = _replay_span(rec, plant, condition, effects, a, b, F)
+        if out is None:
+            errs.append(np.inf)
+            continue
+        p1r, p2r, Xr = out
+        errs.append((np.sum((p1r - rec.raw["p1"][a:b]) ** 2) + np.sum((p2r - rec.raw["p2"][a:b]) ** 2)) / 1e10 + np.sum((Xr - rec.raw["X"][a:b]) ** 2) / 1e-6)
+    if errs[1] < errs[0]:
+        return replace(load, hold_until=first_move)
+    return load
+
+
+def _refine_rest_steps(rec: Record, load: LoadEstimate, f_hat: np.ndarray, plant, condition, effects, settings) -> LoadEstimate:
+    """Place each load step found across a standstill where a replay of the standstill (from
+    the measured state before it to ``REST_STEP_TAIL`` samples after it) fits the recorded
+    p1, p2 and X best: while the cylinder sticks the load does not show in the motion equation,
+    but when it changed decides when and how the cylinder breaks away."""
+    h = settings.savgol_window // 2
+    load = _initial_hold(rec, load, plant, condition, effects, settings)
+    if not np.any(load.brackets[:, 0] >= 0):
+        return load
+    steps = load.steps.copy()
+    hold, stuck = _holding(rec, plant, condition, effects)
+    stuck = stuck & (np.arange(stuck.size) < load.hold_until)
+    for i, (lo, hi) in enumerate(load.brackets):
+        if lo < 0:
+            continue
+        a = max(int(lo), h)
+        b = min(int(hi) + REST_STEP_TAIL, rec.n - h - 1)
+        prev_s = steps[i - 1] if i > 0 else 0
+        next_s = steps[i + 1] if i + 1 < steps.size else rec.n
+        cands = np.unique(np.r_[np.arange(max(lo + 1, prev_s + 1), min(hi, next_s - 1) + 1, REST_STEP_GRID), steps[i]])
+        if b - a < 10 or cands.size < 2:
+            continue
+        old, new = load.levels[i], load.levels[i + 1]
+        best, best_err = steps[i], np.inf
+        for c in cands:
+            F = replay_load(np.where(np.arange(a, b) < c, old, new), hold[a:b], stuck[a:b])
+            out = _replay_span(rec, plant, condition, effects, a, b, F)
+            if out is None:
+                continue
+            p1r, p2r, Xr = out
+            err = (np.sum((p1r - rec.raw["p1"][a:b]) ** 2) + np.sum((p2r - rec.raw["p2"][a:b]) ** 2)) / 1e10 + np.sum((Xr - rec.raw["X"][a:b]) ** 2) / 1e-6
+            if err < best_err:
+                best, best_err = int(c), err
+        steps[i] = best
+    return load.with_steps(steps, f_hat)
+
+
+# --- step 2: regression data ---------------------------------------------------------------
+
+
+@dataclass
+class _Rows:
+    """Stacked integrated residuals of all records (one model)."""
+
+    y: np.ndarray  # residuals (not yet weighted)
+    eq: np.ndarray  # equation index per row (0 chamber 1, 1 chamber 2, 2 motion)
+    block: np.ndarray
+    group: np.ndarray  # motion rows: (record, load segment) id; -1 otherwise
+
+
+def _rows(prepared: list[_Prepared], plant, condition, effects, settings) -> _Rows:
+    c = plant.cylinder
+    ys, eqs, blocks, groups = [], [], [], []
+    for i, p in enumerate(prepared):
+        rec = p.rec
+        ir = interval_residuals(_terms_raw(rec, plant, condition, effects), rec.raw["X"], c.A1, c.A2, rec.dt, p.edges, settings.interval_smoothing)
+        e = p.edges
+        nb = 100000
+        bc = (ir.t_cont // settings.block_s).astype(np.int64) + i * nb
+        bm = (ir.t_motion // settings.block_s).astype(np.int64) + i * nb
+        # motion rows: every sample of [e_{i-1}, e_{i+1}] usable and in one load segment
+        us = p.segmentation.usable.astype(np.int64)
+        cus = np.r_[0, np.cumsum(us)]
+        lo, hi = e[:-2], e[2:] + 1
+        all_usable = (cus[hi] - cus[lo]) == (hi - lo)
+        seg = p.segmentation.segment
+        same = seg[lo] == seg[np.minimum(hi - 1, rec.n - 1)]
+        mrow = all_usable & same & np.isfinite(ir.rm)
+        ys += [ir.r1, ir.r2, ir.rm[mrow]]
+        eqs += [np.zeros(ir.r1.size, int), np.ones(ir.r2.size, int), np.full(int(mrow.sum()), 2)]
+        blocks += [bc, bc, bm[mrow]]
+        groups += [np.full(ir.r1.size, -1), np.full(ir.r2.size, -1), (i * nb + seg[e[1:-1]])[mrow]]
+    return _Rows(np.concatenate(ys), np.concatenate(eqs), np.concatenate(blocks), np.concatenate(groups))
+
+
+def _demean_motion(values: np.ndarray, rows: _Rows) -> np.ndarray:
+    out = np.array(values, dtype=float, copy=True)
+    m = rows.eq == 2
+    if m.any():
+        out[m] = demean_by_group(out[m], rows.group[m])
+    return out
+
+
+def _equation_sigmas(y: np.ndarray, rows: _Rows) -> np.ndarray:
+    """Robust scale (1.4826 MAD) of each equation's residual rows."""
+    sig = np.ones(3)
+    for k in range(3):
+        v = y[(rows.eq == k) & np.isfinite(y)]
+        if v.size > 10:
+            s = 1.4826 * float(np.median(np.abs(v - np.median(v))))
+            sig[k] = s if s > 0 else (float(np.std(v)) or 1.0)
+    return sig
+
+
+def _jacobian(prepared, plant, condition, effects, specs: list[EffectSpec], rows: _Rows, settings, r_here: np.ndarray | None = None) -> np.ndarray:
+    """Forward differences (step FD_FRACTION x typical, towards the physical side) of the
+    residual rows with respect to each candidate's parameter at ``effects``."""
+    if r_here is None:
+        r_here = _rows(prepared, plant, condition, effects, settings).y
+    cols = []
+    for spec in specs:
+        d = FD_FRACTION * spec.typical
+        rp = _rows(prepared, plant, condition, perturbed(effects, spec, d), settings).y
+        cols.append(_demean_motion((rp - r_here) / d, rows))
+    return np.column_stack(cols) if cols else np.zeros((rows.y.size, 0))
+
+
+# --- step 3 and 1: replays and gaps ---------------------------------------------------------
+
+
+@dataclass
+class ReplayTrace:
+    """One record's recorded signals and replayed readings (for the overlay plots)."""
+
+    record_index: int
+    start_us: int
+    t: np.ndarray
+    measured: dict[str, np.ndarray]
+    replayed: dict[str, np.ndarray]
+
+
+def _replay_record(p: _Prepared, plant, condition, effects, settings) -> dict[str, np.ndarray]:
+    rec = p.rec
+    h = settings.savgol_window // 2
+    n = rec.n
+    x_src = np.where(np.isfinite(rec.sg["x"]), rec.sg["x"], rec.raw["x"])
+    x_true, p1_true, p2_true = true_signals(x_src, rec.sg["p1"], rec.sg["p2"], effects)
+    seg = max(2, int(round(settings.replay_segment_s / rec.dt)))
+    starts = np.arange(h, n - h - 1, seg)
+    v = rec.sg["v"][starts]
+    v = np.where(np.abs(v) < 1e-3, 0.0, v)
+    states = np.column_stack([rec.raw["X"][starts], v, p1_true[starts], p2_true[starts]])
+    load = _replay_load_for(p, plant, condition, effects, settings)
+    res = replay(plant, x_true, rec.raw["ps"], rec.raw["pr"], load, starts, states, condition=condition, effects=effects)
+    _, p1r, p2r = sensor_readings(np.zeros(1), res.p1_pa, res.p2_pa, effects)
+    out = {"p1": np.asarray(p1r, float).copy(), "p2": np.asarray(p2r, float).copy(), "X": res.X_m.copy()}
+    for k in out:
+        out[k][n - h:] = np.nan  # the record's tail has no Savitzky–Golay regions
+    return out
+
+
+def _gaps(prepared, plant, condition, effects, settings, keep: set[int]) -> tuple[GapAccumulator, dict[int, dict]]:
+    acc = GapAccumulator()
+    kept = {}
+    for i, p in enumerate(prepared):
+        rr = _replay_record(p, plant, condition, effects, settings)
+        for s, meas in (("p1", p.rec.raw["p1"]), ("p2", p.rec.raw["p2"]), ("X", p.rec.raw["X"])):
+            acc.add(s, rr[s] - meas, p.regions)
+        if i in keep:
+            kept[i] = rr
+    return acc, kept
+
+
+def _residual_summary(prepared, plant, condition, effects, settings) -> list[dict]:
+    """RMS and mean of the pointwise residuals per equation and region."""
+    c = plant.cylinder
+    sums: dict[tuple[str, str], list[float]] = {}
+    for p in prepared:
+        rec = p.rec
+        t = _terms_sg(rec, plant, condition, effects)
+        g1 = effects.p1_sensor_gain
+        g2 = effects.p2_sensor_gain
+        r = pointwise_residuals(t, rec.sg["v"], rec.sg["a"], rec.sg["dp1"] / g1, rec.sg["dp2"] / g2, c.A1, c.A2, _load_for(p, plant, condition, effects, settings))
+        for eq, key in (("chamber1", "r1"), ("chamber2", "r2"), ("motion", "rm")):
+            val = r[key]
+            base = np.isfinite(val)
+            if eq == "motion":
+                base &= p.base_load.usable
+            for reg in REGIONS:
+                m = base & p.regions[reg]
+                acc = sums.setdefault((eq, reg), [0.0, 0.0, 0])
+                acc[0] += float(np.sum(val[m] ** 2))
+                acc[1] += float(np.sum(val[m]))
+                acc[2] += int(m.sum())
+    rows = []
+    for (eq, reg), (ss, s, n) in sorted(sums.items()):
+        rows.append({
+            "equation": eq, "region": reg, "n_samples": n,
+            "rms": float(np.sqrt(ss / n)) if n else float("nan"),
+            "mean": float(s / n) if n else float("nan"),
+            "unit": "N" if eq == "motion" else "m3/s",
+        })
+    return rows
+
+

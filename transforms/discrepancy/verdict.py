@@ -1,0 +1,243 @@
+"""The verdict of a discrepancy run with nuisance parameters: ``named``, ``ambiguous`` or ``none``,
+how sure, and why.
+
+Two kinds of evidence (docs/discrepancy.md, "Verdicts"):
+
+1. **What the nuisances cannot explain at all.** The forward selection runs on the residuals and
+   regressors cleared of the nuisance directions (``pipeline._select``); an effect it names has a
+   signature no combination of the base model's uncertain parameters has. Named; ambiguous when
+   the runner-up effect is hard to tell from it (advantage t < ``AMBIGUITY_T``).
+2. **What the nuisances explain only outside their tolerances.** An effect whose signature *is* a
+   nuisance pattern (a spool sensor offset is exactly the underlap pattern (−Δx, +Δx, +Δx, −Δx);
+   a moving-mass change is a mass off its datasheet; air at high pressure is a lower β) leaves no
+   residual once the nuisances are calibrated, but it drives them away from their priors. For
+   every candidate j the linearised MAP problem is solved again with j free:
+
+       O = Σ (w r)² / κ + |z|²,      ΔO_j = O(without j) − O(with j)
+
+   (κ ≥ 1: the correlation of neighbouring residual rows, the ratio of the block sums' variance
+   to the rows'; z the standardised nuisances). For an exact nuisance pattern ΔO_j = (a·z)², the
+   squared number of prior σ the nuisances had to move along the effect's pattern. ΔO_j ≥
+   ``Z_AMBIGUOUS``² is reported: ``ambiguous`` with both readings (the effect's value, and the
+   nuisances' values that would explain the same data) and what data would separate them;
+   ΔO_j ≥ ``Z_NAMED``² is ``named`` (such a deviation is not scatter: e.g. a 30 µm underlap
+   pattern against 5 µm tolerance).
+
+Confidence: for (1) Φ(t) of the advantage over the runner-up (0.999 without one); for (2)
+1/(1 + exp(−(ΔO − Z_AMBIGUOUS²)/2)) for the effect reading, which is 0.5 at the ambiguity line;
+for ``none`` one minus the largest of those over all candidates.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from scipy import stats
+
+from model.effects import EffectSpec
+from transforms.discrepancy.nuisance import NUISANCE_UNITS
+
+__all__ = ["SEPARATE_BY", "Verdict", "Z_AMBIGUOUS", "Z_NAMED", "nuisance_verdict"]
+
+Z_AMBIGUOUS = 3.0
+"""Prior σ (along an effect's nuisance pattern) above which the nuisance reading is reported as doubtful."""
+Z_NAMED = 6.0
+"""... and above which the effect is named: the nuisances would be far outside their tolerances."""
+MAX_CONFIDENCE = 0.999
+REFIT_CANDIDATES = 3
+"""The leading candidates by the linearised ΔO are fitted again exactly (jointly with the nuisances)."""
+
+SEPARATE_BY: dict[str, str] = {
+    "spool_sensor_offset": "a commissioning window (an underlap pattern is there from the start, a sensor offset appears later) or the spool's null reading at stand-still with the pressure off",
+    "entrained_air": "moves at low chamber pressure (air is ~10x softer at 20 bar than at 150 bar, a low bulk modulus is not)",
+    "load_mass_change": "a commissioning window or the weighed moving mass",
+    "friction_change": "a commissioning window (seal friction is known to ~30 % only)",
+    "pressure_sensor_offset": "the transmitter's reading with the system unpressurised, or a commissioning window",
+    "pressure_sensor_gain": "a reference gauge at a second pressure level, or a commissioning window",
+    "internal_leakage": "a stand-still holding pressure with the valve closed (leakage flow shows as pressure decay)",
+    "external_leakage": "a stand-still holding pressure with the valve closed (leakage flow shows as pressure decay)",
+    "supply_line_resistance": "a pressure transmitter at the valve's P port, or moves at different flow with the same supply pressure",
+}
+
+
+def _fmt_nuisance(name: str, delta_si: float, sigma: float) -> str:
+    unit = NUISANCE_UNITS[name]
+    zz = delta_si / sigma if sigma > 0 else float("nan")
+    if unit == "m":
+        return f"{name} {delta_si * 1e6:+.1f} µm ({zz:+.1f}σ)"
+    return f"{name} {delta_si:+.3g} {unit} ({zz:+.1f}σ)"
+
+
+@dataclass
+class Verdict:
+    """What a run with nuisance parameters concluded.
+
+    Attributes
+    ----------
+    verdict : str
+        ``named``, ``ambiguous`` or ``none``.
+    confidence : float
+        In [0, 1]: how sure the first reading is (module docstring).
+    effect : EffectSpec or None
+        The effect of the first reading (None for ``none``).
+    value : float
+        Its parameter. [effect.unit]
+    alternatives : list of str
+        The other readings of the same data (effects with their values, or the nuisance values).
+    separate_by : str
+        What data would tell the readings apart.
+    reason : str
+        One sentence: why this verdict.
+    nuisances : list of dict
+        The calibrated nuisances (:meth:`transforms.discrepancy.calibration.Calibration.table` rows).
+    scores : list of dict
+        Every candidate's ΔO (evidence beyond the nuisance tolerances), its value and the nuisance reading.
+    """
+
+    verdict: str
+    confidence: float
+    effect: EffectSpec | None
+    value: float
+    alternatives: list[str] = field(default_factory=list)
+    separate_by: str = ""
+    reason: str = ""
+    nuisances: list[dict] = field(default_factory=list)
+    scores: list[dict] = field(default_factory=list)
+    alternative_keys: list[str] = field(default_factory=list)
+    """Library keys among the alternatives (for the study's bookkeeping)."""
+    gap_before: float = float("nan")
+    gap_after: float = float("nan")
+    """Normalised replay gap of the calibrated base model and with the first reading's effect
+    (for a verdict from the selection, the pipeline's stage gaps)."""
+
+
+def _logistic(d: float) -> float:
+    return float(min(MAX_CONFIDENCE, 1.0 / (1.0 + np.exp(-(d - Z_AMBIGUOUS**2) / 2.0))))
+
+
+def _block_kappa(rw: np.ndarray, block: np.ndarray) -> float:
+    ok = np.isfinite(rw)
+    uniq, inv = np.unique(block[ok], return_inverse=True)
+    sums = np.bincount(inv, weights=rw[ok], minlength=uniq.size)
+    den = float(np.sum(rw[ok] ** 2))
+    return max(1.0, float(np.sum(sums**2)) / den) if den > 0 else 1.0
+
+
+def nuisance_scores(nm, fit, named_specs, specs, rows0, w_rows, settings, prepared) -> list[dict]:
+    """ΔO, value and nuisance reading of every library candidate not named (module docstring)."""
+    from transforms.discrepancy.calibration import jacobians, joint_fit
+
+    others = [s for s in specs if s not in named_specs]
+    _, _, Jc = jacobians(prepared, nm, fit.z, fit.effects, others, rows0, settings, fit.r) if others else (None, None, np.zeros((fit.r.size, 0)))
+    rw = fit.r * w_rows
+    cols = [fit.Jz * w_rows[:, None], fit.Je * w_rows[:, None], Jc * w_rows[:, None]]
+    ok = np.isfinite(rw)
+    for c in cols:
+        ok &= np.all(np.isfinite(c), axis=1)
+    kappa = _block_kappa(np.where(ok, rw, np.nan), rows0.block)
+    q, p = fit.Jz.shape[1], fit.Je.shape[1]
+    sk = np.sqrt(kappa)
+    N, E, C = (c[ok] / sk for c in cols)
+    b = np.r_[-rw[ok] / sk, -fit.z]
+    prior = np.hstack([np.eye(q), np.zeros((q, p))])
+
+    def solve(A):
+        sc = np.sqrt(np.mean(A * A, axis=0))
+        sc = np.where(sc > 0, sc, 1.0)
+        x, *_ = np.linalg.lstsq(A / sc, b, rcond=None)
+        x = x / sc
+        return x, float(np.sum((A @ x - b) ** 2))
+
+    A0 = np.vstack([np.hstack([N, E]), prior])
+    _, o0 = solve(A0)
+    out = []
+    for j, spec in enumerate(others):
+        A = np.vstack([np.hstack([N, E, C[:, j:j + 1]]), np.hstack([prior, np.zeros((q, 1))])])
+        x, o = solve(A)
+        t = float(x[-1])
+        d = o0 - o
+        if spec.lower is not None and t < 0:
+            d = 0.0
+        dz = x[:q]
+        order = np.argsort(-np.abs(dz))[:4]
+        reading = ", ".join(
+            _fmt_nuisance(nm.names()[k], -dz[k] * nm.sigma[nm.active[k]], nm.sigma[nm.active[k]]) for k in order if abs(dz[k]) >= 0.5
+        )
+        out.append({"key": spec.key, "spec": spec, "delta_objective": float(max(d, 0.0)), "value": spec.value(fit.effects) + t,
+                    "nuisance_reading": reading, "kappa": kappa, "refit": None})
+    out.sort(key=lambda r: -r["delta_objective"])
+    # the leading candidates again, by the exact (nonlinear) joint fit from the linear reading
+    o_without = fit.data_ss / kappa + fit.prior_ss
+    for r in out[:REFIT_CANDIDATES]:
+        if r["delta_objective"] < 0.5 * Z_AMBIGUOUS**2:
+            break
+        spec = r["spec"]
+        start = replace(fit.effects, **{spec.attribute: r["value"] if spec.lower is None else max(r["value"], spec.lower)})
+        jf = joint_fit(prepared, nm, fit.z, list(named_specs) + [spec], start, rows0, w_rows, settings)
+        d = o_without - (jf.data_ss / kappa + jf.prior_ss)
+        dz = fit.z - jf.z
+        order = np.argsort(-np.abs(dz))[:4]
+        r.update(delta_objective=float(max(d, 0.0)), value=spec.value(jf.effects), refit=jf, nuisance_reading=", ".join(
+            _fmt_nuisance(nm.names()[k], dz[k] * nm.sigma[nm.active[k]], nm.sigma[nm.active[k]]) for k in order if abs(dz[k]) >= 0.5))
+    return sorted(out, key=lambda r: -r["delta_objective"])
+
+
+def nuisance_verdict(prepared, nm, fit, named_specs, specs, rows0, w_rows, settings, named, gap_of, gap_before: float) -> Verdict:
+    """The verdict of a run with nuisances (module docstring). ``named`` are the pipeline's
+    NamedEffects (selection on what the nuisances cannot explain); ``fit`` the final joint fit;
+    ``gap_of(effects, (plant, condition))`` replays the records and returns the normalised gap."""
+    from transforms.discrepancy.calibration import Calibration
+
+    cal = Calibration(nm=nm, z=fit.z, z_se=fit.z_se, plant=None, condition=None, sigmas=(0.0, 0.0, 0.0))  # type: ignore[arg-type]
+    table = cal.table()
+    scores = nuisance_scores(nm, fit, named_specs, specs, rows0, w_rows, settings, prepared)
+    for s in scores:
+        s["confidence"] = _logistic(s["delta_objective"])
+    public = [{k: v for k, v in s.items() if k not in ("spec", "refit")} for s in scores]
+    if named:
+        first = named[0]
+        alt = first.alternative
+        conf = float(min(MAX_CONFIDENCE, stats.norm.cdf(first.alternative_t))) if np.isfinite(first.alternative_t) else MAX_CONFIDENCE
+        gaps = dict(gap_before=first.gap_before, gap_after=first.gap_after)
+        if alt is not None:
+            return Verdict(
+                "ambiguous", conf, first.spec, first.value, alternatives=[alt.key], alternative_keys=[alt.key],
+                separate_by=SEPARATE_BY.get(first.spec.name, "a commissioning window"),
+                reason=f"{first.spec.key} explains what the base model's tolerances cannot, but {alt.key} explains nearly as much (advantage t = {first.alternative_t:.2g})",
+                nuisances=table, scores=public, **gaps)
+        return Verdict(
+            "named", conf, first.spec, first.value,
+            reason=(f"{first.spec.key} explains what no combination of the base model's uncertain parameters within their tolerances can "
+                    f"(cross-validated gain {first.relative_gain:.0%}, t = {first.t_stat:.3g}); gap {first.gap_before:.3g} → {first.gap_after:.3g}"),
+            nuisances=table, scores=public, **gaps)
+    best = scores[0] if scores else None
+    if best is None or best["delta_objective"] < Z_AMBIGUOUS**2:
+        worst = max([s["confidence"] for s in scores] + [0.0])
+        zb = np.sqrt(best["delta_objective"]) if best else 0.0
+        return Verdict("none", float(min(MAX_CONFIDENCE, 1.0 - worst)), None, float("nan"),
+                       reason=(f"the base model with its uncertain parameters calibrated within their tolerances explains the data "
+                               f"(largest excess along an effect's pattern {zb:.2g}σ < {Z_AMBIGUOUS:g}σ)"),
+                       nuisances=table, scores=public, gap_before=gap_before, gap_after=gap_before)
+    spec = best["spec"]
+    z = float(np.sqrt(best["delta_objective"]))
+    rivals = [s for s in scores[1:] if s["delta_objective"] >= max(Z_AMBIGUOUS**2, 0.5 * best["delta_objective"])]
+    alts = [f"{s['key']} {s['spec'].parameter_name}={s['value']:.3g} {s['spec'].unit}" for s in rivals]
+    nuis = f"the base model with {best['nuisance_reading']}" if best["nuisance_reading"] else "the base model's tolerances"
+    sep = SEPARATE_BY.get(spec.name, "a commissioning window")
+    jf = best["refit"]
+    if jf is not None:
+        table = Calibration(nm=nm, z=jf.z, z_se=jf.z_se, plant=None, condition=None, sigmas=(0.0, 0.0, 0.0)).table()  # type: ignore[arg-type]
+        gap_after = gap_of(jf.effects, nm.model(jf.z))
+    else:
+        gap_after = float("nan")
+    gaps = dict(gap_before=gap_before, gap_after=gap_after)
+    if z >= Z_NAMED and not rivals:
+        return Verdict("named", best["confidence"], spec, best["value"], alternatives=[nuis], separate_by=sep,
+                       reason=f"without {spec.key} the base model's parameters would have to move {z:.2g}σ outside their tolerances ({nuis})",
+                       nuisances=table, scores=public, **gaps)
+    return Verdict("ambiguous", best["confidence"], spec, best["value"], alternatives=[nuis] + alts,
+                   alternative_keys=[s["key"] for s in rivals], separate_by=sep,
+                   reason=(f"the data fit either {spec.key} {spec.parameter_name}={best['value']:.3g} {spec.unit} or {nuis}: "
+                           f"{z:.2g}σ from the tolerances, more than manufacturing scatter and datasheets usually allow, too little to rule them out"),
+                   nuisances=table, scores=public, **gaps)
