@@ -233,7 +233,8 @@ def ensure_tables(con: duckdb.DuckDBPyConnection, tables: Mapping[str, tuple[tup
 def add_missing_columns(con: duckdb.DuckDBPyConnection, tables: Mapping[str, tuple[Field, ...]]) -> None:
     """Add to existing ``tables`` (name → fields) the fields the registry gained after the
     warehouse was created, after their own columns, with the value that means "none" for the rows
-    already there (null, or '' / 0 for a non-nullable field); one catalog query, DDL only when
+    already there (null, or '' / 0 for a non-nullable text / number; a time has no "none" but
+null); one catalog query, DDL only when
     something is missing."""
     names = list(tables)
     have: dict[str, set[str]] = {}
@@ -245,7 +246,7 @@ def add_missing_columns(con: duckdb.DuckDBPyConnection, tables: Mapping[str, tup
     for name, fields in tables.items():
         for f in fields:
             if name in have and f.name not in have[name]:
-                default = "NULL" if f.nullable else ("''" if f.dtype == pl.Utf8 else "0")
+                default = "NULL" if f.nullable else ("''" if f.dtype == pl.Utf8 else "0" if f.dtype.is_numeric() else "NULL")
                 con.execute(f'ALTER TABLE {name} ADD COLUMN "{f.name}" {duckdb_type(f.dtype)} DEFAULT {default}')
 
 

@@ -38,7 +38,7 @@ from flows.common.config import load_plant_config, plant_valves
 from flows.common.errors import ValvemonError
 from flows.common.instants import utc_instant
 from flows.common.prefect_run import flow, task
-from flows.common.warehouse_db import connect, ensure_tables, insert_frame, transaction
+from flows.common.warehouse_db import add_missing_columns, connect, ensure_tables, insert_frame, transaction
 from flows.discrepancy.lake_records import lake_records
 from model.params import PlantParams, ValveCondition
 from schemas.fields import (
@@ -81,15 +81,9 @@ def plant_params_for(valve: ValveSpec, export) -> PlantParams:
 
 def ensure_discrepancy_tables(con) -> None:
     """Create the discrepancy tables if missing, and add columns a newer registry names to a
-    table an older version created (null for the old runs)."""
-    from flows.common.warehouse_db import duckdb_type
-
+    table an older version created (`add_missing_columns`: null, or 0 / '' where the field is not nullable)."""
     ensure_tables(con, {name: (fields, None) for name, fields in DISCREPANCY_TABLES.items()})
-    for name, fields in DISCREPANCY_TABLES.items():
-        have = {r[0] for r in con.execute(f"DESCRIBE {name}").fetchall()}
-        for f in fields:
-            if f.name not in have:
-                con.execute(f'ALTER TABLE {name} ADD COLUMN "{f.name}" {duckdb_type(f.dtype)}')
+    add_missing_columns(con, DISCREPANCY_TABLES)
 
 
 def _fmt(v: float) -> str:
