@@ -11,6 +11,9 @@ use; the workflow is given the nominal design data only, and
 * ``--commissioning yes``: first calibrates the nuisances on a commissioning window of the same
   valve without the effect (another seed), then diagnoses against that model taken as exact.
 
+``--family sharp|worn3`` makes the true valve one of issue 16's other families (sharp-edged spool,
+worn lands leaking 3× Eq. 3); the workflow is still given Eq. 3's design data.
+
 ``--method before`` runs the workflow as it was before issue 17 on the same cells (the design data
 taken as exact; with commissioning only α and underlap fitted, ``pipeline.fit_condition``).
 
@@ -44,7 +47,11 @@ SMALL_FACTOR = 0.2
 """The small magnitude is this fraction of the library's typical one."""
 
 
-def true_plant(seed: int):
+FAMILIES: dict[str, dict] = {"eq3": {}, "sharp": {"area_law": "sharp"}, "worn3": {"leakage_factor": 3.0}}
+"""The true valve's family (issue 16's area laws); the workflow always assumes Eq. 3."""
+
+
+def true_plant(seed: int, family: str = "eq3"):
     from model import TABLE1
     from model.params import ControllerParams, LoadParams, TrajectoryParams
     from transforms.discrepancy.nuisance import NuisancePriors, apply_nuisances, nuisance_sigmas, nuisance_values
@@ -59,6 +66,7 @@ def true_plant(seed: int):
         trajectory=TrajectoryParams(profile="minimum_jerk", v_extend_m_s=(0.12, 0.2), v_retract_m_s=(0.06, 0.11), dwell_s=(0.3, 1.0)),
         controller=ControllerParams(kp_m_per_m=0.055, ti_s=0.6),
         load=LoadParams(rate_per_s=0.3),
+        geometry=replace(plant.geometry, **FAMILIES[family]),
     )
     return plant, z
 
@@ -70,34 +78,34 @@ def _lake(effects, seed: int, n_windows: int, plant):
 
 
 @functools.lru_cache(maxsize=4)
-def commissioning_condition_before(seed: int, n_windows: int):
+def commissioning_condition_before(seed: int, n_windows: int, family: str = "eq3"):
     """Before issue 17: only α and underlap fitted on the commissioning window."""
     from model import TABLE1
     from transforms.discrepancy import DiscrepancySettings, split_records
     from transforms.discrepancy.pipeline import fit_condition
 
-    plant, _ = true_plant(seed)
+    plant, _ = true_plant(seed, family)
     s = DiscrepancySettings()
     recs = split_records(_lake(None, 5000 + seed, n_windows, plant), s)
     return TABLE1, fit_condition(recs, TABLE1, TABLE1.nominal_condition, s).condition
 
 
 @functools.lru_cache(maxsize=4)
-def commissioning_model(seed: int, n_windows: int):
+def commissioning_model(seed: int, n_windows: int, family: str = "eq3"):
     """The nuisances calibrated on a clean commissioning window of the seed's valve."""
     from model import TABLE1
     from transforms.discrepancy import DiscrepancySettings, split_records
     from transforms.discrepancy.calibration import calibrate
     from transforms.discrepancy.nuisance import NuisancePriors
 
-    plant, _ = true_plant(seed)
+    plant, _ = true_plant(seed, family)
     s = DiscrepancySettings()
     recs = split_records(_lake(None, 5000 + seed, n_windows, plant), s)
     cal = calibrate(recs, TABLE1, TABLE1.nominal_condition, NuisancePriors(), s)
     return cal.plant, cal.condition
 
 
-def run_cell(key: str, magnitude: str, commissioning: bool, seed: int, n_windows: int, method: str = "nuisance") -> dict:
+def run_cell(key: str, magnitude: str, commissioning: bool, seed: int, n_windows: int, method: str = "nuisance", family: str = "eq3") -> dict:
     from model import TABLE1
     from model.effects import library_entry
     from transforms.discrepancy import DiscrepancySettings, split_records
@@ -105,7 +113,7 @@ def run_cell(key: str, magnitude: str, commissioning: bool, seed: int, n_windows
     from transforms.discrepancy.pipeline import diagnose
 
     t0 = time.process_time()
-    plant, z = true_plant(seed)
+    plant, z = true_plant(seed, family)
     spec = None if key == "none" else library_entry(key)
     value = None
     effects = None
@@ -120,7 +128,7 @@ def run_cell(key: str, magnitude: str, commissioning: bool, seed: int, n_windows
         if not commissioning:
             cp, cc = TABLE1, TABLE1.nominal_condition
         else:
-            cp, cc = (commissioning_model if method == "nuisance" else commissioning_condition_before)(seed, n_windows)
+            cp, cc = (commissioning_model if method == "nuisance" else commissioning_condition_before)(seed, n_windows, family)
         d = diagnose(recs, cp, cc, s, monitoring=False)
         if d.named:
             first = d.named[0]
@@ -148,7 +156,7 @@ def run_cell(key: str, magnitude: str, commissioning: bool, seed: int, n_windows
     if spec is not None and got == key and got_value is not None and np.isfinite(got_value):
         rel_err = abs(got_value - value) / abs(value - spec.neutral)
     return {
-        "effect": key, "magnitude": magnitude, "commissioning": commissioning, "seed": seed, "value": value, "method": method,
+        "effect": key, "magnitude": magnitude, "commissioning": commissioning, "seed": seed, "value": value, "method": method, "family": family,
         "verdict": verdict, "got": got, "got_value": got_value, "alternatives": alts, "confidence": conf, "outcome": outcome,
         "rel_err": rel_err, "gap_nominal": d.gap_nominal, "gap_before": d.stage_gaps[0], "gap_after": d.stage_gaps[-1],
         "cpu_s": time.process_time() - t0,
@@ -191,6 +199,7 @@ def main(argv=None) -> None:
     ap.add_argument("--effects", default="all")
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--method", default="nuisance", choices=("nuisance", "before"))
+    ap.add_argument("--family", default="eq3", choices=tuple(FAMILIES), help="the true valve's area law (the workflow assumes Eq. 3)")
     ap.add_argument("--out", default="bench/discrepancy_robustness.jsonl")
     a = ap.parse_args(argv)
     keys = [s.key for s in EFFECT_LIBRARY] if a.effects == "all" else a.effects.split(",")
@@ -200,10 +209,10 @@ def main(argv=None) -> None:
     tasks = []
     for c in comms:
         for seed in seeds:  # seed-major, so a worker reuses its commissioning calibration
-            tasks.append(("none", "typical", c, seed, a.windows, a.method))
+            tasks.append(("none", "typical", c, seed, a.windows, a.method, a.family))
             for m in mags:
                 for k in keys:
-                    tasks.append((k, m, c, seed, a.windows, a.method))
+                    tasks.append((k, m, c, seed, a.windows, a.method, a.family))
     t0 = time.time()
     rows = []
     out = Path(a.out)
