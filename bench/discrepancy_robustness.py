@@ -47,13 +47,9 @@ SMALL_FACTOR = 0.2
 """The small magnitude is this fraction of the library's typical one."""
 
 
-FAMILIES: dict[str, dict] = {"eq3": {}, "sharp": {"area_law": "sharp"}, "worn3": {"leakage_factor": 3.0}}
-"""The true valve's family (issue 16's area laws); the workflow always assumes Eq. 3."""
-
-
 def true_plant(seed: int, family: str = "eq3"):
     from model import TABLE1
-    from model.params import ControllerParams, LoadParams, TrajectoryParams
+    from model.params import GEOMETRY_FAMILIES, ControllerParams, LoadParams, TrajectoryParams
     from transforms.discrepancy.nuisance import NuisancePriors, apply_nuisances, nuisance_sigmas, nuisance_values
 
     nom = TABLE1.nominal_condition
@@ -66,7 +62,7 @@ def true_plant(seed: int, family: str = "eq3"):
         trajectory=TrajectoryParams(profile="minimum_jerk", v_extend_m_s=(0.12, 0.2), v_retract_m_s=(0.06, 0.11), dwell_s=(0.3, 1.0)),
         controller=ControllerParams(kp_m_per_m=0.055, ti_s=0.6),
         load=LoadParams(rate_per_s=0.3),
-        geometry=replace(plant.geometry, **FAMILIES[family]),
+        geometry=GEOMETRY_FAMILIES[family],  # the nuisances leave the geometry as it is
     )
     return plant, z
 
@@ -199,7 +195,7 @@ def main(argv=None) -> None:
     ap.add_argument("--effects", default="all")
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--method", default="nuisance", choices=("nuisance", "before"))
-    ap.add_argument("--family", default="eq3", choices=tuple(FAMILIES), help="the true valve's area law (the workflow assumes Eq. 3)")
+    ap.add_argument("--family", default="eq3", choices=("eq3", "sharp", "worn3", "worn4"), help="the true valve's area law (the workflow assumes Eq. 3)")
     ap.add_argument("--out", default="bench/discrepancy_robustness.jsonl")
     a = ap.parse_args(argv)
     keys = [s.key for s in EFFECT_LIBRARY] if a.effects == "all" else a.effects.split(",")

@@ -30,15 +30,8 @@ import polars as pl
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from model import TABLE1  # noqa: E402
+from model.params import GEOMETRY_FAMILIES  # noqa: E402
 from tests.monitoring import test_accuracy as study  # noqa: E402
-
-FAMILIES = {
-    "eq3": TABLE1.geometry,
-    "sharp": dataclasses.replace(TABLE1.geometry, area_law="sharp"),
-    "worn3": dataclasses.replace(TABLE1.geometry, leakage_factor=3.0),
-    "worn4": dataclasses.replace(TABLE1.geometry, leakage_factor=4.0),
-}
 
 
 def _seeds(spec: str) -> list[int]:
@@ -56,7 +49,7 @@ def main() -> None:
     if args.assume_eq3:
         params = dataclasses.replace(params, leak_min_points=10**12)
     print(f"{'family':8} {'window-edges':>12} {'ok':>4} {'worst α̂ %':>10} {'worst x̂ % x_max':>16} {'2r leak (t1…t5)':>16}")
-    for name, geometry in FAMILIES.items():
+    for name, geometry in GEOMETRY_FAMILIES.items():
         fits = pl.concat([
             study.wear_study(s, s, trajectory=study.STUDY_TRAJECTORY, geometry=geometry, commissioning=args.commissioning, params=params)
             for s in _seeds(args.seeds)

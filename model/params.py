@@ -527,3 +527,13 @@ class PlantParams:
 #: about 0.1 mm is typical"), alpha = 0.675, x_l = -x_u + delta/2, beta = 1.5 GPa,
 #: p_s = 200 bar, d_s = 6 kN, v_max = 0.3 m/s, V_01 = 3.0 L, V_02 = 7.1 L.
 TABLE1: PlantParams = PlantParams()
+
+#: Named valve-family presets on Table 1's geometry (issue 16; ``model.area``): ``eq3`` the
+#: paper's valve, ``sharp`` sharp edges without closed-edge leakage or clearance intercept,
+#: ``worn3`` / ``worn4`` Eq. 3 with worn lands leaking up to 3× / 4× Eq. 3's.
+GEOMETRY_FAMILIES: dict[str, ValveGeometry] = {
+    "eq3": TABLE1.geometry,
+    "sharp": replace(TABLE1.geometry, area_law="sharp"),
+    "worn3": replace(TABLE1.geometry, leakage_factor=3.0),
+    "worn4": replace(TABLE1.geometry, leakage_factor=4.0),
+}

@@ -11,24 +11,18 @@ monitor's design data stay Table 1's (it is not told the family).
 
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 import polars as pl
 import pytest
 
-from model import TABLE1, broken_edge, condition_arrays, condition_at, healthy, wear
-from model.params import EDGES
+from model import broken_edge, condition_at, healthy, wear
+from model.params import GEOMETRY_FAMILIES
 from transforms.monitor import commissioning_baseline, monitor
 
 from .sim_lake import simulated_lake
 from .test_accuracy import NOMINAL, PARAMS, STUDY_TRAJECTORY, X_MAX, wear_study
 
-FAMILIES = {
-    "eq3": TABLE1.geometry,
-    "sharp": dataclasses.replace(TABLE1.geometry, area_law="sharp"),
-    "worn_lands": dataclasses.replace(TABLE1.geometry, leakage_factor=3.0),
-}
+FAMILIES = {name: GEOMETRY_FAMILIES[name] for name in ("eq3", "sharp", "worn3")}
 ALPHA_TOL = 0.01
 """|α̂ / α_true − 1| bound of issue 16 (1 %)."""
 X_TOL = 0.002 * X_MAX
@@ -66,7 +60,7 @@ def test_identified_leakage_tells_the_families_apart(seed):
     lam = {f: _commissioning(f, seed) for f in FAMILIES}
     assert lam["sharp"]["2r"].leak_scale < 0.3
     assert 0.7 < lam["eq3"]["2r"].leak_scale < 1.4
-    assert 1.8 < lam["worn_lands"]["2r"].leak_scale < 4.0
+    assert 1.8 < lam["worn3"]["2r"].leak_scale < 4.0
     for fits in lam.values():
         for b in fits.values():
             assert b.leak_scale >= 0 and min(b.leak_coefficients) >= 0 and np.isfinite(b.leak_scale_se)
