@@ -11,8 +11,11 @@ use; the workflow is given the nominal design data only, and
 * ``--commissioning yes``: first calibrates the nuisances on a commissioning window of the same
   valve without the effect (another seed), then diagnoses against that model taken as exact.
 
-``--family sharp|worn3`` makes the true valve one of issue 16's other families (sharp-edged spool,
-worn lands leaking 3× Eq. 3); the workflow is still given Eq. 3's design data.
+``--family sharp|worn3|worn4`` makes the true valve one of issue 16's other families (sharp-edged
+spool, worn lands leaking 3× or 4× Eq. 3). ``--declared nameplate`` (default) gives the workflow the
+area law a plant configuration would name: the sharp-edged valve type is configured
+``area_law = "sharp"``, worn lands are not configured (Eq. 3's nameplate; the workflow's edge-shape
+nuisances must absorb them); ``--declared eq3`` gives every valve Eq. 3, the sharp-edged one too.
 
 ``--method before`` runs the workflow as it was before issue 17 on the same cells (the design data
 taken as exact; with commissioning only α and underlap fitted, ``pipeline.fit_condition``).
@@ -50,11 +53,12 @@ SMALL_FACTOR = 0.2
 def true_plant(seed: int, family: str = "eq3"):
     from model import TABLE1
     from model.params import GEOMETRY_FAMILIES, ControllerParams, LoadParams, TrajectoryParams
-    from transforms.discrepancy.nuisance import NuisancePriors, apply_nuisances, nuisance_sigmas, nuisance_values
+    from transforms.discrepancy.nuisance import NUISANCES, SCATTER, NuisancePriors, apply_nuisances, nuisance_sigmas, nuisance_values
 
     nom = TABLE1.nominal_condition
     rng = np.random.default_rng([seed, 17017])
-    z = np.clip(rng.normal(size=15), -2.0, 2.0)
+    z = np.zeros(len(NUISANCES))
+    z[:len(SCATTER)] = np.clip(rng.normal(size=len(SCATTER)), -2.0, 2.0)
     sig = nuisance_sigmas(TABLE1, nom, NuisancePriors())
     plant, cond = apply_nuisances(TABLE1, nom, nuisance_values(TABLE1, nom) + sig * z)
     plant = replace(
@@ -62,9 +66,22 @@ def true_plant(seed: int, family: str = "eq3"):
         trajectory=TrajectoryParams(profile="minimum_jerk", v_extend_m_s=(0.12, 0.2), v_retract_m_s=(0.06, 0.11), dwell_s=(0.3, 1.0)),
         controller=ControllerParams(kp_m_per_m=0.055, ti_s=0.6),
         load=LoadParams(rate_per_s=0.3),
-        geometry=GEOMETRY_FAMILIES[family],  # the nuisances leave the geometry as it is
+        geometry=GEOMETRY_FAMILIES[family],  # the family's edge shape, exactly
     )
     return plant, z
+
+
+def design_plant(family: str, declared: str):
+    """The design data the workflow is given: Table 1 with the area law the plant configuration
+    declares. ``nameplate``: a sharp-edged valve type is configured ``area_law = "sharp"``, worn
+    lands are not configured (wear happens in service: Eq. 3's nameplate); ``eq3``: every valve
+    configured as Eq. 3, the sharp-edged one too."""
+    from model import TABLE1
+    from model.params import GEOMETRY_FAMILIES
+
+    if declared == "nameplate" and GEOMETRY_FAMILIES[family].area_law == "sharp":
+        return replace(TABLE1, geometry=GEOMETRY_FAMILIES[family])
+    return TABLE1
 
 
 def _lake(effects, seed: int, n_windows: int, plant):
@@ -74,35 +91,35 @@ def _lake(effects, seed: int, n_windows: int, plant):
 
 
 @functools.lru_cache(maxsize=4)
-def commissioning_condition_before(seed: int, n_windows: int, family: str = "eq3"):
+def commissioning_condition_before(seed: int, n_windows: int, family: str = "eq3", declared: str = "nameplate"):
     """Before issue 17: only α and underlap fitted on the commissioning window."""
-    from model import TABLE1
     from transforms.discrepancy import DiscrepancySettings, split_records
     from transforms.discrepancy.pipeline import fit_condition
 
     plant, _ = true_plant(seed, family)
+    design = design_plant(family, declared)
     s = DiscrepancySettings()
     recs = split_records(_lake(None, 5000 + seed, n_windows, plant), s)
-    return TABLE1, fit_condition(recs, TABLE1, TABLE1.nominal_condition, s).condition
+    return design, fit_condition(recs, design, design.nominal_condition, s).condition
 
 
 @functools.lru_cache(maxsize=4)
-def commissioning_model(seed: int, n_windows: int, family: str = "eq3"):
+def commissioning_model(seed: int, n_windows: int, family: str = "eq3", declared: str = "nameplate"):
     """The nuisances calibrated on a clean commissioning window of the seed's valve."""
-    from model import TABLE1
     from transforms.discrepancy import DiscrepancySettings, split_records
     from transforms.discrepancy.calibration import calibrate
     from transforms.discrepancy.nuisance import NuisancePriors
 
     plant, _ = true_plant(seed, family)
+    design = design_plant(family, declared)
     s = DiscrepancySettings()
     recs = split_records(_lake(None, 5000 + seed, n_windows, plant), s)
-    cal = calibrate(recs, TABLE1, TABLE1.nominal_condition, NuisancePriors(), s)
+    cal = calibrate(recs, design, design.nominal_condition, NuisancePriors(), s)
     return cal.plant, cal.condition
 
 
-def run_cell(key: str, magnitude: str, commissioning: bool, seed: int, n_windows: int, method: str = "nuisance", family: str = "eq3") -> dict:
-    from model import TABLE1
+def run_cell(key: str, magnitude: str, commissioning: bool, seed: int, n_windows: int, method: str = "nuisance", family: str = "eq3",
+             declared: str = "nameplate") -> dict:
     from model.effects import library_entry
     from transforms.discrepancy import DiscrepancySettings, split_records
     from transforms.discrepancy.nuisance import NuisancePriors
@@ -110,6 +127,7 @@ def run_cell(key: str, magnitude: str, commissioning: bool, seed: int, n_windows
 
     t0 = time.process_time()
     plant, z = true_plant(seed, family)
+    design = design_plant(family, declared)
     spec = None if key == "none" else library_entry(key)
     value = None
     effects = None
@@ -122,9 +140,9 @@ def run_cell(key: str, magnitude: str, commissioning: bool, seed: int, n_windows
     recs = split_records(_lake(effects, 100 + seed, n_windows, plant), s)
     if commissioning or method == "before":
         if not commissioning:
-            cp, cc = TABLE1, TABLE1.nominal_condition
+            cp, cc = design, design.nominal_condition
         else:
-            cp, cc = (commissioning_model if method == "nuisance" else commissioning_condition_before)(seed, n_windows, family)
+            cp, cc = (commissioning_model if method == "nuisance" else commissioning_condition_before)(seed, n_windows, family, declared)
         d = diagnose(recs, cp, cc, s, monitoring=False)
         if d.named:
             first = d.named[0]
@@ -135,7 +153,7 @@ def run_cell(key: str, magnitude: str, commissioning: bool, seed: int, n_windows
             verdict, got, got_value, alts = "none", None, None, []
         conf = None
     else:
-        d = diagnose(recs, TABLE1, None, s, monitoring=False, priors=NuisancePriors())
+        d = diagnose(recs, design, None, s, monitoring=False, priors=NuisancePriors())
         v = d.verdict
         verdict, got, got_value, alts, conf = v.verdict, (v.effect.key if v.effect else None), v.value, v.alternative_keys, v.confidence
     if key == "none":
@@ -152,7 +170,7 @@ def run_cell(key: str, magnitude: str, commissioning: bool, seed: int, n_windows
     if spec is not None and got == key and got_value is not None and np.isfinite(got_value):
         rel_err = abs(got_value - value) / abs(value - spec.neutral)
     return {
-        "effect": key, "magnitude": magnitude, "commissioning": commissioning, "seed": seed, "value": value, "method": method, "family": family,
+        "effect": key, "magnitude": magnitude, "commissioning": commissioning, "seed": seed, "value": value, "method": method, "family": family, "declared": declared,
         "verdict": verdict, "got": got, "got_value": got_value, "alternatives": alts, "confidence": conf, "outcome": outcome,
         "rel_err": rel_err, "gap_nominal": d.gap_nominal, "gap_before": d.stage_gaps[0], "gap_after": d.stage_gaps[-1],
         "cpu_s": time.process_time() - t0,
@@ -195,7 +213,9 @@ def main(argv=None) -> None:
     ap.add_argument("--effects", default="all")
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--method", default="nuisance", choices=("nuisance", "before"))
-    ap.add_argument("--family", default="eq3", choices=("eq3", "sharp", "worn3", "worn4"), help="the true valve's area law (the workflow assumes Eq. 3)")
+    ap.add_argument("--family", default="eq3", choices=("eq3", "sharp", "worn3", "worn4"), help="the true valve's edge shape")
+    ap.add_argument("--declared", default="nameplate", choices=("nameplate", "eq3"),
+                    help="the area law the workflow is given: the valve type's (sharp for the sharp family, Eq. 3 for worn lands) or Eq. 3 always")
     ap.add_argument("--out", default="bench/discrepancy_robustness.jsonl")
     a = ap.parse_args(argv)
     keys = [s.key for s in EFFECT_LIBRARY] if a.effects == "all" else a.effects.split(",")
@@ -205,10 +225,10 @@ def main(argv=None) -> None:
     tasks = []
     for c in comms:
         for seed in seeds:  # seed-major, so a worker reuses its commissioning calibration
-            tasks.append(("none", "typical", c, seed, a.windows, a.method, a.family))
+            tasks.append(("none", "typical", c, seed, a.windows, a.method, a.family, a.declared))
             for m in mags:
                 for k in keys:
-                    tasks.append((k, m, c, seed, a.windows, a.method, a.family))
+                    tasks.append((k, m, c, seed, a.windows, a.method, a.family, a.declared))
     t0 = time.time()
     rows = []
     out = Path(a.out)

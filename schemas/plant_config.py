@@ -225,11 +225,14 @@ class ModelTolerances:
     """One-σ tolerances of the base model's uncertain parameters (``[valves.tolerances]``), the
     priors of the discrepancy workflow's nuisance parameters. Defaults: manufacturing scatter of
     servo valve edges (α 3 %, underlap 5 µm), Table 1's β range 1.4–1.6 GPa and dead volumes from
-    piping drawings (7 %), seal-friction datasheets (30 %), a weighed moving mass (2 %).
+    piping drawings (7 %), seal-friction datasheets (30 %), a weighed moving mass (2 %); the edges'
+    shape beyond Eq. 3's nominal: the radial clearance R − r (50 %: a sharp-edged spool, no
+    clearance intercept, is 2σ below) and the closed lands' leakage (100 % of Eq. 3's: worn lands
+    leaking 3× are 2σ above).
 
     Attributes (SI, relative values as fractions)
     ----------
-    alpha_rel, underlap_m, bulk_modulus_rel, volume_rel, friction_rel, mass_rel : float
+    alpha_rel, underlap_m, bulk_modulus_rel, volume_rel, friction_rel, mass_rel, clearance_rel, land_leakage_rel : float
     """
 
     alpha_rel: float = 0.03
@@ -238,6 +241,8 @@ class ModelTolerances:
     volume_rel: float = 0.07
     friction_rel: float = 0.30
     mass_rel: float = 0.02
+    clearance_rel: float = 0.5
+    land_leakage_rel: float = 1.0
 
 
 _TOLERANCE_KEYS = {  # file key: (attribute, scale to SI, largest value in the file's unit)
@@ -247,6 +252,8 @@ _TOLERANCE_KEYS = {  # file key: (attribute, scale to SI, largest value in the f
     "volume_pct": ("volume_rel", 0.01, 50.0),
     "friction_pct": ("friction_rel", 0.01, 100.0),
     "mass_pct": ("mass_rel", 0.01, 50.0),
+    "clearance_pct": ("clearance_rel", 0.01, 100.0),
+    "land_leakage_pct": ("land_leakage_rel", 0.01, 1000.0),
 }
 
 
