@@ -65,6 +65,33 @@ def test_nuisance_values_round_trip_and_priors():
     assert p.cylinder.d_s_n >= p.cylinder.d_c_n and p.cylinder.mass_kg > 0
 
 
+def test_edge_shape_nuisances_span_the_valve_families():
+    """Eq. 3 with the clearance nuisance at −2σ (R − r → 0) is the sharp-edged law, and the land
+    leakage nuisance at +2σ is worn lands leaking 3× (model.params.GEOMETRY_FAMILIES); a valve
+    configured sharp-edged has no edge-shape nuisance."""
+    from model.area import valve_areas
+
+    v, sig = nuisance_values(TABLE1, NOM), nuisance_sigmas(TABLE1, NOM, PRIORS)
+    i_c, i_l = NUISANCES.index("clearance"), NUISANCES.index("land_leakage")
+    x = np.linspace(-3e-3, 3e-3, 2001)
+    near = np.abs(x) < 3e-4
+    eq3 = np.asarray(valve_areas(x, TABLE1.geometry, NOM))
+
+    def areas(i, dz):
+        w = v.copy()
+        w[i] += dz * sig[i]
+        plant, cond = apply_nuisances(TABLE1, NOM, w)
+        return np.asarray(valve_areas(x, plant.geometry, cond))
+
+    sharp, worn3 = (np.asarray(valve_areas(x, GEOMETRY_FAMILIES[f], NOM)) for f in ("sharp", "worn3"))
+    err = np.abs(areas(i_c, -2.0) - sharp)
+    assert np.max(err) < 0.03 * np.max(sharp)  # π h² cos φ of Eq. 3's open branch, at full opening
+    assert np.max(err[:, near]) < 0.1 * np.min(np.abs(eq3[:, near] - sharp[:, near]))  # the intercept is gone
+    np.testing.assert_allclose(areas(i_l, 2.0), worn3, rtol=1e-12)
+    sharp = replace(TABLE1, geometry=GEOMETRY_FAMILIES["sharp"])
+    assert np.all(nuisance_sigmas(sharp, NOM, PRIORS)[[i_c, i_l]] == 0.0)
+    assert np.all(sig[[i_c, i_l]] > 0.0)
+
 def test_project_out_removes_what_the_nuisances_explain():
     rng = np.random.default_rng(0)
     N = rng.normal(size=(400, 3)) * 30.0  # strong data: the ridge hardly matters
@@ -124,6 +151,32 @@ def test_spool_offset_is_never_another_effect():
     assert v.verdict in ("named", "ambiguous") and v.effect.key == "spool_sensor_offset", (v.verdict, v.reason)
     if v.verdict == "ambiguous":
         assert any("underlap" in a for a in v.alternatives), v.alternatives
+
+
+# --- another valve family than the design data's (issue 16), without a commissioning window ----
+
+SHARP_AS_EQ3 = perturbed_plant(31, family="sharp")[0]
+"""A sharp-edged spool configured as Eq. 3 (no clearance intercept: 55-109 µm of opening near zero)."""
+WORN3 = perturbed_plant(31, family="worn3")[0]
+"""Eq. 3 lands worn in service to 3× Eq. 3's leakage; the configuration still says Eq. 3."""
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("plant", [SHARP_AS_EQ3, WORN3], ids=["sharp", "worn3"])
+def test_clean_valve_of_another_family_is_none(plant):
+    d = diagnose(_records(None, seed=306, plant=plant), TABLE1, None, SETTINGS, monitoring=False, priors=PRIORS)
+    assert d.verdict.verdict == "none", d.verdict.reason
+    assert d.gap_before < 0.5 * d.gap_nominal
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("plant,key,value", [(WORN3, "internal_leakage", 2e-12), (SHARP_AS_EQ3, "pressure_sensor_offset[p1]", 2e5)],
+                         ids=["worn3-internal_leakage", "sharp-p1_offset"])
+def test_effect_on_another_family_is_named_or_honestly_ambiguous(plant, key, value):
+    d = diagnose(_records(library_entry(key).effects(value), seed=307, plant=plant), TABLE1, None, SETTINGS, monitoring=False, priors=PRIORS)
+    v = d.verdict
+    assert v.verdict in ("named", "ambiguous"), (v.verdict, v.reason)
+    assert v.effect.key == key or (v.verdict == "ambiguous" and key in v.alternative_keys), (v.effect.key, v.alternatives)
 
 
 # --- with a commissioning window ---------------------------------------------------------------

@@ -50,13 +50,13 @@ __all__ = [
 from transforms.discrepancy.rows import (  # noqa: F401 (ReplayTrace, prepare_records, perturbed: part of this module's interface)
     FD_FRACTION,
     ReplayTrace,
-    _Rows,
     _demean_motion,
     _equation_sigmas,
     _estimate_load,
     _gaps,
     _jacobian,
     _residual_summary,
+    _Rows,
     _rows,
     perturbed,
     prepare_records,
@@ -274,7 +274,7 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
     """
     from scipy import stats as _stats
 
-    from transforms.discrepancy.calibration import NuisanceModel, calibrate_prepared, joint_fit, refine_breakaway
+    from transforms.discrepancy.calibration import NuisanceModel, calibrate_best, calibrate_prepared, joint_fit, refine_breakaway
 
     settings = settings or DiscrepancySettings()
     condition = plant.nominal_condition if condition is None else condition
@@ -289,7 +289,7 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
     if nm is not None:
         # calibrate the nuisances (loads from the nominal model), then again on the loads of the
         # calibrated model; the calibrated base model is stage 0
-        z_cal = calibrate_prepared(prepared, nm, settings)[0].z
+        z_cal = calibrate_best(prepared, nm, settings)[0].z
         nm = refine_breakaway(prepared, nm, z_cal, settings)
         plant, condition = nm.model(z_cal)
         prepared = prepare_records(records, plant, condition, settings)

@@ -55,7 +55,7 @@ SEPARATE_BY: dict[str, str] = {
     "friction_change": "a commissioning window (seal friction is known to ~30 % only)",
     "pressure_sensor_offset": "the transmitter's reading with the system unpressurised, or a commissioning window",
     "pressure_sensor_gain": "a reference gauge at a second pressure level, or a commissioning window",
-    "internal_leakage": "a stand-still holding pressure with the valve closed (leakage flow shows as pressure decay)",
+    "internal_leakage": "a stand-still holding pressure with the valve closed (leakage flow shows as pressure decay), at several spool positions (worn lands leak more the further the spool is past them, the piston seal does not)",
     "external_leakage": "a stand-still holding pressure with the valve closed (leakage flow shows as pressure decay)",
     "supply_line_resistance": "a pressure transmitter at the valve's P port, or moves at different flow with the same supply pressure",
 }
