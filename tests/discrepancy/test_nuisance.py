@@ -157,6 +157,8 @@ def test_spool_offset_is_never_another_effect():
 
 SHARP_AS_EQ3 = perturbed_plant(31, family="sharp")[0]
 """A sharp-edged spool configured as Eq. 3 (no clearance intercept: 55-109 µm of opening near zero)."""
+SHARP_DESIGN = replace(TABLE1, geometry=GEOMETRY_FAMILIES["sharp"])
+"""The sharp-edged valve's design data as its plant configuration names it (``area_law = "sharp"``)."""
 WORN3 = perturbed_plant(31, family="worn3")[0]
 """Eq. 3 lands worn in service to 3× Eq. 3's leakage; the configuration still says Eq. 3."""
 
@@ -170,14 +172,16 @@ def test_clean_valve_of_another_family_is_none(plant):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("plant,key,value", [(WORN3, "internal_leakage", 2e-12), (SHARP_AS_EQ3, "pressure_sensor_offset[p1]", 2e5)],
-                         ids=["worn3-internal_leakage", "sharp-p1_offset"])
-def test_effect_on_another_family_is_named_or_honestly_ambiguous(plant, key, value):
-    d = diagnose(_records(library_entry(key).effects(value), seed=307, plant=plant), TABLE1, None, SETTINGS, monitoring=False, priors=PRIORS)
+@pytest.mark.parametrize("plant,design,key,value", [(WORN3, TABLE1, "internal_leakage", 2e-12),
+                                                    (SHARP_AS_EQ3, SHARP_DESIGN, "pressure_sensor_offset[p1]", 2e5)],
+                         ids=["worn3-internal_leakage", "sharp_configured-p1_offset"])
+def test_effect_on_another_family_is_named_or_honestly_ambiguous(plant, design, key, value):
+    d = diagnose(_records(library_entry(key).effects(value), seed=307, plant=plant), design, None, SETTINGS, monitoring=False, priors=PRIORS)
     v = d.verdict
     assert v.verdict in ("named", "ambiguous"), (v.verdict, v.reason)
     assert v.effect.key == key or (v.verdict == "ambiguous" and key in v.alternative_keys), (v.effect.key, v.alternatives)
-
+    if v.effect.key == key:
+        assert abs(v.value - value) <= 0.2 * abs(value), (v.value, value)
 
 # --- with a commissioning window ---------------------------------------------------------------
 

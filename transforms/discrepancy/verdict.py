@@ -21,7 +21,9 @@ Two kinds of evidence (docs/discrepancy.md, "Verdicts"):
    ``Z_AMBIGUOUS``² is reported: ``ambiguous`` with both readings (the effect's value, and the
    nuisances' values that would explain the same data) and what data would separate them;
    ΔO_j ≥ ``Z_NAMED``² is ``named`` (such a deviation is not scatter: e.g. a 30 µm underlap
-   pattern against 5 µm tolerance).
+   pattern against 5 µm tolerance). A reading must hold in the replay as well: one whose exact
+   joint fit widens the replay gap by more than ``REPLAY_REFUTES`` is refuted and left out (a
+   transmitter gain that balances the equation rows' small systematic errors but replays worse).
 
 Confidence: for (1) Φ(t) of the advantage over the runner-up (0.999 without one); for (2)
 1/(1 + exp(−(ΔO − Z_AMBIGUOUS²)/2)) for the effect reading, which is 0.5 at the ambiguity line;
@@ -45,6 +47,9 @@ Z_AMBIGUOUS = 3.0
 Z_NAMED = 6.0
 """... and above which the effect is named: the nuisances would be far outside their tolerances."""
 MAX_CONFIDENCE = 0.999
+REPLAY_REFUTES = 1.1
+"""A reading whose exact fit widens the replay gap beyond this factor is refuted (an effect that is a
+nuisance pattern leaves the gap about as it is, one that explains the data shrinks it)."""
 REFIT_CANDIDATES = 3
 """The leading candidates by the linearised ΔO are fitted again exactly (jointly with the nuisances)."""
 
@@ -211,24 +216,37 @@ def nuisance_verdict(prepared, nm, fit, named_specs, specs, rows0, w_rows, setti
             reason=(f"{first.spec.key} explains what no combination of the base model's uncertain parameters within their tolerances can "
                     f"(cross-validated gain {first.relative_gain:.0%}, t = {first.t_stat:.3g}); gap {first.gap_before:.3g} → {first.gap_after:.3g}"),
             nuisances=table, scores=public, **gaps)
-    best = scores[0] if scores else None
-    if best is None or best["delta_objective"] < Z_AMBIGUOUS**2:
-        worst = max([s["confidence"] for s in scores] + [0.0])
-        zb = np.sqrt(best["delta_objective"]) if best else 0.0
+    # a reading must hold in the replay too (as the pipeline's confirmation by simulation): one
+    # whose exact fit widens the replay gap beyond REPLAY_REFUTES is refuted and left out
+    refuted, gap_after, best = [], float("nan"), None
+    for sc in scores:
+        if sc["delta_objective"] < Z_AMBIGUOUS**2:
+            break
+        if sc["refit"] is not None:
+            gap_after = gap_of(sc["refit"].effects, nm.model(sc["refit"].z))
+            if gap_after > REPLAY_REFUTES * gap_before:
+                refuted.append(sc)
+                continue
+        best = sc
+        break
+    why = f"; refuted by the replay: {', '.join(sc['key'] for sc in refuted)} (widens the gap)" if refuted else ""
+    scores = [sc for sc in scores if not any(sc is r for r in refuted)]
+    if best is None:
+        worst = max([sc["confidence"] for sc in scores] + [0.0])
+        zb = np.sqrt(scores[0]["delta_objective"]) if scores else 0.0
         return Verdict("none", float(min(MAX_CONFIDENCE, 1.0 - worst)), None, float("nan"),
                        reason=(f"the base model with its uncertain parameters calibrated within their tolerances explains the data "
-                               f"(largest excess along an effect's pattern {zb:.2g}σ < {Z_AMBIGUOUS:g}σ)"),
+                               f"(largest excess along an effect's pattern {zb:.2g}σ < {Z_AMBIGUOUS:g}σ){why}"),
                        nuisances=table, scores=public, gap_before=gap_before, gap_after=gap_before)
     spec = best["spec"]
     z = float(np.sqrt(best["delta_objective"]))
-    rivals = [s for s in scores[1:] if s["delta_objective"] >= max(Z_AMBIGUOUS**2, 0.5 * best["delta_objective"])]
-    alts = [f"{s['key']} {s['spec'].parameter_name}={s['value']:.3g} {s['spec'].unit}" for s in rivals]
+    rivals = [sc for sc in scores if sc is not best and sc["delta_objective"] >= max(Z_AMBIGUOUS**2, 0.5 * best["delta_objective"])]
+    alts = [f"{sc['key']} {sc['spec'].parameter_name}={sc['value']:.3g} {sc['spec'].unit}" for sc in rivals]
     nuis = f"the base model with {best['nuisance_reading']}" if best["nuisance_reading"] else "the base model's tolerances"
     sep = SEPARATE_BY.get(spec.name, "a commissioning window")
     jf = best["refit"]
     if jf is not None:
         table = Calibration(nm=nm, z=jf.z, z_se=jf.z_se, plant=None, condition=None, sigmas=(0.0, 0.0, 0.0)).table()  # type: ignore[arg-type]
-        gap_after = gap_of(jf.effects, nm.model(jf.z))
     else:
         gap_after = float("nan")
     gaps = dict(gap_before=gap_before, gap_after=gap_after)
@@ -237,7 +255,7 @@ def nuisance_verdict(prepared, nm, fit, named_specs, specs, rows0, w_rows, setti
                        reason=f"without {spec.key} the base model's parameters would have to move {z:.2g}σ outside their tolerances ({nuis})",
                        nuisances=table, scores=public, **gaps)
     return Verdict("ambiguous", best["confidence"], spec, best["value"], alternatives=[nuis] + alts,
-                   alternative_keys=[s["key"] for s in rivals], separate_by=sep,
+                   alternative_keys=[sc["key"] for sc in rivals], separate_by=sep,
                    reason=(f"the data fit either {spec.key} {spec.parameter_name}={best['value']:.3g} {spec.unit} or {nuis}: "
                            f"{z:.2g}σ from the tolerances, more than manufacturing scatter and datasheets usually allow, too little to rule them out"),
                    nuisances=table, scores=public, **gaps)
