@@ -51,6 +51,7 @@ from schemas.fields import (
     polars_schema,
 )
 from schemas.plant_config import ValveSpec
+from transforms.discrepancy.gaps import NOISE_GAP
 from transforms.discrepancy.nuisance import NuisancePriors
 from transforms.discrepancy.pipeline import ConditionFit, Diagnosis, diagnose
 from transforms.discrepancy.settings import DiscrepancySettings
@@ -64,9 +65,6 @@ DISCREPANCY_TABLES = {
     "discrepancy_condition": DISCREPANCY_CONDITION_FIELDS,
 }
 CONDITION_MODES = ("auto", "design", "commissioning")
-NOISE_GAP = 0.2
-"""A normalised gap above this is more than recorded noise and the load estimate leave (exact
-model on Table 1's sensors: 0.04–0.2, docs/discrepancy.md)."""
 
 
 def plant_params_for(valve: ValveSpec, export) -> PlantParams:

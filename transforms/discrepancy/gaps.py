@@ -17,12 +17,15 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["GAP_SCALES", "GAP_SIGNALS", "GapAccumulator", "normalised_gap"]
+__all__ = ["GAP_SCALES", "GAP_SIGNALS", "NOISE_GAP", "GapAccumulator", "normalised_gap"]
 
 GAP_SIGNALS = ("p1", "p2", "X")
 GAP_SCALES = {"p1": 1.0e5, "p2": 1.0e5, "X": 1.0e-3}
 """Normalising scale of each signal's RMS error in the normalised gap: 1 bar, 1 bar, 1 mm."""
 GAP_UNITS = {"p1": "Pa", "p2": "Pa", "X": "m"}
+NOISE_GAP = 0.2
+"""A normalised gap above this is more than recorded noise and the load estimate leave (exact
+model on Table 1's sensors: 0.04–0.2, docs/discrepancy.md)."""
 
 
 def normalised_gap(rms: dict[str, float]) -> float:
