@@ -15,9 +15,10 @@ import pytest
 
 from model import TABLE1
 from model.effects import Effects, library_entry
-from model.params import GEOMETRY_FAMILIES
+from model.params import GEOMETRY_FAMILIES, ControllerParams, LoadParams, TrajectoryParams
 from transforms.discrepancy import DiscrepancySettings, split_records
-from transforms.discrepancy.calibration import calibrate
+from transforms.discrepancy.calibration import _split_gains, calibrate
+from transforms.discrepancy.load import LoadEstimate
 from transforms.discrepancy.nuisance import NUISANCES, SCATTER, NuisancePriors, apply_nuisances, nuisance_sigmas, nuisance_values
 from transforms.discrepancy.pipeline import _project_out, diagnose
 
@@ -28,8 +29,10 @@ PRIORS = NuisancePriors()
 NOM = TABLE1.nominal_condition
 
 
-def perturbed_plant(seed: int, clip: float = 1.5, family: str = "eq3"):
-    rng = np.random.default_rng([seed, 4242])
+def perturbed_plant(seed: int, clip: float = 1.5, family: str = "eq3", stream: int = 4242):
+    """The valve of ``seed``: every scatter nuisance off nominal by z ~ N(0, 1) clipped at ±``clip``
+    (``stream`` 17017 and clip 2 are bench/discrepancy_robustness.py's), edges of ``family``."""
+    rng = np.random.default_rng([seed, stream])
     z = np.zeros(len(NUISANCES))
     z[:len(SCATTER)] = np.clip(rng.normal(size=len(SCATTER)), -clip, clip)
     plant, cond = apply_nuisances(TABLE1, NOM, nuisance_values(TABLE1, NOM) + nuisance_sigmas(TABLE1, NOM, PRIORS) * z)
@@ -100,6 +103,20 @@ def test_project_out_removes_what_the_nuisances_explain():
     a, b = _project_out(N, inside, outside)
     assert np.linalg.norm(a) < 1e-2 * np.linalg.norm(inside)
     assert np.linalg.norm(b) > 0.9 * np.linalg.norm(outside)
+
+
+def test_split_gains_peak_at_a_level_change_and_added_step_splits_the_segment():
+    r = np.r_[np.full(10, -1.0), np.full(15, 2.0 / 3.0)]  # demeaned, level change after row 10
+    g = _split_gains(r)
+    assert int(np.argmax(g)) == 9 and g[9] == pytest.approx(10 * 15 / 25 * (5.0 / 3.0) ** 2)
+    n = 1000
+    seg = (np.arange(n) >= 600).astype(np.int64)
+    est = LoadEstimate(seg, np.array([600]), np.array([1.0, 2.0]), np.where(seg, 2.0, 1.0), np.full((1, 2), -1),
+                       np.ones(n, bool), np.ones(n, bool))
+    new = est.with_added_step(300, guard=40)
+    assert new.steps.tolist() == [300, 600] and new.levels.tolist() == [1.0, 1.0, 2.0] and new.brackets.shape == (2, 2)
+    assert new.segment[299] == 0 and new.segment[300] == 1 and new.segment[600] == 2
+    assert not new.usable[260:340].any() and new.usable[:260].all() and new.usable[340:].all()
 
 
 def test_calibration_recovers_the_perturbed_plant_and_closes_the_gap():
@@ -185,11 +202,42 @@ def test_effect_on_another_family_is_named_or_honestly_ambiguous(plant, design, 
 
 # --- with a commissioning window ---------------------------------------------------------------
 
-CLEAR_GAP = [  # the gap-shrink magnitudes of test_hidden_effects.CLEAR (mass and air doubled)
+CLEAR_GAP = [  # the gap-shrink magnitudes of test_hidden_effects.CLEAR, mass and air doubled: at 600 kg and 5e-3 they
+    # are named first here too, but raise the gap only to 0.088 / 0.084 against the commissioned model's
+    # floor of 0.047, so it cannot shrink 3x (the commissioning mass is right on this plant: z 1.38, true 1.34)
     ("internal_leakage", 2e-12), ("external_leakage", 2e-12), ("entrained_air", 1e-2), ("spool_sensor_offset", 1e-5),
     ("pressure_sensor_offset[p1]", 2e5), ("pressure_sensor_offset[p2]", -2e5), ("pressure_sensor_gain[p1]", 1.03),
     ("pressure_sensor_gain[p2]", 0.97), ("supply_line_resistance", 1e11), ("friction_change", 2e4), ("load_mass_change", 1200.0),
 ]
+
+
+def _slow(plant):
+    """``plant`` on the robustness study's slow moves (minimum jerk, 0.06–0.2 m/s: accelerations
+    of a few 0.1 m/s², so the inertia is weak in the motion equation), controller and load rate."""
+    return replace(plant, trajectory=TrajectoryParams(profile="minimum_jerk", v_extend_m_s=(0.12, 0.2), v_retract_m_s=(0.06, 0.11), dwell_s=(0.3, 1.0)),
+                   controller=ControllerParams(kp_m_per_m=0.055, ti_s=0.6), load=LoadParams(rate_per_s=0.3))
+
+
+def _study_seed0_plant():
+    """The robustness study's seed-0 valve (bench/discrepancy_robustness.py ``true_plant(0)``): its
+    commissioning window has a 325 N load step during a move, below what the load-step detector
+    finds; before the calibration split segments this put the mass 4.4σ (530 kg) off."""
+    plant, z = perturbed_plant(0, clip=2.0, stream=17017)
+    return _slow(plant), z
+
+
+MASS_BOUND_SIGMA = 0.5
+"""The commissioning calibration's mass within this many prior σ (2 % of m: 60 kg) on slow moves
+(measured: 0.03σ on the study's seed 0, ≤ 0.25σ on the test plant's seeds 320–325)."""
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("case", ["study_seed0", "test_plant"])
+def test_commissioning_calibration_recovers_the_mass_on_slow_moves(case):
+    plant, z_true, seed = (*_study_seed0_plant(), 5000) if case == "study_seed0" else (_slow(PLANT), Z_TRUE, 320)
+    cal = calibrate(_records(None, seed=seed, plant=plant), TABLE1, NOM, PRIORS, SETTINGS)
+    k = NUISANCES.index("mass")
+    assert abs(cal.table()[k]["z"] - z_true[k]) < MASS_BOUND_SIGMA, (cal.table()[k]["z"], z_true[k])
 
 
 @pytest.fixture(scope="module")

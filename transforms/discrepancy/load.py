@@ -117,6 +117,20 @@ class LoadEstimate:
         levels = segment_levels(f_hat, self.valid, segment, len(steps) + 1)
         return LoadEstimate(segment, steps, levels, levels[segment], self.brackets, self.valid, self.usable, self.hold_until)
 
+    def with_added_step(self, k: int, guard: int) -> "LoadEstimate":
+        """The same estimate with one more step at sample ``k`` (found while moving), the samples
+        within ``guard`` of it left out of ``valid`` and ``usable``. Both new segments keep the
+        split segment's level (what the regression uses are the segments; it eliminates the levels)."""
+        k = int(k)
+        i = int(np.searchsorted(self.steps, k))
+        steps = np.insert(self.steps, i, k)
+        segment = self.segment + (np.arange(self.segment.size) >= k)
+        levels = np.insert(self.levels, i + 1, self.levels[i])
+        away = np.ones(self.segment.size, dtype=bool)
+        away[max(0, k - guard):k + guard] = False
+        brackets = np.insert(self.brackets, i, (-1, -1), axis=0)
+        return LoadEstimate(segment, steps, levels, levels[segment], brackets, self.valid & away, self.usable & away, self.hold_until)
+
 
 def segment_levels(f_hat: np.ndarray, valid: np.ndarray, segment: np.ndarray, n_segments: int) -> np.ndarray:
     """Median of ``f_hat`` over the valid samples of each segment; segments without any take the

@@ -27,6 +27,8 @@ from transforms.discrepancy.settings import DiscrepancySettings
 EQUATIONS = ("chamber1", "chamber2", "motion")
 FD_FRACTION = 0.01
 """Finite-difference step of the regressors: this fraction of the candidate's typical magnitude."""
+RECORD_STRIDE = 100000
+"""Block and group ids of record i are offset by i × this (:class:`_Rows`)."""
 
 
 def perturbed(effects: Effects, spec: EffectSpec, delta: float) -> Effects:
@@ -219,17 +221,18 @@ class _Rows:
     y: np.ndarray  # residuals (not yet weighted)
     eq: np.ndarray  # equation index per row (0 chamber 1, 1 chamber 2, 2 motion)
     block: np.ndarray
-    group: np.ndarray  # motion rows: (record, load segment) id; -1 otherwise
+    group: np.ndarray  # motion rows: (record, load segment) id = record × RECORD_STRIDE + segment; -1 otherwise
+    sample: np.ndarray  # motion rows: the record's sample the row is centred at; -1 otherwise
 
 
 def _rows(prepared: list[_Prepared], plant, condition, effects, settings) -> _Rows:
     c = plant.cylinder
-    ys, eqs, blocks, groups = [], [], [], []
+    ys, eqs, blocks, groups, samples = [], [], [], [], []
     for i, p in enumerate(prepared):
         rec = p.rec
         ir = interval_residuals(_terms_raw(rec, plant, condition, effects), rec.raw["X"], c.A1, c.A2, rec.dt, p.edges, settings.interval_smoothing)
         e = p.edges
-        nb = 100000
+        nb = RECORD_STRIDE
         bc = (ir.t_cont // settings.block_s).astype(np.int64) + i * nb
         bm = (ir.t_motion // settings.block_s).astype(np.int64) + i * nb
         # motion rows: every sample of [e_{i-1}, e_{i+1}] usable and in one load segment
@@ -244,7 +247,8 @@ def _rows(prepared: list[_Prepared], plant, condition, effects, settings) -> _Ro
         eqs += [np.zeros(ir.r1.size, int), np.ones(ir.r2.size, int), np.full(int(mrow.sum()), 2)]
         blocks += [bc, bc, bm[mrow]]
         groups += [np.full(ir.r1.size, -1), np.full(ir.r2.size, -1), (i * nb + seg[e[1:-1]])[mrow]]
-    return _Rows(np.concatenate(ys), np.concatenate(eqs), np.concatenate(blocks), np.concatenate(groups))
+        samples += [np.full(ir.r1.size + ir.r2.size, -1), e[1:-1][mrow]]
+    return _Rows(np.concatenate(ys), np.concatenate(eqs), np.concatenate(blocks), np.concatenate(groups), np.concatenate(samples))
 
 
 def _demean_motion(values: np.ndarray, rows: _Rows) -> np.ndarray:
