@@ -21,10 +21,11 @@ Two kinds of evidence (docs/discrepancy.md, "Verdicts"):
    ``Z_AMBIGUOUS``² is reported: ``ambiguous`` with both readings (the effect's value, and the
    nuisances' values that would explain the same data) and what data would separate them;
    ΔO_j ≥ ``Z_NAMED``² is ``named`` (such a deviation is not scatter: e.g. a 30 µm underlap
-   pattern against 5 µm tolerance). A reading must hold in the replay as well: where the base
-   model replays within the noise floor, one whose exact joint fit widens the replay gap by more
-   than ``REPLAY_REFUTES`` is refuted and left out (a transmitter gain that balances the equation
-   rows' small systematic errors but replays worse).
+   pattern against 5 µm tolerance). The leading reading must hold in the replay as well: where
+   the base model replays within the noise floor, one whose exact joint fit widens the replay gap
+   by more than ``REPLAY_REFUTES`` is refuted and the verdict is ``none`` (a transmitter gain that
+   balances the equation rows' small systematic errors but replays worse); the runner-up is not
+   promoted.
 
 Confidence: for (1) Φ(t) of the advantage over the runner-up (0.999 without one); for (2)
 1/(1 + exp(−(ΔO − Z_AMBIGUOUS²)/2)) for the effect reading, which is 0.5 at the ambiguity line;
@@ -221,27 +222,26 @@ def nuisance_verdict(prepared, nm, fit, named_specs, specs, rows0, w_rows, setti
             reason=(f"{first.spec.key} explains what no combination of the base model's uncertain parameters within their tolerances can "
                     f"(cross-validated gain {first.relative_gain:.0%}, t = {first.t_stat:.3g}); gap {first.gap_before:.3g} → {first.gap_after:.3g}"),
             nuisances=table, scores=public, **gaps)
-    # a reading must hold in the replay too (as the pipeline's confirmation by simulation): one
-    # whose exact fit widens the replay gap beyond REPLAY_REFUTES is refuted and left out
-    refuted, gap_after, best = [], float("nan"), None
-    for sc in scores:
-        if sc["delta_objective"] < Z_AMBIGUOUS**2:
-            break
-        if sc["refit"] is not None:
-            gap_after = gap_of(sc["refit"].effects, nm.model(sc["refit"].z))
+    # the leading reading must hold in the replay too (as the pipeline's confirmation by
+    # simulation): where the base model replays within the noise floor, one whose exact fit widens
+    # the replay gap beyond REPLAY_REFUTES is refuted, and the verdict is none (the runner-up is not
+    # promoted: the equations pointed elsewhere)
+    gap_after, best, refuted = float("nan"), None, ""
+    if scores and scores[0]["delta_objective"] >= Z_AMBIGUOUS**2:
+        best = scores[0]
+        if best["refit"] is not None:
+            gap_after = gap_of(best["refit"].effects, nm.model(best["refit"].z))
             if gap_before <= NOISE_GAP and gap_after > REPLAY_REFUTES * gap_before:
-                refuted.append(sc)
-                continue
-        best = sc
-        break
-    why = f"; refuted by the replay: {', '.join(sc['key'] for sc in refuted)} (widens the gap)" if refuted else ""
-    scores = [sc for sc in scores if not any(sc is r for r in refuted)]
+                refuted = (f"the equations' leading reading {best['key']} ({np.sqrt(best['delta_objective']):.2g}σ) is refuted by the "
+                           f"replay (gap {gap_before:.3g} → {gap_after:.3g}); no reading is confirmed")
+                best = None
     if best is None:
-        worst = max([sc["confidence"] for sc in scores] + [0.0])
+        rest = scores[1:] if refuted else scores
+        worst = max([sc["confidence"] for sc in rest] + [0.0])
         zb = np.sqrt(scores[0]["delta_objective"]) if scores else 0.0
         return Verdict("none", float(min(MAX_CONFIDENCE, 1.0 - worst)), None, float("nan"),
-                       reason=(f"the base model with its uncertain parameters calibrated within their tolerances explains the data "
-                               f"(largest excess along an effect's pattern {zb:.2g}σ < {Z_AMBIGUOUS:g}σ){why}"),
+                       reason=refuted or (f"the base model with its uncertain parameters calibrated within their tolerances explains the data "
+                                          f"(largest excess along an effect's pattern {zb:.2g}σ < {Z_AMBIGUOUS:g}σ)"),
                        nuisances=table, scores=public, gap_before=gap_before, gap_after=gap_before)
     spec = best["spec"]
     z = float(np.sqrt(best["delta_objective"]))
