@@ -208,6 +208,10 @@ def _project_out(Nw: np.ndarray, *cols: np.ndarray) -> list[np.ndarray]:
 NUISANCE_COLLINEAR = 0.05
 """A candidate whose regressor keeps less than this fraction of its norm once the nuisance
 directions are projected out is not selected on the residuals (it is a nuisance pattern)."""
+SHARP_CLEARANCE = 0.1
+"""A valve configured with Eq. 3's edges whose radial clearance calibrates below this fraction of
+its configured one has sharp edges (issue 16's other family): it is diagnosed with the sharp-edged
+law, and the verdict says so (an Eq. 3 model left a gap of 0.5–1.6 there and named p1 offsets)."""
 
 
 def _select(prepared, plant, condition, specs, settings, nuisance=None):
@@ -274,7 +278,7 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
     """
     from scipy import stats as _stats
 
-    from transforms.discrepancy.calibration import NuisanceModel, calibrate_best, calibrate_prepared, joint_fit, refine_breakaway
+    from transforms.discrepancy.calibration import CLEARANCE, NuisanceModel, calibrate_best, calibrate_prepared, joint_fit, refine_breakaway
 
     settings = settings or DiscrepancySettings()
     condition = plant.nominal_condition if condition is None else condition
@@ -290,6 +294,14 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
         # calibrate the nuisances (loads from the nominal model), then again on the loads of the
         # calibrated model; the calibrated base model is stage 0
         z_cal = calibrate_best(prepared, nm, settings)[0].z
+        if nm.values(z_cal)[CLEARANCE] < SHARP_CLEARANCE * nm.theta0[CLEARANCE]:
+            # the data show sharp edges, not the configured Eq. 3's: diagnose with that family
+            sharp = replace(nominal[0], geometry=replace(nominal[0].geometry, area_law="sharp"))
+            d = diagnose(records, sharp, nominal[1], settings, library=library, trace_records=trace_records, monitoring=monitoring, priors=priors)
+            d.verdict.reason = (f"the edges are sharp (radial clearance calibrated to {nm.values(z_cal)[CLEARANCE] * 1e6:.2g} µm of the "
+                                f"configured {nm.theta0[CLEARANCE] * 1e6:.3g} µm): diagnosed with the sharp-edged law (configure "
+                                f"area_law = \"sharp\"); " + d.verdict.reason)
+            return d
         nm = refine_breakaway(prepared, nm, z_cal, settings)
         plant, condition = nm.model(z_cal)
         prepared = prepare_records(records, plant, condition, settings)
