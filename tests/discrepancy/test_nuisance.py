@@ -183,9 +183,13 @@ WORN3 = perturbed_plant(31, family="worn3")[0]
 @pytest.mark.slow
 @pytest.mark.parametrize("plant", [SHARP_AS_EQ3, WORN3], ids=["sharp", "worn3"])
 def test_clean_valve_of_another_family_is_none(plant):
+    """... and a sharp-edged valve configured as Eq. 3 is recognised as sharp-edged (its radial
+    clearance calibrates to ~0) and diagnosed with that law."""
     d = diagnose(_records(None, seed=306, plant=plant), TABLE1, None, SETTINGS, monitoring=False, priors=PRIORS)
     assert d.verdict.verdict == "none", d.verdict.reason
     assert d.gap_before < 0.5 * d.gap_nominal
+    assert d.verdict.reason.startswith("the edges are sharp") == (plant is SHARP_AS_EQ3), d.verdict.reason
+    assert (d.model[0].geometry.area_law == "sharp") == (plant is SHARP_AS_EQ3)
 
 
 @pytest.mark.slow
