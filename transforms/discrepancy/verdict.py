@@ -252,8 +252,6 @@ def nuisance_verdict(prepared, nm, fit, named_specs, specs, rows0, w_rows, setti
     jf = best["refit"]
     if jf is not None:
         table = Calibration(nm=nm, z=jf.z, z_se=jf.z_se, plant=None, condition=None, sigmas=(0.0, 0.0, 0.0)).table()  # type: ignore[arg-type]
-    else:
-        gap_after = float("nan")
     gaps = dict(gap_before=gap_before, gap_after=gap_after)
     if z >= Z_NAMED and not rivals:
         return Verdict("named", best["confidence"], spec, best["value"], alternatives=[nuis], separate_by=sep,
