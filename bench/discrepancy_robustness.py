@@ -51,24 +51,10 @@ SMALL_FACTOR = 0.2
 
 
 def true_plant(seed: int, family: str = "eq3"):
-    from model import TABLE1
-    from model.params import GEOMETRY_FAMILIES, ControllerParams, LoadParams, TrajectoryParams
-    from transforms.discrepancy.nuisance import NUISANCES, SCATTER, NuisancePriors, apply_nuisances, nuisance_sigmas, nuisance_values
+    from tests.discrepancy.simdata import perturbed_plant, study_conditions
 
-    nom = TABLE1.nominal_condition
-    rng = np.random.default_rng([seed, 17017])
-    z = np.zeros(len(NUISANCES))
-    z[:len(SCATTER)] = np.clip(rng.normal(size=len(SCATTER)), -2.0, 2.0)
-    sig = nuisance_sigmas(TABLE1, nom, NuisancePriors())
-    plant, cond = apply_nuisances(TABLE1, nom, nuisance_values(TABLE1, nom) + sig * z)
-    plant = replace(
-        plant, nominal_condition=cond,
-        trajectory=TrajectoryParams(profile="minimum_jerk", v_extend_m_s=(0.12, 0.2), v_retract_m_s=(0.06, 0.11), dwell_s=(0.3, 1.0)),
-        controller=ControllerParams(kp_m_per_m=0.055, ti_s=0.6),
-        load=LoadParams(rate_per_s=0.3),
-        geometry=GEOMETRY_FAMILIES[family],  # the family's edge shape, exactly
-    )
-    return plant, z
+    plant, z = perturbed_plant(seed, clip=2.0, family=family, stream=17017)
+    return study_conditions(plant), z
 
 
 def design_plant(family: str, declared: str):

@@ -15,28 +15,18 @@ import pytest
 
 from model import TABLE1
 from model.effects import Effects, library_entry
-from model.params import GEOMETRY_FAMILIES, ControllerParams, LoadParams, TrajectoryParams
+from model.params import GEOMETRY_FAMILIES
 from transforms.discrepancy import DiscrepancySettings, split_records
 from transforms.discrepancy.calibration import _split_gains, calibrate
 from transforms.discrepancy.load import LoadEstimate
-from transforms.discrepancy.nuisance import NUISANCES, SCATTER, NuisancePriors, apply_nuisances, nuisance_sigmas, nuisance_values
+from transforms.discrepancy.nuisance import NUISANCES, NuisancePriors, apply_nuisances, nuisance_sigmas, nuisance_values
 from transforms.discrepancy.pipeline import _project_out, diagnose
 
-from .simdata import simulate_lake
+from .simdata import perturbed_plant, simulate_lake, study_conditions
 
 SETTINGS = DiscrepancySettings()
 PRIORS = NuisancePriors()
 NOM = TABLE1.nominal_condition
-
-
-def perturbed_plant(seed: int, clip: float = 1.5, family: str = "eq3", stream: int = 4242):
-    """The valve of ``seed``: every scatter nuisance off nominal by z ~ N(0, 1) clipped at ±``clip``
-    (``stream`` 17017 and clip 2 are bench/discrepancy_robustness.py's), edges of ``family``."""
-    rng = np.random.default_rng([seed, stream])
-    z = np.zeros(len(NUISANCES))
-    z[:len(SCATTER)] = np.clip(rng.normal(size=len(SCATTER)), -clip, clip)
-    plant, cond = apply_nuisances(TABLE1, NOM, nuisance_values(TABLE1, NOM) + nuisance_sigmas(TABLE1, NOM, PRIORS) * z)
-    return replace(plant, nominal_condition=cond, geometry=GEOMETRY_FAMILIES[family]), z
 
 
 PLANT, Z_TRUE = perturbed_plant(31)
@@ -215,19 +205,12 @@ CLEAR_GAP = [  # the gap-shrink magnitudes of test_hidden_effects.CLEAR, mass an
 ]
 
 
-def _slow(plant):
-    """``plant`` on the robustness study's slow moves (minimum jerk, 0.06–0.2 m/s: accelerations
-    of a few 0.1 m/s², so the inertia is weak in the motion equation), controller and load rate."""
-    return replace(plant, trajectory=TrajectoryParams(profile="minimum_jerk", v_extend_m_s=(0.12, 0.2), v_retract_m_s=(0.06, 0.11), dwell_s=(0.3, 1.0)),
-                   controller=ControllerParams(kp_m_per_m=0.055, ti_s=0.6), load=LoadParams(rate_per_s=0.3))
-
-
 def _study_seed0_plant():
     """The robustness study's seed-0 valve (bench/discrepancy_robustness.py ``true_plant(0)``): its
     commissioning window has a 325 N load step during a move, below what the load-step detector
     finds; before the calibration split segments this put the mass 4.4σ (530 kg) off."""
     plant, z = perturbed_plant(0, clip=2.0, stream=17017)
-    return _slow(plant), z
+    return study_conditions(plant), z
 
 
 MASS_BOUND_SIGMA = 0.5
@@ -238,7 +221,7 @@ MASS_BOUND_SIGMA = 0.5
 @pytest.mark.slow
 @pytest.mark.parametrize("case", ["study_seed0", "test_plant"])
 def test_commissioning_calibration_recovers_the_mass_on_slow_moves(case):
-    plant, z_true, seed = (*_study_seed0_plant(), 5000) if case == "study_seed0" else (_slow(PLANT), Z_TRUE, 320)
+    plant, z_true, seed = (*_study_seed0_plant(), 5000) if case == "study_seed0" else (study_conditions(PLANT), Z_TRUE, 320)
     cal = calibrate(_records(None, seed=seed, plant=plant), TABLE1, NOM, PRIORS, SETTINGS)
     k = NUISANCES.index("mass")
     assert abs(cal.table()[k]["z"] - z_true[k]) < MASS_BOUND_SIGMA, (cal.table()[k]["z"], z_true[k])
