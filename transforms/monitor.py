@@ -661,19 +661,20 @@ def commissioning_baseline(
     leakage_passes: int | None = None,
     engine: str = "numba",
     law: str = "eq3",
-    other_laws: Mapping[str, Mapping[str, Characteristic]] | None = None,
+    laws: Mapping[str, Mapping[str, Characteristic]] | None = None,
 ) -> dict[str, BaselineFit]:
     """Steps 2–4a and 5a on one valve's commissioning rows: Â per edge and its plausibility.
 
     Â is :func:`transforms.baseline.fit_characteristic` with the nominal characteristic as
     carrier (the points' knots, sampled every ``params.baseline_grid_m``, widened by the fit's
-    search bound). ``nominal`` follows the configured edge law ``law``; ``other_laws[name]`` are
-    the nominal characteristics of the other edge laws the valve may have (e.g. ``"sharp"``):
-    when the corrected points of the four edges follow one of them clearly better
-    (:func:`transforms.baseline.recognise_edge_law`), Â's carrier is that law's, and every
-    :class:`BaselineFit` says so (``edge_law``, ``edge_law_note``). The carrier carries the
-    shape beyond and between the knots, so a wrong one biases x̂ in proportion to the shift
-    (docs/monitoring.md, "x̂ on any edge law"); the leakage stays in Eq. 3's units. With ``leakage`` (the default, and what :func:`monitor` then must use too)
+    search bound). ``nominal`` is Eq. 3's (the edges' states and the leakage are in its units);
+    ``laws[name]`` are the nominal characteristics of the other edge laws (``area_law`` names,
+    e.g. ``"sharp"``) the valve may have, ``law`` the configured one: Â's carrier is the
+    configured law's, unless the corrected points of the four edges follow another one clearly
+    better (:func:`transforms.baseline.recognise_edge_law`); every :class:`BaselineFit` says
+    which (``edge_law``, ``edge_law_note``). The carrier carries the shape beyond and between
+    the knots, so a wrong one biases x̂ in proportion to the shift (docs/monitoring.md, "x̂ on
+    any edge law"). With ``leakage`` (the default, and what :func:`monitor` then must use too)
     the points are corrected for the closed edge's flow: its nominal branch at the state that
     edge's own points give (Eq. 8 onto the nominal: α_b, x_b), scaled by λ₁, plus λ₂ times a
     constant gap flow (:func:`transforms.leakage.closed_leakage`), (λ₁, λ₂) ≥ 0 identified with
@@ -724,14 +725,17 @@ def commissioning_baseline(
                 new_lam[o], cov[o] = leak_scale_lstsq(u[e], plain[e], cols_o[e], knots, shape, block=params.leak_block_points,
                                                       prior=np.array([1.0, 0.0]), prior_sd=params.leak_scale_prior_sd)  # fmt: skip
         lam = new_lam
-    carrier, edge_law, note = nominal, law, ""
-    if other_laws:
-        edge_law, ssr = recognise_edge_law(u, area, {law: nominal, **other_laws}, law, x_search_m=params.x_hat_bound_m)
+    candidates = {"eq3": nominal, **(laws or {})}
+    if law not in candidates:
+        raise ValueError(f"configured edge law {law!r} has no nominal characteristic (laws: {sorted(candidates)})")
+    edge_law, note = law, ""
+    if len(candidates) > 1:
+        edge_law, ssr = recognise_edge_law(u, area, candidates, law, x_search_m=params.x_hat_bound_m)
         if edge_law != law:
-            carrier = other_laws[edge_law]
             note = (f"edge law: the commissioning window shows {EDGE_LAWS.get(edge_law, edge_law)} edges, not the configured "
                     f"{EDGE_LAWS.get(law, law)} ones ({1 - ssr[edge_law] / ssr[law]:.0%} less Eq. 8 residual); "
                     f"the baseline follows area_law = \"{edge_law}\"")
+    carrier = candidates[edge_law]
     out: dict[str, BaselineFit] = {}
     for e in EDGES:
         ue, ae = u[e], area[e]

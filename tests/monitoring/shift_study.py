@@ -19,7 +19,7 @@ from model.params import EDGES
 from transforms.monitor import commissioning_baseline, monitor
 
 from .sim_lake import simulated_lake
-from .test_accuracy import NOMINAL, OTHER_LAWS, PARAMS, STUDY_TRAJECTORY
+from .test_accuracy import LAWS, NOMINAL, PARAMS, STUDY_TRAJECTORY
 
 WINDOW_SEED_OFFSET = 1000
 """The windows' moves, loads and supply are drawn from seed + this (not the commissioning's)."""
@@ -35,7 +35,7 @@ def commissioned(geometry, seed: int, commissioning: int = 6, sensors=None, para
     """(base condition, :func:`commissioning_baseline` of its ``commissioning`` 10 s snapshots)."""
     base = manufactured(TABLE1.nominal_condition, seed)
     lake = simulated_lake([base] * commissioning, seed, trajectory=STUDY_TRAJECTORY, sensors=sensors, geometry=geometry)
-    return base, commissioning_baseline(lake, params or PARAMS, NOMINAL, other_laws=OTHER_LAWS)
+    return base, commissioning_baseline(lake, params or PARAMS, NOMINAL, laws=LAWS)
 
 
 def shift_study(geometry, seed: int, shifts_m, alphas, *, duration_s: float = 10.0, commissioning: int = 6,

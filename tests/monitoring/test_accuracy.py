@@ -71,7 +71,7 @@ def nominal(area_law: str = "eq3") -> dict[str, Characteristic]:
 
 
 NOMINAL = nominal()
-OTHER_LAWS = {"sharp": nominal("sharp")}
+LAWS = {"sharp": nominal("sharp")}
 """The edge law the monitor may recognise besides the configured Eq. 3 (as the flows pass it)."""
 
 
@@ -90,7 +90,7 @@ def wear_study(seed: int, scatter_seed: int, trajectory=None, sensors=None, geom
     hours = np.concatenate([np.arange(commissioning, dtype=float), HOURS[1:]])
     xu, al = condition_arrays(scenario, hours)
     lake = simulated_lake(condition_at(scenario, hours), seed, trajectory=trajectory, sensors=sensors, geometry=geometry)
-    fitted = commissioning_baseline(_first_windows(lake, commissioning), params, NOMINAL, other_laws=OTHER_LAWS)
+    fitted = commissioning_baseline(_first_windows(lake, commissioning), params, NOMINAL, laws=LAWS)
     res = monitor(
         lake, params, {"V1": {e: b.characteristic for e, b in fitted.items()}},
         leakage={"V1": {e: b.leakage for e, b in fitted.items()}},
