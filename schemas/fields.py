@@ -321,7 +321,7 @@ BASELINE_FIELDS: tuple[Field, ...] = (
     Field("x_vs_nominal_mm", pl.Float64, "mm", "Shift of the baseline against the nominal characteristic.", nullable=True),
     Field("created_at", UTC_US, "", "When this version was stored."),
     Field("leak_branch_scale", pl.Float64, "", "λ₁: the edge's closed-edge leakage is Eq. 3's branch × λ₁ ...", nullable=True, ge=0.0),
-    Field("leak_gap_scale", pl.Float64, "", "... + λ₂ × its area at the closing point (a gap flow).", nullable=True, ge=0.0),
+    Field("leak_gap_scale", pl.Float64, "", "... + λ₂ × that branch with worn lands (4× Eq. 3's far from the edge).", nullable=True, ge=0.0),
     Field("leak_scale", pl.Float64, "", "That leakage over Eq. 3's 1 mm inside the edge (1 = Eq. 3, 0 = none).", nullable=True, ge=0.0),
     Field("leak_scale_ci_low", pl.Float64, "", "Lower 95 % bound of leak_scale (NULL: not identified, Eq. 3 kept).", nullable=True),
     Field("leak_scale_ci_high", pl.Float64, "", "Upper bound of the 95 % interval of leak_scale.", nullable=True),

@@ -676,8 +676,8 @@ def commissioning_baseline(
     the knots, so a wrong one biases x̂ in proportion to the shift (docs/monitoring.md, "x̂ on
     any edge law"). With ``leakage`` (the default, and what :func:`monitor` then must use too)
     the points are corrected for the closed edge's flow: its nominal branch at the state that
-    edge's own points give (Eq. 8 onto the nominal: α_b, x_b), scaled by λ₁, plus λ₂ times a
-    constant gap flow (:func:`transforms.leakage.closed_leakage`), (λ₁, λ₂) ≥ 0 identified with
+    edge's own points give (Eq. 8 onto the nominal: α_b, x_b), scaled by λ₁, plus λ₂ times the
+    same with worn lands (:func:`transforms.leakage.closed_leakage`), (λ₁, λ₂) ≥ 0 identified with
     the characteristic (:func:`transforms.baseline.leak_scale_lstsq`: means of
     ``leak_block_points`` points, prior N((1, 0), ``leak_scale_prior_sd``²) about Eq. 3's; only
     from ≥ ``leak_min_points`` points of the other edge, else Eq. 3's is kept); first

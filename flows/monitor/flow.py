@@ -139,7 +139,7 @@ def _design_definition(valve: ValveSpec) -> dict:
     }  # fmt: skip
 
 
-BASELINE_METHOD = ("carrier-shaped step 4a, closed-edge leakage identified (λ₁ branch + λ₂ gap, block means), "
+BASELINE_METHOD = ("carrier-shaped step 4a, closed-edge leakage identified (λ₁ branch + λ₂ worn-lands branch, block means), "
                    "carrier of the edge law the commissioning window shows")
 """How baselines are built now (part of their definition: a change of method makes new versions)."""
 
