@@ -122,7 +122,7 @@ def nominal_characteristic(valve: ValveSpec, edge: str, x_hat_bound_m: float, ar
     return Characteristic.from_arrays(u, d.contraction_coefficient * area)
 
 
-EDGE_LAWS = ("sharp",)
+OTHER_EDGE_LAWS = ("sharp",)
 """The edge laws besides Eq. 3 that step 4a may recognise from a commissioning window (the
 linear-gradient edge is one of them: straight, like the sharp-edged law)."""
 
@@ -222,7 +222,7 @@ def _baseline_rows(valve: ValveSpec, params: MonitorParams, warehouse: Path, ver
                 f"valve {valve.id}: its baseline_window {start.isoformat()} – {end.isoformat()} holds no lake data; "
                 "ingest the commissioning exports first or remove baseline_window to use the nominal characteristic"
             )
-        laws = {law: {e: nominal_characteristic(valve, e, params.x_hat_bound_m, law) for e in EDGES} for law in EDGE_LAWS}
+        laws = {law: {e: nominal_characteristic(valve, e, params.x_hat_bound_m, law) for e in EDGES} for law in OTHER_EDGE_LAWS}
         fitted = commissioning_baseline(lake, params, nominal, law=valve.design.area_law, laws=laws)
         for e in EDGES:
             b = fitted[e]
