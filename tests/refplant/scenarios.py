@@ -114,6 +114,8 @@ def effect(name: str, magnitude: float | None = None, *, channel: str = "p1") ->
     """One effect switched on: ``name`` of :data:`LIBRARY` or :data:`OUTSIDE`, ``magnitude`` in
     its unit (default :data:`TYPICAL`; a gain is the factor, e.g. 1.05); ``channel`` for the
     pressure transmitter effects (``"p1"`` or ``"p2"``; ``transmitter_lag`` also ps, pr)."""
+    if name not in TYPICAL:
+        raise ValueError(f"unknown effect {name!r}; known: {LIBRARY + OUTSIDE}")
     m = TYPICAL[name] if magnitude is None else float(magnitude)
     if name in ("pressure_sensor_offset", "pressure_sensor_gain") and channel not in ("p1", "p2"):
         raise ValueError(f"{name}: channel must be p1 or p2")
@@ -124,9 +126,7 @@ def effect(name: str, magnitude: float | None = None, *, channel: str = "p1") ->
         "supply_line_resistance": "supply_resistance_pa_s2_m6", "friction_change": "delta_viscous_n_s_m",
         "load_mass_change": "delta_mass_kg", "pressure_dependent_friction": "seal_friction_m2",
         "transmitter_lag": "extra_lag_s",
-    }.get(name)
-    if attr is None:
-        raise ValueError(f"unknown effect {name!r}; known: {LIBRARY + OUTSIDE}")
+    }[name]
     if name == "transmitter_lag":
         return Effects(extra_lag_s=m, extra_lag_channel=channel)
     return replace(Effects(), **{attr: m})
