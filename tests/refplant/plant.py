@@ -11,7 +11,9 @@ PI controller's integral z [m]. Right-hand side (:func:`rhs_kernel`, numba):
   the valve solves p_v = p_s - R q_s|q_s| when there is a supply line;
 * cylinder, Eq. 5: F_R = m g + A1 p1 - A2 p2 - F_l; sliding: F_f = d_v v_X + (d_c + (d_s - d_c)
   exp(-v_X^2/v_0^2)) sign(v_X); Karnopp: for |v_X| < band the rod sticks (dv_X/dt = -v_X / t_stick)
-  while |F_R| <= d_s, else it breaks away against d_s sign(F_R);
+  while |F_R| <= d_s, else it breaks away in the direction of F_R against the same Stribeck force
+  (|F_f(v_X)|, about d_s there), so the law is continuous across the band's edge and a force just
+  above d_s gives a slow creep inside the band rather than chattering at its edge;
 * chambers, Eq. 6 with leakage and air: dp1/dt = beta_e(p1)/V1 (q1 - A1 v_X - q_i),
   dp2/dt = beta_e(p2)/V2 (A2 v_X - q2 + q_i - q_e), V1 = V01 + A1 X, V2 = V02 - A2 X.
 
@@ -179,15 +181,14 @@ def rhs_kernel(t, y, P, rows, ts, dur, xa, xb, lt, lf, xcmd):
     F_R = P[_W] + P[_A1] * p1 - P[_A2] * p2 - F_l
     seal = P[_KSEAL] * (p1 + p2)
     F_c, F_s = P[_DC] + seal, P[_DS] + seal
-    if abs(vX) < P[_BAND]:
-        if abs(F_R) <= F_s:
-            dvX = -vX / P[_TST]
-        else:
-            dvX = (F_R - math.copysign(F_s, F_R)) / P[_M]
+    r = vX / P[_V0]
+    slide = P[_DV] * abs(vX) + F_c + (F_s - F_c) * math.exp(-r * r)
+    if abs(vX) >= P[_BAND]:
+        dvX = (F_R - math.copysign(slide, vX)) / P[_M]
+    elif abs(F_R) <= F_s:
+        dvX = -vX / P[_TST]
     else:
-        r = vX / P[_V0]
-        F_f = P[_DV] * vX + math.copysign(F_c + (F_s - F_c) * math.exp(-r * r), vX)
-        dvX = (F_R - F_f) / P[_M]
+        dvX = (F_R - math.copysign(slide, F_R)) / P[_M]
     qi = P[_KI] * (p1 - p2)
     qe = P[_KE] * p2
     V1 = P[_V01] + P[_A1] * X

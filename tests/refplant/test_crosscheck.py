@@ -34,7 +34,7 @@ def test_agrees_with_model_on_the_same_inputs():
     rec = simulate(plant, dur, 0, load=Load.constant(F_l), trajectory=traj, supply=sup, spool_command=ref.x_ref_m[0],
                    initial_state=y0)
     T = rec.true
-    assert np.ptp(ref.X_m[0]) > 0.1 and np.mean(ref.vX_m_s[0] == 0) > 0.1  # moves and sticking dwells
+    assert np.ptp(ref.X_m[0]) > 0.1 and np.mean(ref.vX_m_s[0] == 0) > 0.05  # moves and sticking dwells
     assert np.abs(T["p1"] - ref.p1_pa[0]).max() < 0.05e5
     assert np.abs(T["p2"] - ref.p2_pa[0]).max() < 0.05e5
     assert np.abs(T["X"] - ref.X_m[0]).max() < 1e-6
