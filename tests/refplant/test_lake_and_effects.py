@@ -7,7 +7,8 @@ import numpy as np
 import polars as pl
 import pytest
 
-from . import COLUMNS, NAMEPLATE, Effects, Load, Trajectory, effect, simulate, simulate_windows, to_lake_frame, without_noise
+from . import (COLUMNS, NAMEPLATE, Effects, Load, Trajectory, effect, manufactured, simulate, simulate_windows, to_lake_frame,
+               without_noise)
 from .scenarios import LIBRARY, OUTSIDE, draw_load
 from .sensors import first_order_lag
 
@@ -90,3 +91,21 @@ def test_transmitter_extra_lag_slows_one_channel():
     p1 = b.true["p1"]
     err = {tau: np.abs(b.p1 - first_order_lag(p1, 1e-3, tau)).max() for tau in (1e-3, 3e-3)}
     assert err[3e-3] < 0.05 * err[1e-3], err  # the p1 reading now lags 1 + 2 ms
+
+
+def test_a_recording_in_segments_is_one_continuous_run():
+    whole = simulate(QUIET, 3.0, 9)
+    cut = simulate(QUIET, 3.0, 9, segment_s=0.7)
+    assert np.ptp(whole.true["X"]) > 0.05
+    for sig, tol in (("p1", 0.02e5), ("p2", 0.02e5), ("x_spool", 0.05e-6), ("x_cyl", 1e-6)):
+        np.testing.assert_allclose(getattr(cut, sig), getattr(whole, sig), rtol=0, atol=tol, err_msg=sig)
+
+
+def test_manufactured_valve_scatters_per_edge_and_misstates_beta():
+    a, b = manufactured(NAMEPLATE, 1), manufactured(NAMEPLATE, 2)
+    assert a == manufactured(NAMEPLATE, 1) and a != b
+    assert a.fluid.bulk_modulus_pa == pytest.approx(1.5e9 * 1.025)
+    xu = np.array([e.underlap_m for e in a.valve.edges])
+    al = np.array([e.alpha for e in a.valve.edges])
+    assert np.all(np.abs(xu - 40e-6) < 20e-6) and len(set(xu)) == 4
+    assert np.all(np.abs(al / 0.675 - 1) < 0.12) and len(set(al)) == 4
