@@ -40,16 +40,24 @@ def commissioned(geometry, seed: int, commissioning: int = 6, sensors=None, para
 
 def shift_study(geometry, seed: int, shifts_m, alphas, *, duration_s: float = 10.0, commissioning: int = 6,
                 sensors=None, params=None, baseline=None) -> pl.DataFrame:
-    """Fit rows of every window (``window_id`` 1…, one per (shift, α) pair in ``itertools.product``
-    order) and edge, with ``x_true_m``, ``alpha_true``, ``x_err_m``, ``alpha_err`` and the
-    commissioning ``leak_scale_baseline``; window 0 repeats the commissioning values (no fit)."""
+    """:func:`fits_against_truth` of the windows of every (shift, α) pair in ``itertools.product``
+    order on model/'s plant of ``geometry``, commissioned by :func:`commissioned`."""
     params = params or PARAMS
     base, fitted = baseline or commissioned(geometry, seed, commissioning, sensors, params)
     pairs = list(itertools.product(shifts_m, alphas))
     lake = simulated_lake([shifted(base, s, a) for s, a in pairs], seed + WINDOW_SEED_OFFSET, duration_s=duration_s,
                           trajectory=STUDY_TRAJECTORY, sensors=sensors, geometry=geometry)
+    return fits_against_truth(lake, fitted, pairs, params)
+
+
+def fits_against_truth(lake: pl.DataFrame, fitted, pairs, params=None) -> pl.DataFrame:
+    """Fit rows of every window of ``lake`` (``window_id`` 1…; window i shifted and scaled by
+    ``pairs[i]`` = (shift [m], α factor) against the commissioning state) and edge, against the
+    baselines ``fitted`` (:func:`commissioning_baseline`), with ``x_true_m``, ``alpha_true``,
+    ``x_err_m``, ``alpha_err``; window 0 carries the commissioning values (``leak_scale_baseline``,
+    ``edge_law``, the points' ``u_min_m``, ``u_max_m``; no fit)."""
     res = monitor(
-        lake, params, {"V1": {e: b.characteristic for e, b in fitted.items()}},
+        lake, params or PARAMS, {"V1": {e: b.characteristic for e, b in fitted.items()}},
         leakage={"V1": {e: b.leakage for e, b in fitted.items()}},
         leak_scale={"V1": {e: b.leak_scale for e, b in fitted.items()}},
         leak_reference={"V1": {e: b.leak_reference for e, b in fitted.items()}},
