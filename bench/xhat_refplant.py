@@ -19,7 +19,6 @@ import argparse
 import itertools
 import sys
 import time
-from datetime import datetime, timezone
 from pathlib import Path
 
 import numpy as np
@@ -28,25 +27,8 @@ import polars as pl
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from model.params import EDGES  # noqa: E402
-from tests import refplant as rp  # noqa: E402
-from tests.monitoring.shift_study import fits_against_truth  # noqa: E402
-from tests.monitoring.test_accuracy import LAWS, NOMINAL, PARAMS, X_MAX  # noqa: E402
-from transforms.monitor import commissioning_baseline  # noqa: E402
-
-START = datetime(2025, 1, 1, tzinfo=timezone.utc)
-
-
-def study(law: str, seed: int, shifts, alphas, commissioning: int, noiseless: bool) -> pl.DataFrame:
-    base = rp.family(rp.manufactured(rp.NAMEPLATE, seed=seed), law)
-    if noiseless:
-        base = rp.without_noise(base)
-    comm = rp.to_lake_frame(rp.simulate_windows(base, commissioning, seed), "V1", START)
-    fitted = commissioning_baseline(comm, PARAMS, NOMINAL, laws=LAWS)
-    pairs = list(itertools.product(shifts, alphas))
-    recs = [rp.simulate(rp.worn(base, alpha_scale=(a,) * 4, underlap_shift_m=(s,) * 4), 10.0, seed * 1000 + 500 + i)
-            for i, (s, a) in enumerate(pairs)]
-    return fits_against_truth(rp.to_lake_frame(recs, "V1", START), fitted, pairs)
-
+from tests.monitoring.shift_study import refplant_study  # noqa: E402
+from tests.monitoring.test_accuracy import X_MAX  # noqa: E402
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -63,8 +45,10 @@ def main() -> None:
     shifts = [float(v) * 1e-3 for v in args.shifts_mm.split(",")]
     alphas = [float(v) for v in args.alphas.split(",")]
     t0 = time.process_time()
-    parts = [study(f, s, shifts, alphas, args.commissioning, args.noiseless).with_columns(pl.lit(f).alias("family"), pl.lit(s).alias("seed"))
-             for f in args.families.split(",") for s in seeds]
+    pairs = list(itertools.product(shifts, alphas))
+    parts = [refplant_study(f, s, pairs, commissioning=args.commissioning, noiseless=args.noiseless)
+             .with_columns(pl.lit(f).alias("family"), pl.lit(s).alias("seed"))
+             for f in args.families.split(",") for s in seeds]  # fmt: skip
     allf = pl.concat(parts, how="diagonal_relaxed")
     if args.out:
         allf.write_parquet(args.out)

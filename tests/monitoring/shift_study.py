@@ -18,7 +18,7 @@ from model.condition import manufactured
 from model.params import EDGES
 from transforms.monitor import commissioning_baseline, monitor
 
-from .sim_lake import simulated_lake
+from .sim_lake import START, simulated_lake
 from .test_accuracy import LAWS, NOMINAL, PARAMS, STUDY_TRAJECTORY
 
 WINDOW_SEED_OFFSET = 1000
@@ -50,6 +50,27 @@ def shift_study(geometry, seed: int, shifts_m, alphas, *, duration_s: float = 10
     return fits_against_truth(lake, fitted, pairs, params)
 
 
+def refplant_study(law: str, seed: int, pairs, *, commissioning: int = 6, noiseless: bool = False,
+                   window_seeds=None, params=None) -> pl.DataFrame:
+    """:func:`fits_against_truth` on the second reference plant (``tests/refplant``): its
+    manufactured valve ``seed`` with every edge on ``law``, commissioned from ``commissioning`` 10 s
+    snapshots, then one 10 s window per (shift [m], α factor) of ``pairs``, every edge worn so, drawn
+    from ``window_seeds`` (default seed·1000 + 500 + i). ``noiseless``: its acquisition without
+    noise or quantisation."""
+    from tests import refplant as rp
+
+    params = params or PARAMS
+    base = rp.family(rp.manufactured(rp.NAMEPLATE, seed=seed), law)
+    if noiseless:
+        base = rp.without_noise(base)
+    comm = rp.to_lake_frame(rp.simulate_windows(base, commissioning, seed), "V1", START)
+    fitted = commissioning_baseline(comm, params, NOMINAL, laws=LAWS)
+    seeds = window_seeds or [seed * 1000 + 500 + i for i in range(len(pairs))]
+    recs = [rp.simulate(rp.worn(base, alpha_scale=(a,) * 4, underlap_shift_m=(s,) * 4), 10.0, int(k))
+            for (s, a), k in zip(pairs, seeds, strict=True)]
+    return fits_against_truth(rp.to_lake_frame(recs, "V1", START), fitted, pairs, params)
+
+
 def fits_against_truth(lake: pl.DataFrame, fitted, pairs, params=None) -> pl.DataFrame:
     """Fit rows of every window of ``lake`` (``window_id`` 1…; window i shifted and scaled by
     ``pairs[i]`` = (shift [m], α factor) against the commissioning state) and edge, against the
@@ -73,6 +94,7 @@ def fits_against_truth(lake: pl.DataFrame, fitted, pairs, params=None) -> pl.Dat
     )
     comm = pl.DataFrame({"window_id": pl.Series([0] * 4, dtype=pl.UInt32), "edge": list(EDGES),
                          "leak_scale_baseline": [fitted[e].leak_scale for e in EDGES],
+                         "leak_scale_baseline_se": [fitted[e].leak_scale_se for e in EDGES],
                          "edge_law": [fitted[e].edge_law for e in EDGES],
                          "u_min_m": [fitted[e].u_range_m[0] for e in EDGES],
                          "u_max_m": [fitted[e].u_range_m[1] for e in EDGES]})  # fmt: skip
