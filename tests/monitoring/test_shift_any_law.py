@@ -50,6 +50,7 @@ def test_shift_is_estimated_as_a_shift(family):
     assert np.isfinite(later["leak_scale"].to_numpy()).all()
 
 
+@pytest.mark.slow
 def test_shift_on_the_second_reference_plant():
     """The linear-gradient valve of the reference plant written apart from model/ (its own
     dynamics: continuous PI, Karnopp sticking, ramped loads, transmitter lag and skew; recorded
