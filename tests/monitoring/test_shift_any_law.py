@@ -55,9 +55,10 @@ def test_shift_on_the_second_reference_plant():
     """The linear-gradient valve of the reference plant written apart from model/ (its own
     dynamics: continuous PI, Karnopp sticking, ramped loads, transmitter lag and skew; recorded
     with noise), configured as Eq. 3: recognised as straight, x̂ within 3 % of the shift and 0.1 %
-    of x_max on every edge, no leakage where there is none. Three of bench/xhat_refplant.py's four
-    windows; its fourth (α ×1.15 at 0.03 mm, s1 and 2r over only 0.30 mm of u) is 7 % off: the
-    α̂–x̂ coupling on a short range (docs/monitoring.md, "x̂ on any edge law")."""
+    of x_max on every edge, no leakage where there is none. Three of the four windows of
+    ``bench/xhat_families.py --plant refplant``; its fourth (α ×1.15 at 0.03 mm, s1 and 2r over
+    only 0.30 mm of u) is 7 % off: the α̂–x̂ coupling on a short range (docs/monitoring.md,
+    "x̂ on any edge law")."""
     fits = refplant_study("linear", 1, [(0.03e-3, 1.0), (0.06e-3, 1.0), (0.06e-3, 1.15)], window_seeds=(1500, 1502, 1503))
     base = fits.filter(pl.col("window_id") == 0)
     later = fits.filter(pl.col("window_id") > 0)
