@@ -283,6 +283,7 @@ def retention(
     valves: Valves = None,
     as_of: Annotated[Optional[str], typer.Option("--as-of", help="Reference date (ISO): partitions older than keep_days before it are eligible. [default: today, UTC]")] = None,
     list_all: Annotated[bool, typer.Option("--list", help="Also print every partition's decision.")] = False,
+    force: Annotated[bool, typer.Option("--force", help="Accept an --as-of later than today or more than a day after the latest ingest.")] = False,
     warehouse: Warehouse = None,
 ) -> None:
     """Thin or drop lake partitions older than retention.keep_days (plant TOML) once their fits exist."""
@@ -294,7 +295,7 @@ def retention(
     wh = warehouse_dir(warehouse)
     with nullcontext() if dry_run else publishing(config, wh):  # a dry run writes nothing, not even the snapshot
         summary = run_flow(
-            retention_flows.retention_flow, config_path=str(config), warehouse=str(wh), valve_ids=valves, as_of=as_of, dry_run=dry_run
+            retention_flows.retention_flow, config_path=str(config), warehouse=str(wh), valve_ids=valves, as_of=as_of, dry_run=dry_run, force=force
         )
     if summary is None:
         typer.echo(f"{config}: no [retention] table: retention is off, nothing is deleted (docs/warehouse.md, Retention)")

@@ -611,6 +611,7 @@ RETENTION_LOG_FIELDS: tuple[Field, ...] = (
     Field("keep_days", pl.Int32, "d", "retention.keep_days in force.", ge=1),
     Field("thin_keep_s_per_hour", pl.Float64, "s", "retention.thin_keep_s_per_hour in force (null for drop).", nullable=True, ge=0.0),
     Field("as_of", pl.Date, "", "The run's reference date: partitions older than keep_days before it were eligible."),
-    Field("applied_at", UTC_US, "", "When the action was completed."),
+    Field("applied_at", UTC_US, "", "When the action was completed (an intent: when it was recorded)."),
+    Field("state", pl.Utf8, "", "intent: recorded before the data change, which a killed run may have left part-done (the next run completes it); done: completed.", isin=("intent", "done")),
 )
 """Every applied retention action, one row per partition and action (table ``retention_log``)."""
