@@ -164,3 +164,15 @@ def test_a_complete_file_is_not_truncated_and_costs_no_scan(tmp_path, monkeypatc
     m = table(wh, "ingest_manifest").row(0, named=True)
     assert (m["quarantined"], m["truncated"], m["field_count"]) == (0, 0, 0)
     assert lake(wh).height == SECONDS
+
+
+def test_the_width_rule_with_a_header_ending_in_a_separator():
+    """A header's trailing unnamed column may be left out by a row, but a row that ends in a
+    separator must have every field: ``t,2,`` is a field missing in the middle, not ``t,2`` + one
+    empty trailing field."""
+    from transforms.ingest.text_rows import ragged_rows, width_bounds
+
+    assert width_bounds(["Time", "A", "B", ""]) == (3, 4)
+    text = b'Time,A,B,\nt,1,2,\nt,1,2\nt,2,\n\r\nt,1,2,3\n"x,y",1,2,\nt\r\nt,1,2,,'
+    rows, counts = ragged_rows(text, ",", 3, 4)
+    assert rows.tolist() == [2, 6, 7] and counts.tolist() == [3, 1, 5]

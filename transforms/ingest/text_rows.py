@@ -23,8 +23,9 @@ FIELD_COUNT, TRUNCATED = "field_count", "truncated"
 
 def width_bounds(columns: list[str]) -> tuple[int, int]:
     """The field counts a data row may have, ``(lo, hi)``, from the decoder's column names: the
-    header's, or down to its last named column when it ends in unnamed ones (a trailing separator
-    on the header line that some rows leave out)."""
+    header's (``hi``), or down to its last named column (``lo``) when it ends in unnamed ones (a
+    trailing separator on the header line) — but such a shorter row must then end in a value, not
+    in a separator (:func:`ragged_rows`)."""
     hi = len(columns)
     lo = hi
     while lo > 1 and (columns[lo - 1] == "" or columns[lo - 1].startswith("_duplicated_")):
@@ -34,45 +35,52 @@ def width_bounds(columns: list[str]) -> tuple[int, int]:
 
 @numba.njit(cache=True, nogil=True)
 def _scan(buf, sep, quote, lo, hi):
-    """Rows (0 = the header line, not checked) whose field count lies outside ``[lo, hi]``: their
-    indices and counts. A separator or a line end between quotes is part of a field (as the
-    decoder reads it); a blank line (nothing, or only ``\\r``) is no row to check."""
+    """Rows (0 = the header line, not checked) of the wrong width: their indices and field counts.
+    A row has ``hi`` fields, or ``lo … hi-1`` ending in a non-empty field (the header's trailing
+    unnamed columns left out, not a field missing before a trailing separator). A separator or a
+    line end between quotes is part of a field (as the decoder reads it); a blank line (nothing,
+    or only ``\r``) is no row to check."""
     rows = []
     counts = []
     row = 0
     fields = 1
     length = 0
+    last = 0
     in_quote = False
-    n = len(buf)
-    for i in range(n):
+    for i in range(len(buf)):
         b = buf[i]
         if b == quote:
             in_quote = not in_quote
             length += 1
+            last += 1
         elif in_quote:
             length += 1
+            last += 1
         elif b == 10:  # \n
-            if row > 0 and length > 0 and (fields < lo or fields > hi):
+            if row > 0 and length > 0 and fields != hi and not (lo <= fields < hi and last > 0):
                 rows.append(row)
                 counts.append(fields)
             row += 1
             fields = 1
             length = 0
+            last = 0
         elif b == sep:
             fields += 1
             length += 1
+            last = 0
         elif b != 13:  # \r
             length += 1
-    if row > 0 and length > 0 and (fields < lo or fields > hi):
+            last += 1
+    if row > 0 and length > 0 and fields != hi and not (lo <= fields < hi and last > 0):
         rows.append(row)
         counts.append(fields)
     return np.array(rows, dtype=np.int64), np.array(counts, dtype=np.int64)
 
 
 def ragged_rows(text, separator: str, lo: int, hi: int) -> tuple[np.ndarray, np.ndarray]:
-    """The data rows of CSV text (header line first; any buffer of bytes) whose field count lies
-    outside ``[lo, hi]``: their positions among the data rows (0 = the line after the header,
-    blank lines counted, as the decoder's frame rows) and their field counts."""
+    """The data rows of CSV text (header line first; any buffer of bytes) of the wrong width
+    (``lo``, ``hi``: :func:`width_bounds`): their positions among the data rows (0 = the line after
+    the header, blank lines counted, as the decoder's frame rows) and their field counts."""
     buf = np.frombuffer(text, dtype=np.uint8)
     rows, counts = _scan(buf, np.uint8(ord(separator)), np.uint8(ord('"')), lo, hi)
     return rows - 1, counts
