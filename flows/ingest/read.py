@@ -173,18 +173,19 @@ def read_csv_export(data: bytes | Path, export: ExportSpec, tags: TagTable | Non
         pass  # a value that is no number, a tag the plant does not have, bad UTF-8, a row too wide: the careful path
     opts = _csv_options(export, "utf8-lossy")
     overrides.pop(export.tag_column, None)
+    too_wide = False
     try:
         df = pl.read_csv(data, schema_overrides=overrides, ignore_errors=True, **opts)
     except pl.exceptions.ComputeError:
         if _binary(data):  # NUL bytes: not text at all, not a row too wide
             raise
-        opts["truncate_ragged_lines"] = True  # a row too wide: read, and marked below
+        too_wide = opts["truncate_ragged_lines"] = True  # a row too wide: read, and marked below
         df = pl.read_csv(data, schema_overrides=overrides, ignore_errors=True, **opts)
     suspicious = [c for c in values if df[c].null_count()]
     if suspicious:
         text = pl.read_csv(data, columns=suspicious, **opts)
         df = df.with_columns([text[c] for c in suspicious])
-    return mark_row_faults(df, data, export.separator, maybe_wide=True)
+    return mark_row_faults(df, data, export.separator, maybe_wide=too_wide)
 
 
 def _binary(data: bytes | Path) -> bool:
