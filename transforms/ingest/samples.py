@@ -246,6 +246,17 @@ def _take_broken(df: pl.DataFrame, lines: pl.Series) -> tuple[pl.DataFrame, pl.S
     return df.filter(~bad).drop(ROW_FAULT_COLUMN), lines.filter(~bad), df.filter(bad), lines.filter(bad)
 
 
+def _and_marks(df: pl.DataFrame, columns) -> list[str]:
+    """``columns`` and, when the text reader added it, :data:`ROW_FAULT_COLUMN` (a marked row is
+    not blank, whatever its cells)."""
+    return [*columns, *([ROW_FAULT_COLUMN] if ROW_FAULT_COLUMN in df.columns else [])]
+
+
+def _cut(broken: pl.DataFrame | None) -> bool:
+    """Whether the marked rows hold a cut last line."""
+    return broken is not None and bool(broken[ROW_FAULT_COLUMN].eq("truncated").any())
+
+
 def _present(col: pl.Series) -> pl.Series:
     """Cells that hold something (a wide export's empty cell is no sample)."""
     return col.is_not_null() if col.dtype != pl.String else col.str.strip_chars().str.len_bytes().fill_null(0) > 0
@@ -419,7 +430,7 @@ def long_samples(df: pl.DataFrame, export: ExportSpec, timezone: str, tags: TagT
     if export.quality_column:
         wanted["quality_column"] = export.quality_column
     _require_columns(df, wanted)
-    df, lines = _drop_blank(df.select([*wanted.values(), *(c for c in (ROW_FAULT_COLUMN,) if c in df.columns)]), first_line)
+    df, lines = _drop_blank(df.select(_and_marks(df, wanted.values())), first_line)
     rows_in = df.height
     df, lines, broken, broken_lines = _take_broken(df, lines)
     broken_q = None
@@ -475,9 +486,8 @@ def long_samples(df: pl.DataFrame, export: ExportSpec, timezone: str, tags: TagT
         ok = pl.Series(fault == 0)
         lines, tag, ts, value_si = lines.filter(ok), tag.filter(ok), ts.filter(ok), value_si[fault == 0]
     n_broken = 0 if broken_q is None else broken_q.height
-    truncated = broken is not None and broken[ROW_FAULT_COLUMN].eq("truncated").any()
     return Samples(
-        _accepted(lines, tag, ts, value_si), _concat([broken_q, set_aside, faulted]), rows_in, n + n_broken, tags_present, counts, faults.counts, faults.first, other, truncated
+        _accepted(lines, tag, ts, value_si), _concat([broken_q, set_aside, faulted]), rows_in, n + n_broken, tags_present, counts, faults.counts, faults.first, other, _cut(broken)
     )
 
 
@@ -509,7 +519,7 @@ def wide_samples(
                 raise IngestError(f"unknown tag {c!r} (column {df.columns.index(c) + 1}): no valve of the plant configuration has it")
             other[c] = df.height - df[c].null_count()
     tag_columns = [c for c in tag_columns if c in ids]
-    df, lines = _drop_blank(df.select([*wanted.values(), *tag_columns, *(c for c in (ROW_FAULT_COLUMN,) if c in df.columns)]), first_line)
+    df, lines = _drop_blank(df.select(_and_marks(df, [*wanted.values(), *tag_columns])), first_line)
     rows_in = df.height
     df, lines, broken, broken_lines = _take_broken(df, lines)
     n = df.height
@@ -574,8 +584,7 @@ def wide_samples(
             tag = tag.head(len(value_si))
         accepted.append(_accepted(col_lines, tag, col_ts, value_si))
     acc = pl.concat(accepted) if accepted else _empty_accepted(tags)
-    truncated = broken is not None and broken[ROW_FAULT_COLUMN].eq("truncated").any()
-    return Samples(acc, _concat(quarantined), rows_in, samples_in, frozenset(tag_columns), tag_samples, faults.counts, faults.first, other, truncated)
+    return Samples(acc, _concat(quarantined), rows_in, samples_in, frozenset(tag_columns), tag_samples, faults.counts, faults.first, other, _cut(broken))
 
 
 def samples_of(
