@@ -397,11 +397,20 @@ def complete_interrupted(warehouse: Path, spec: RetentionSpec, as_of: date, valv
 
 AS_OF_AFTER_INGEST = timedelta(days=1)
 """How far after the warehouse's latest ingest an ``as_of`` may lie without ``force``."""
+EARLIEST_ZONE = timedelta(hours=14)
+"""The furthest any time zone is ahead of UTC (UTC+14): "today" there is the latest ``as_of`` that
+is today somewhere (the nightly run's is the plant's local today)."""
+
+
+def latest_today(now: datetime) -> date:
+    """The latest date that is today in some time zone at ``now``."""
+    return (now.astimezone(timezone.utc) + EARLIEST_ZONE).date()
 
 
 def check_as_of(warehouse: Path, as_of: date, today: date) -> None:
-    """Refuse an ``as_of`` later than ``today`` or more than :data:`AS_OF_AFTER_INGEST` after the
-    latest ingest (``ingest_manifest.ingested_at``): it would make data look older than it is.
+    """Refuse an ``as_of`` later than ``today`` (:func:`latest_today`) or more than
+    :data:`AS_OF_AFTER_INGEST` after the latest ingest (``ingest_manifest.ingested_at``): it would
+    make data look older than it is.
 
     Raises
     ------
@@ -436,9 +445,10 @@ def run_retention(
         raise ValueError("run_retention: the plant configures no [retention]")
     warehouse = Path(warehouse)
     ids = plant_valves(config, valve_ids, "--valves")
-    today = datetime.now(timezone.utc).date()
+    now = datetime.now(timezone.utc)
+    today = now.date()
     if as_of is not None and not force and not dry_run:
-        check_as_of(warehouse, as_of, today)
+        check_as_of(warehouse, as_of, latest_today(now))
     as_of = as_of or today
     summary = RetentionSummary(as_of, spec, dry_run, today=today)
     # a dry run takes no lock either: even a lock file would be a write

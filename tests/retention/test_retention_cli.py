@@ -10,6 +10,7 @@ import pytest
 
 from flows.common.lake import partition_folders
 from flows.common.warehouse_db import connect
+from flows.retention.flow import latest_today
 from schemas.plant_config import RetentionSpec
 from tests.ingest.conftest import run_cli
 from tests.retention.conftest import write_config
@@ -64,7 +65,7 @@ def test_an_as_of_in_the_future_is_refused_unless_forced(base, wh, tmp_path, mon
     cfg = write_config(base[1] / "plant.toml", tmp_path / "plant.toml", RetentionSpec(keep_days=1000, mode="drop"))
     parts = partition_folders(wh)
     code, out, err = _cli(["--as-of", "2099-01-01"], wh, cfg, monkeypatch, capsys)
-    today = datetime.now(timezone.utc).date()
+    today = latest_today(datetime.now(timezone.utc))  # today in the zone furthest ahead (the nightly run's as-of is the plant's local today)
     assert code == 1 and out == "" and err == f"valvemon: error: --as-of 2099-01-01 is later than today ({today}): data would count as older than it is; give --force if that is meant\n"
     assert partition_folders(wh) == parts
     code, out, _ = _cli(["--as-of", "2099-01-01", "--dry-run"], wh, cfg, monkeypatch, capsys)  # a dry run only reports
