@@ -307,6 +307,10 @@ EDGE_FIT_FIELDS: tuple[Field, ...] = (
     Field("leak_scale", pl.Float64, "", "The edge's closed-edge leakage in the window over Eq. 3's (0 = none).", nullable=True, ge=0.0),
     Field("leak_scale_ci_low", pl.Float64, "", "Lower bound of the 95 % confidence interval of leak_scale.", nullable=True),
     Field("leak_scale_ci_high", pl.Float64, "", "Upper bound of the 95 % confidence interval of leak_scale.", nullable=True),
+    Field("alpha_x_corr", pl.Float64, "", "Correlation of alpha_hat and x_hat_mm from the fit's covariance.", nullable=True),
+    Field("x_hat_determined", pl.Boolean, "",
+          "False where |alpha_x_corr| > 0.995: the points' u-range too short to tell a shift from a scale; "
+          "x_hat_mm is then not used by the trends and the change detector.", nullable=True),
 )
 """One row per valve, edge and monitoring window (table ``edge_fits``, interfaces.md)."""
 
@@ -416,7 +420,7 @@ VALVE_CONDITION_FIELDS: tuple[Field, ...] = (
     Field("last_window_start", UTC_US, "", "Latest monitoring window of the edge (any status).", nullable=True),
     Field("last_ok_window_start", UTC_US, "", "Latest window with an estimate.", nullable=True),
     Field("alpha_hat", pl.Float64, "", "alpha_hat of the latest ok window.", nullable=True),
-    Field("x_hat_pct", pl.Float64, "%", "x_hat_pct of the latest ok window.", nullable=True),
+    Field("x_hat_pct", pl.Float64, "%", "x_hat_pct of the latest ok window that determined it (x_hat_determined).", nullable=True),
     Field("e_mm2", pl.Float64, "mm²", "e_mm2 of the latest ok window.", nullable=True),
     Field("alpha_level", pl.Float64, "", "Long-term level (median of the latest alarm-free windows) of alpha_hat.", nullable=True),
     Field("x_hat_pct_level", pl.Float64, "%", "Long-term level of x_hat_pct.", nullable=True),

@@ -100,18 +100,33 @@ FIT_COLUMNS = (
     "x_hat_ci_high_m",
     "ci_inflation",
     "iterations",
+    "alpha_x_corr",
+    "x_hat_determined",
     "leak_scale",
     "leak_scale_ci_low",
     "leak_scale_ci_high",
 )
 """``leak_scale*``: the row's edge's closed-edge leakage scale λ (× Eq. 3's leakage at the edge's
 state; identified from the other edge of its port, :mod:`transforms.leakage`) and its interval;
-NaN without the closed-edge correction."""
+NaN without the closed-edge correction.
+
+``alpha_x_corr``: the correlation of α̂ and x̂ from the fit's covariance (JᵀJ)⁻¹;
+``x_hat_determined``: |alpha_x_corr| ≤ :data:`X_HAT_MAX_CORRELATION` (False without an estimate)."""
 
 LEAK_COLUMNS = FIT_COLUMNS[-3:]
 
 # kernel result codes
 _OK, _DEGENERATE, _AT_BOUND, _NOT_CONVERGED, _SKIPPED, _PREDICTED = 0, 1, 2, 3, 4, 5
+
+X_HAT_MAX_CORRELATION = 0.995
+"""x̂ is *determined* by a window only where |corr(α̂, x̂)| ≤ this (a coupling factor
+1/sqrt(1 − corr²) ≤ 10: x̂'s standard error at most 10× what it would be were α known). Over a
+short range of u the scale and the shift are nearly confounded (Â ≈ straight: α·Â(u + x) moves
+along one line), and a point error that varies with u by a fraction of a per cent turns into
+micrometres of x̂; the reference plant's window over u = 1.04–1.34 mm (corr −0.9976) read x̂
+2.1 µm (7 % of its 0.03 mm shift) off. Such a window's α̂ and e stand; its x̂ is stored with its
+interval, ``x_hat_determined`` false, and the trends and the change detector leave it out
+(docs/monitoring.md, "x̂ on any edge law")."""
 
 TRUST_STEP_M = 1e-6
 """A Newton step shorter than this (1 µm, a fiftieth of the baseline's knot spacing) is not
@@ -570,7 +585,8 @@ def fit_arrays(
     α̂ and x̂ only (e, the confidence intervals and ``ci_inflation`` are NaN).
 
     Returns per population: ``status`` (str), ``n_points``, ``u_min_m``, ``u_max_m``,
-    ``alpha_hat``, ``x_hat_m``, ``e_m2``, CI bounds, ``ci_inflation``, ``iterations``.
+    ``alpha_hat``, ``x_hat_m``, ``e_m2``, CI bounds, ``ci_inflation``, ``iterations``,
+    ``alpha_x_corr``, ``x_hat_determined`` (:data:`FIT_COLUMNS`).
     Estimates are NaN where the status says there is none.
     """
     u = np.ascontiguousarray(u, dtype=np.float64)
@@ -633,6 +649,7 @@ def fit_arrays(
         tq = stdtrit(dof, 0.5 + ci_level / 2.0)
         half_a = tq * infl * np.sqrt(var_a)
         half_x = tq * infl * np.sqrt(var_x)
+        corr = -shd / np.sqrt(shh * sdd)
     fitted = np.isfinite(alpha) & np.isfinite(ssr)
     infl = np.where(fitted, infl, np.nan)
     return {
@@ -649,6 +666,8 @@ def fit_arrays(
         "x_hat_ci_high_m": xhat + half_x,
         "ci_inflation": infl,
         "iterations": iters.astype(np.int64),
+        "alpha_x_corr": np.where(fitted, corr, np.nan),
+        "x_hat_determined": fitted & (np.abs(corr) <= X_HAT_MAX_CORRELATION),
     }
 
 

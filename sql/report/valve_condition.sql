@@ -47,7 +47,7 @@ windows as (
         max(window_start) filter (where is_ok) as last_ok_window_start,
         max(operating_hours) filter (where is_ok) as operating_hours,
         arg_max(alpha_hat, window_start) filter (where is_ok) as alpha_hat,
-        arg_max(x_hat_pct, window_start) filter (where is_ok) as x_hat_pct,
+        arg_max(x_hat_pct, window_start) filter (where is_ok and x_hat_determined) as x_hat_pct,
         arg_max(e_mm2, window_start) filter (where is_ok) as e_mm2,
         median(leak_scale) filter (where is_ok and leak_scale is not null) as leak_scale
     from fits

@@ -3,6 +3,9 @@
 -- version (design data or commissioning window changed since) is left out: its α̂ and x̂ are
 -- relative to another characteristic. is_ok marks windows that gave all three estimates.
 -- leak_scale (+ interval): the edge's closed-edge leakage in the window over Eq. 3's (0 = none).
+-- x_hat_determined: false where the window's points were too short a range of u to tell a shift
+-- from a scale (|corr(alpha_hat, x_hat)| > 0.995); its x_hat is not a trend or detector value.
+-- Rows monitored before the column existed count as determined.
 with
 
 fits as (
@@ -32,6 +35,7 @@ final as (
         fits.leak_scale,
         fits.leak_scale_ci_low,
         fits.leak_scale_ci_high,
+        coalesce(fits.x_hat_determined, true) as x_hat_determined,
         (fits.status = 'ok'
             and isfinite(fits.alpha_hat) and isfinite(fits.x_hat_pct) and isfinite(fits.e_mm2)) as is_ok
     from fits
