@@ -307,9 +307,10 @@ EDGE_FIT_FIELDS: tuple[Field, ...] = (
     Field("leak_scale", pl.Float64, "", "The edge's closed-edge leakage in the window over Eq. 3's (0 = none).", nullable=True, ge=0.0),
     Field("leak_scale_ci_low", pl.Float64, "", "Lower bound of the 95 % confidence interval of leak_scale.", nullable=True),
     Field("leak_scale_ci_high", pl.Float64, "", "Upper bound of the 95 % confidence interval of leak_scale.", nullable=True),
-    Field("alpha_x_corr", pl.Float64, "", "Correlation of alpha_hat and x_hat_mm from the fit's covariance.", nullable=True),
+    Field("u_spread_mm", pl.Float64, "mm", "The points' spread in u as the fit's covariance sees it "
+          "(the standard deviation of u on a straight characteristic).", nullable=True),
     Field("x_hat_determined", pl.Boolean, "",
-          "False where |alpha_x_corr| > 0.995: the points' u-range too short to tell a shift from a scale; "
+          "False where u_spread_mm < 0.1 mm: too short a range of u to tell a shift from a scale; "
           "x_hat_mm is then not used by the trends and the change detector.", nullable=True),
 )
 """One row per valve, edge and monitoring window (table ``edge_fits``, interfaces.md)."""

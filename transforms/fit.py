@@ -100,7 +100,7 @@ FIT_COLUMNS = (
     "x_hat_ci_high_m",
     "ci_inflation",
     "iterations",
-    "alpha_x_corr",
+    "u_spread_m",
     "x_hat_determined",
     "leak_scale",
     "leak_scale_ci_low",
@@ -110,22 +110,25 @@ FIT_COLUMNS = (
 state; identified from the other edge of its port, :mod:`transforms.leakage`) and its interval;
 NaN without the closed-edge correction.
 
-``alpha_x_corr``: the correlation of α̂ and x̂ from the fit's covariance (JᵀJ)⁻¹;
-``x_hat_determined``: |alpha_x_corr| ≤ :data:`X_HAT_MAX_CORRELATION` (False without an estimate)."""
+``u_spread_m``: the points' spread in u as the fit's covariance sees it; ``x_hat_determined``:
+``u_spread_m`` ≥ :data:`X_HAT_MIN_SPREAD_M` (False without an estimate)."""
 
 LEAK_COLUMNS = FIT_COLUMNS[-3:]
 
 # kernel result codes
 _OK, _DEGENERATE, _AT_BOUND, _NOT_CONVERGED, _SKIPPED, _PREDICTED = 0, 1, 2, 3, 4, 5
 
-X_HAT_MAX_CORRELATION = 0.995
-"""x̂ is *determined* by a window only where |corr(α̂, x̂)| ≤ this (a coupling factor
-1/sqrt(1 − corr²) ≤ 10: x̂'s standard error at most 10× what it would be were α known). Over a
-short range of u the scale and the shift are nearly confounded (Â ≈ straight: α·Â(u + x) moves
-along one line), and a point error that varies with u by a fraction of a per cent turns into
-micrometres of x̂; the reference plant's window over u = 1.04–1.34 mm (corr −0.9976) read x̂
-2.1 µm (7 % of its 0.03 mm shift) off. Such a window's α̂ and e stand; its x̂ is stored with its
-interval, ``x_hat_determined`` false, and the trends and the change detector leave it out
+X_HAT_MIN_SPREAD_M = 0.1e-3
+"""x̂ is *determined* by a window only where its points spread over u by at least this (0.1 mm):
+the spread as the fit's covariance sees it, ``u_spread_m`` = α̂ sqrt(det JᵀJ) / (α̂² Σ Â'²), the
+standard deviation of u + x̂ on a straight Â and whatever the characteristic's intercept. Over
+a shorter range the scale and the shift are confounded (the correlation of α̂ and x̂ then
+depends on Â's intercept too: −0.998 on the reference plant's straight edges, beyond −0.9997 on
+Eq. 3's curved ones in ordinary windows), and a point error that varies with u by a tenth of a
+per cent per millimetre turns into micrometres of x̂: the reference plant's window over
+u = 1.04–1.34 mm (spread 0.08 mm) read x̂ 2.1 µm (7 % of its 0.03 mm shift) off, its 95 %
+interval ±0.5–1 µm. Such a window's α̂ and e stand; its x̂ is stored with its interval,
+``x_hat_determined`` false, and the trends and the change detector leave it out
 (docs/monitoring.md, "x̂ on any edge law")."""
 
 TRUST_STEP_M = 1e-6
@@ -586,7 +589,7 @@ def fit_arrays(
 
     Returns per population: ``status`` (str), ``n_points``, ``u_min_m``, ``u_max_m``,
     ``alpha_hat``, ``x_hat_m``, ``e_m2``, CI bounds, ``ci_inflation``, ``iterations``,
-    ``alpha_x_corr``, ``x_hat_determined`` (:data:`FIT_COLUMNS`).
+    ``u_spread_m``, ``x_hat_determined`` (:data:`FIT_COLUMNS`).
     Estimates are NaN where the status says there is none.
     """
     u = np.ascontiguousarray(u, dtype=np.float64)
@@ -649,7 +652,7 @@ def fit_arrays(
         tq = stdtrit(dof, 0.5 + ci_level / 2.0)
         half_a = tq * infl * np.sqrt(var_a)
         half_x = tq * infl * np.sqrt(var_x)
-        corr = -shd / np.sqrt(shh * sdd)
+        spread = alpha * np.sqrt(det) / sdd
     fitted = np.isfinite(alpha) & np.isfinite(ssr)
     infl = np.where(fitted, infl, np.nan)
     return {
@@ -666,8 +669,8 @@ def fit_arrays(
         "x_hat_ci_high_m": xhat + half_x,
         "ci_inflation": infl,
         "iterations": iters.astype(np.int64),
-        "alpha_x_corr": np.where(fitted, corr, np.nan),
-        "x_hat_determined": fitted & (np.abs(corr) <= X_HAT_MAX_CORRELATION),
+        "u_spread_m": np.where(fitted, spread, np.nan),
+        "x_hat_determined": fitted & (spread >= X_HAT_MIN_SPREAD_M),
     }
 
 

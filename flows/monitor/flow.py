@@ -516,7 +516,7 @@ def _fits_table(fits: pl.DataFrame, valve: ValveSpec, baselines: dict[str, Basel
         "leak_scale",
         "leak_scale_ci_low",
         "leak_scale_ci_high",
-        "alpha_x_corr",
+        (pl.col("u_spread_m") * 1e3).alias("u_spread_mm"),
         "x_hat_determined",
     ).cast(dict(polars_schema(EDGE_FIT_FIELDS))).with_columns(pl.col(pl.Float64).fill_nan(None))  # no estimate: NULL
 

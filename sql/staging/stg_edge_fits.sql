@@ -4,7 +4,7 @@
 -- relative to another characteristic. is_ok marks windows that gave all three estimates.
 -- leak_scale (+ interval): the edge's closed-edge leakage in the window over Eq. 3's (0 = none).
 -- x_hat_determined: false where the window's points were too short a range of u to tell a shift
--- from a scale (|corr(alpha_hat, x_hat)| > 0.995); its x_hat is not a trend or detector value.
+-- from a scale (u_spread_mm < 0.1 mm); its x_hat is not a trend or detector value.
 -- Rows monitored before the column existed count as determined.
 with
 

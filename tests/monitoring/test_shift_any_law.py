@@ -54,18 +54,24 @@ def test_shift_is_estimated_as_a_shift(family):
 def test_shift_on_the_second_reference_plant():
     """The linear-gradient valve of the reference plant written apart from model/ (its own
     dynamics: continuous PI, Karnopp sticking, ramped loads, transmitter lag and skew; recorded
-    with noise), configured as Eq. 3: recognised as straight, x̂ within 3 % of the shift and 0.1 %
-    of x_max on every edge, no leakage where there is none. Three of the four windows of
-    ``bench/xhat_families.py --plant refplant``; its fourth (α ×1.15 at 0.03 mm, s1 and 2r over
-    only 0.30 mm of u) is 7 % off: the α̂–x̂ coupling on a short range (docs/monitoring.md,
-    "x̂ on any edge law")."""
-    fits = refplant_study("linear", 1, [(0.03e-3, 1.0), (0.06e-3, 1.0), (0.06e-3, 1.15)], window_seeds=(1500, 1502, 1503))
+    with noise), configured as Eq. 3: recognised as straight, no leakage where there is none, and
+    x̂ within 3 % of the shift and 0.1 % of x_max on every edge whose window determined it. The
+    four windows of ``bench/xhat_families.py --plant refplant``: in the second (α ×1.15 at 0.03 mm)
+    s1 and 2r cover only u = 1.04–1.34 mm, where the pressures' 2 ms of lag and skew leave α̂ 0.16 %
+    low and the α̂–x̂ coupling turns that into 7 % of the shift; the fit says so (x̂ not
+    determined: the points' spread in u < 0.1 mm) rather than report it (docs/monitoring.md, "x̂ on any edge law")."""
+    fits = refplant_study("linear", 1, [(0.03e-3, 1.0), (0.03e-3, 1.15), (0.06e-3, 1.0), (0.06e-3, 1.15)])
     base = fits.filter(pl.col("window_id") == 0)
     later = fits.filter(pl.col("window_id") > 0)
     assert set(base["edge_law"]) == {"sharp"}
     assert (later["status"] == "ok").all(), later.filter(pl.col("status") != "ok")
-    err = later["x_err_m"].abs().to_numpy()
-    bad = later.filter(pl.Series((err > REL_TOL * later["x_true_m"].to_numpy()) | (err > ABS_TOL)))
-    assert bad.height == 0, bad.select("window_id", "edge", "x_true_m", "alpha_true", "x_err_m", "alpha_err", "u_min_m", "u_max_m")
+    cols = ("window_id", "edge", "x_true_m", "alpha_true", "x_err_m", "alpha_err", "u_min_m", "u_max_m", "u_spread_m")
+    undetermined = later.filter(~pl.col("x_hat_determined"))
+    assert sorted(zip(undetermined["window_id"], undetermined["edge"])) == [(2, "2r"), (2, "s1")], undetermined.select(cols)
+    assert ((undetermined["u_max_m"] - undetermined["u_min_m"]) < 0.35e-3).all()
+    determined = later.filter(pl.col("x_hat_determined"))
+    err = determined["x_err_m"].abs().to_numpy()
+    bad = determined.filter(pl.Series((err > REL_TOL * determined["x_true_m"].to_numpy()) | (err > ABS_TOL)))
+    assert bad.height == 0, bad.select(cols)
     assert (base["leak_scale_baseline"] <= 1.96 * base["leak_scale_baseline_se"] + 0.01).all(), base
     assert (later["leak_scale_ci_low"] < 0.01).all(), later.filter(pl.col("leak_scale_ci_low") >= 0.01)

@@ -89,6 +89,21 @@ def test_correlated_residuals_widen_the_intervals():
     assert r["x_hat_ci_low_m"] < XHAT < r["x_hat_ci_high_m"]
 
 
+@pytest.mark.parametrize("base", [None, BASELINE], ids=["straight", "Eq. 3 baseline"])
+@pytest.mark.parametrize(("lo", "hi", "determined"), [(1.04e-3, 1.34e-3, False), (1.04e-3, 1.6e-3, True)])
+def test_u_spread_and_x_hat_determined(base, lo, hi, determined):
+    """The fit's spread of u from its covariance, α̂ sqrt(det JᵀJ) / (α̂² Σ Â'²), is the standard
+    deviation of u on a straight Â (whatever its intercept) and close to it on Eq. 3's curved one;
+    a 0.3 mm range of u (spread 0.087 mm) does not determine x̂, 0.56 mm (0.16 mm) does."""
+    if base is None:
+        k, u0 = 0.02, 0.07e-3
+        base = Characteristic([-1e-3, 6e-3], [k * (-1e-3 + u0), k * (6e-3 + u0)])
+    u, a = _population(np.random.default_rng(11), 2000, base=base, lo=lo, hi=hi)
+    r = _fit_one(u, a, base=base)
+    assert r["u_spread_m"] == pytest.approx(u.std(), rel=1e-9 if base is not BASELINE else 0.05)
+    assert r["x_hat_determined"] == determined
+
+
 def test_analytic_gradient_matches_finite_differences():
     rng = np.random.default_rng(5)
     u, a = _population(rng, 500)
