@@ -51,18 +51,22 @@ def shift_study(geometry, seed: int, shifts_m, alphas, *, duration_s: float = 10
 
 
 def refplant_study(law: str, seed: int, pairs, *, commissioning: int = 6, noiseless: bool = False,
-                   window_seeds=None, params=None) -> pl.DataFrame:
+                   ideal_transmitters: bool = False, window_seeds=None, params=None) -> pl.DataFrame:
     """:func:`fits_against_truth` on the second reference plant (``tests/refplant``): its
     manufactured valve ``seed`` with every edge on ``law``, commissioned from ``commissioning`` 10 s
     snapshots, then one 10 s window per (shift [m], α factor) of ``pairs``, every edge worn so, drawn
     from ``window_seeds`` (default seed·1000 + 500 + i). ``noiseless``: its acquisition without
-    noise or quantisation."""
+    noise or quantisation; ``ideal_transmitters``: its pressures without their lag and skew."""
+    from dataclasses import replace
+
     from tests import refplant as rp
 
     params = params or PARAMS
     base = rp.family(rp.manufactured(rp.NAMEPLATE, seed=seed), law)
     if noiseless:
         base = rp.without_noise(base)
+    if ideal_transmitters:
+        base = replace(base, sensors=replace(base.sensors, lag_s=(0.0,) * 4, skew_samples=0))
     comm = rp.to_lake_frame(rp.simulate_windows(base, commissioning, seed), "V1", START)
     fitted = commissioning_baseline(comm, params, NOMINAL, laws=LAWS)
     seeds = window_seeds or [seed * 1000 + 500 + i for i in range(len(pairs))]
