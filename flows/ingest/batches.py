@@ -47,6 +47,11 @@ class ExportSource:
     units: FileUnits | None = None
     """The units the file states (a unit header row, TDMS ``unit_string``); None: it states none."""
 
+    @property
+    def start(self) -> tuple[str, int] | None:
+        """A text export's ``start_time`` header line: its start time and line number."""
+        return None if self.header is None else self.header.start
+
 
 def open_export(path: Path, export: ExportSpec) -> ExportSource:
     """Hash one export file and check it is not empty (``read_export``'s checks before decoding);

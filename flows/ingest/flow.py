@@ -185,6 +185,7 @@ def merge_batches(
     NotStreamable
         The export cannot be taken batch by batch (nothing of it reached the lake).
     """
+    from flows.ingest.header_rows import time_origin
     from flows.ingest.staging import LakeStager
     from transforms.ingest.stream import ExportStream
     from transforms.ingest.units import tags_with_file_units
@@ -193,7 +194,8 @@ def merge_batches(
     stager = LakeStager(warehouse, config, lock)
     spill = QuarantineSpill({"file_hash": source.file_hash, "source_file": str(path), "run_id": run_id, "ingested_at": now})
     try:
-        stream = ExportStream(config, tags_with_file_units(tags, config, source.units))  # the file's own units, where it states them
+        origin = time_origin(path, source.start, config.export, config.timezone)  # relative times: the file's start
+        stream = ExportStream(config, tags_with_file_units(tags, config, source.units), origin_ns=origin)  # the file's own units, where it states them
         for df, first_line, final in batches:
             for frame in stream.feed(df, first_line=first_line, final=final):
                 stager.add(frame)

@@ -2,6 +2,7 @@
 
 ``export.header_rows`` says what each header line holds, in file order (``schemas.plant_config``:
 ``"tag"`` — the column names, matched to the configured tags —, ``"name"``, ``"unit"``,
+``"start_time"`` — the recording's start in the second cell, for a relative time column —,
 ``"skip"``). :func:`read_header_rows` reads those lines from the start of a file and gives the
 ``tag`` line (the one header line the CSV decoder is given in front of every block), the number of
 header lines (the first data line is the next) and the unit of every configured tag's column,
@@ -19,6 +20,8 @@ from typing import IO
 
 from flows.common.errors import ValvemonError
 from schemas.plant_config import ExportSpec
+from transforms.ingest.errors import IngestError
+from transforms.ingest.timestamps import parse_start_time, start_in_name
 from transforms.ingest.units import FileUnits
 
 
@@ -32,6 +35,8 @@ class HeaderRows:
     """Header lines read: the first data line is ``lines + 1``."""
     units: FileUnits | None
     """Column (tag) → (unit as written, ``column N 'name'``); None without a ``unit`` line."""
+    start: tuple[str, int] | None = None
+    """The ``start_time`` line's second cell and the line's number; None without such a line."""
 
 
 def _fields(line: bytes, separator: str) -> list[str]:
@@ -87,8 +92,14 @@ def read_header_rows(fh: IO[bytes], export: ExportSpec, where: str) -> HeaderRow
             f"{where}: line {t + 1}: expected the header line 'tag' ({expected}) with the time column {export.timestamp_column!r} "
             f"(export.timestamp_column), found {found}{', …' if len(names) > 4 else ''}"
         )
+    start = None
     for i, (kind, row) in enumerate(zip(kinds, fields)):
-        if kind == "skip":
+        if kind == "start_time":
+            if len(row) < 2 or not row[1].strip():
+                text = raw[i].decode("utf-8", errors="replace").rstrip("\r\n")
+                raise ValvemonError(f"{where}: line {i + 1}: expected the recording's start time in the second cell of the 'start_time' line ({expected}), found {text!r}")
+            start = (row[1].strip(), i + 1)
+        if kind in ("skip", "start_time"):
             continue
         cells = [c.strip() for j, c in enumerate(row) if j < len(names) and names[j] != export.timestamp_column and c.strip()]
         if cells and all(_is_number(c, export.decimal) for c in cells):
@@ -105,7 +116,40 @@ def read_header_rows(fh: IO[bytes], export: ExportSpec, where: str) -> HeaderRow
             if name != export.timestamp_column:
                 desc = f" {label[j].strip()!r}" if j < len(label) and label[j].strip() else ""
                 units[name] = (row[j] if j < len(row) else "", f"column {j + 1}{desc}")
-    return HeaderRows(raw[t], len(kinds), units)
+    return HeaderRows(raw[t], len(kinds), units, start)
+
+
+def time_origin(path: Path, start: tuple[str, int] | None, export: ExportSpec, timezone: str) -> int | None:
+    """The file's start time (UTC ns) that a relative ``export.timestamp_format`` counts from: the
+    ``start_time`` header line's (``start``: its text and line), else the first part of the file's
+    name written in ``export.start_time_format`` (``DEMO_20250301T010000.txt`` with
+    ``"%Y%m%dT%H%M%S"``); None for absolute timestamps.
+
+    Raises
+    ------
+    ValvemonError
+        Naming the file and the line (or its name): no start time, or one that cannot be read.
+    """
+    if not export.relative_time:
+        return None
+    fmt = export.start_time_format
+    if start is not None:
+        text, where = start[0], f"{path}: line {start[1]}"
+    else:
+        where = f"{path}: file name {path.name!r}"
+        try:
+            text = start_in_name(path.name, fmt)
+        except IngestError as exc:
+            raise ValvemonError(f"{where}: {exc}") from None
+        if text is None:
+            raise ValvemonError(
+                f"{where}: no start time: no 'start_time' header line (export.header_rows) and no part of the name "
+                f"written in export.start_time_format {fmt!r} (export.timestamp_format {export.timestamp_format!r} counts from the start)"
+            )
+    try:
+        return parse_start_time(text, fmt, timezone)
+    except IngestError as exc:
+        raise ValvemonError(f"{where}: {exc}") from None
 
 
 def without_header_rows(data: bytes | Path, export: ExportSpec, where: str) -> tuple[bytes, HeaderRows]:

@@ -292,6 +292,8 @@ class ExportFile:
     path: Path | None = None
     units: FileUnits | None = None
     """The units the file states (a unit header row, TDMS ``unit_string``); None: it states none."""
+    start: tuple[str, int] | None = None
+    """A text export's ``start_time`` header line: its start time and line number."""
 
 
 def read_export(path: Path, export: ExportSpec, tags: TagTable | None = None) -> ExportFile:
@@ -327,7 +329,7 @@ def read_export(path: Path, export: ExportSpec, tags: TagTable | None = None) ->
                 raise ValvemonError(empty)
     except (OSError, ValueError) as exc:
         raise ValvemonError(f"{path}: cannot read the file ({getattr(exc, 'strerror', None) or exc})") from None
-    units = None
+    units = start = None
     try:
         if fmt == "parquet":
             df = read_parquet_export(path, export, tags)
@@ -343,7 +345,7 @@ def read_export(path: Path, export: ExportSpec, tags: TagTable | None = None) ->
 
             data, header = without_header_rows(data, export, str(path))
             df = read_csv_export(data, export, tags)
-            first_line, units = header.lines + 1, header.units
+            first_line, units, start = header.lines + 1, header.units, header.start
         else:
             df = read_csv_export(data, export, tags)
             first_line = 2
@@ -357,7 +359,7 @@ def read_export(path: Path, export: ExportSpec, tags: TagTable | None = None) ->
         raise ValvemonError(f"{path}: not a readable {kind} export ({reason})") from None
     if df.height == 0:
         raise ValvemonError(f"{path}: no data rows (only a header)")
-    return ExportFile(df, first_line, fmt, digest, size, path, units)
+    return ExportFile(df, first_line, fmt, digest, size, path, units, start)
 
 
 # --- one file --------------------------------------------------------------------------------

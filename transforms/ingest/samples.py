@@ -371,7 +371,7 @@ def _concat(frames: list[pl.DataFrame | None]) -> pl.DataFrame:
     return pl.concat(used) if used else empty_quarantine()
 
 
-def long_samples(df: pl.DataFrame, export: ExportSpec, timezone: str, tags: TagTable, *, first_line: int = 2, now_ns: int | None = None) -> Samples:
+def long_samples(df: pl.DataFrame, export: ExportSpec, timezone: str, tags: TagTable, *, first_line: int = 2, now_ns: int | None = None, origin_ns: int | None = None) -> Samples:
     """Samples of a long export: one row per tag and time.
 
     Parameters
@@ -389,6 +389,8 @@ def long_samples(df: pl.DataFrame, export: ExportSpec, timezone: str, tags: TagT
         Line number of the frame's first row (2 below a CSV header, 1 for Parquet rows).
     now_ns : int, optional
         The ingest's time (UTC ns) for ``implausible_time``; default: now.
+    origin_ns : int, optional
+        The file's start time (UTC ns), which a relative ``timestamp_format`` counts from.
     """
     wanted = {"timestamp_column": export.timestamp_column, "tag_column": export.tag_column, "value_column": export.value_column}
     if export.quality_column:
@@ -416,7 +418,7 @@ def long_samples(df: pl.DataFrame, export: ExportSpec, timezone: str, tags: TagT
     tag_id = tag.to_physical()
     faults = _Faults(tags, time.time_ns() if now_ns is None else now_ns)
     ts_raw = df[export.timestamp_column]
-    ts = parse_timestamps(ts_raw, export.timestamp_format, timezone, groups=tag_id, lines=lines, tags=tag, unreadable="null")
+    ts = parse_timestamps(ts_raw, export.timestamp_format, timezone, groups=tag_id, lines=lines, tags=tag, unreadable="null", origin_ns=origin_ns)
     bad_ts = None
     if ts.null_count():
         bad_ts = ts.is_null() if missing_tag is None else ts.is_null() & ~missing_tag
@@ -452,7 +454,7 @@ def _is_placeholder(df: pl.DataFrame, name: str) -> bool:
     return (name == "" or name.startswith("_duplicated_")) and df[name].null_count() == df.height
 
 
-def wide_samples(df: pl.DataFrame, export: ExportSpec, timezone: str, tags: TagTable, *, first_line: int = 2, now_ns: int | None = None) -> Samples:
+def wide_samples(df: pl.DataFrame, export: ExportSpec, timezone: str, tags: TagTable, *, first_line: int = 2, now_ns: int | None = None, origin_ns: int | None = None) -> Samples:
     """Samples of a wide export: a time column (and optionally a quality column) and a column per tag.
 
     An empty cell is no sample. A row whose quality code is bad, or whose timestamp cannot be
@@ -474,7 +476,7 @@ def wide_samples(df: pl.DataFrame, export: ExportSpec, timezone: str, tags: TagT
     df, lines = _drop_blank(df.select([*wanted.values(), *tag_columns]), first_line)
     n = df.height
     ts_raw = df[export.timestamp_column]
-    ts = parse_timestamps(ts_raw, export.timestamp_format, timezone, lines=lines, unreadable="null")
+    ts = parse_timestamps(ts_raw, export.timestamp_format, timezone, lines=lines, unreadable="null", origin_ns=origin_ns)
     bad_ts = ts.is_null() if ts.null_count() else None
     faults = _Faults(tags, time.time_ns() if now_ns is None else now_ns)
     bad_quality = _bad_quality(df[export.quality_column], export.good_quality) if export.quality_column else None
@@ -526,11 +528,12 @@ def wide_samples(df: pl.DataFrame, export: ExportSpec, timezone: str, tags: TagT
     return Samples(acc, _concat(quarantined), n, samples_in, frozenset(tag_columns), tag_samples, faults.counts, faults.first, other)
 
 
-def samples_of(df: pl.DataFrame, config: PlantConfig, tags: TagTable | None = None, *, first_line: int = 2, now_ns: int | None = None) -> Samples:
-    """Samples of an export in the configured layout (``export.layout``)."""
+def samples_of(df: pl.DataFrame, config: PlantConfig, tags: TagTable | None = None, *, first_line: int = 2, now_ns: int | None = None, origin_ns: int | None = None) -> Samples:
+    """Samples of an export in the configured layout (``export.layout``); ``origin_ns``: the file's
+    start time (UTC ns) for a relative ``timestamp_format``."""
     tags = tags or TagTable.from_config(config)
     reader = long_samples if config.export.layout == "long" else wide_samples
-    return reader(df, config.export, config.timezone, tags, first_line=first_line, now_ns=now_ns)
+    return reader(df, config.export, config.timezone, tags, first_line=first_line, now_ns=now_ns, origin_ns=origin_ns)
 
 
 def check_required_signals(tags_present: frozenset[str], config: PlantConfig) -> list[str]:
