@@ -21,7 +21,7 @@ import polars as pl
 import pytest
 from polars.testing import assert_frame_equal
 
-import flows.ingest.batches
+import flows.ingest.formats
 import flows.ingest.staging
 from flows.common.config import load_plant_config
 from tests.ingest.conftest import ingest, lake, table, write_plant
@@ -66,7 +66,7 @@ def wide10(tmp_path):
 
 @pytest.fixture
 def small(monkeypatch):
-    monkeypatch.setattr(flows.ingest.batches, "BATCH_SAMPLES", SMALL["BATCH_SAMPLES"])
+    monkeypatch.setattr(flows.ingest.formats, "BATCH_SAMPLES", SMALL["BATCH_SAMPLES"])
     monkeypatch.setattr(flows.ingest.staging, "DAY_FILE_MAX_ROWS", SMALL["DAY_FILE_MAX_ROWS"])
     monkeypatch.setattr(flows.ingest.staging, "BUFFER_ROWS", SMALL["BUFFER_ROWS"])
 
@@ -119,11 +119,11 @@ CHILD = textwrap.dedent(
     """
     import json, os, signal, sys
     sys.path.insert(0, {root!r})
-    import flows.common.lake, flows.ingest.batches, flows.ingest.staging
+    import flows.common.lake, flows.ingest.formats, flows.ingest.staging
     from flows.ingest.flow import run_ingest
     small, kill_at, warm = json.loads(sys.argv[1]), int(sys.argv[2]), sys.argv[3]
     for k, v in small.items():
-        setattr(flows.ingest.batches if k == "BATCH_SAMPLES" else flows.ingest.staging, k, v)
+        setattr(flows.ingest.formats if k == "BATCH_SAMPLES" else flows.ingest.staging, k, v)
     def hwm():  # VmHWM: ru_maxrss would carry pytest's own peak over fork + exec
         return next(int(l.split()[1]) for l in open("/proc/self/status") if l.startswith("VmHWM:"))
     run_ingest(sys.argv[4], [warm], sys.argv[6])  # imports, compiled kernels, first allocations

@@ -15,7 +15,7 @@ import polars as pl
 import pytest
 from polars.testing import assert_frame_equal
 
-import flows.ingest.batches
+import flows.ingest.formats
 from flows.common.errors import ValvemonError
 from schemas.errors import ConfigError
 from tests.ingest.conftest import ingest, lake, table
@@ -69,7 +69,7 @@ def csv_lake(tmp_path, t_utc_us: np.ndarray, values: dict) -> pl.DataFrame:
 def test_seconds_since_a_start_time_line_give_the_lake_of_the_wide_csv(tmp_path, monkeypatch):
     """5 min at 10 Hz, seconds with a decimal comma, the start in local time (Vienna, +01:00) on
     the first line; read in blocks of 32 kB, so the start is carried to every block."""
-    monkeypatch.setattr(flows.ingest.batches, "CSV_BLOCK_BYTES", 32_768)
+    monkeypatch.setattr(flows.ingest.formats, "CSV_BLOCK_BYTES", 32_768)
     n = 3000
     values = samples(n)
     elapsed = [f"{i / 10:.3f}".replace(".", ",") for i in range(n)]

@@ -76,6 +76,12 @@ class ExportCounts:
     """Of ``quarantined``: the faults whose share ``export.max_bad_share`` bounds."""
     other_tags: dict[str, int] = field(default_factory=dict)
     """Tags (columns) no valve has → their samples, read past (not in ``samples_in``)."""
+    rows_added: int = 0
+    lake_conflicts: int = 0
+    partitions: int = 0
+    partitions_written: int = 0
+    """What merging with the lake did (the flows fill these): rows the lake did not have, rows that
+    differed from the lake's, valve-days touched and written."""
 
 
 @dataclass

@@ -13,15 +13,11 @@ given too and not looked at.
 from __future__ import annotations
 
 import csv
-import io
 from dataclasses import dataclass
-from pathlib import Path
 from typing import IO
 
 from flows.common.errors import ValvemonError
 from schemas.plant_config import ExportSpec
-from transforms.ingest.errors import IngestError
-from transforms.ingest.timestamps import parse_start_time, start_in_name
 from transforms.ingest.units import FileUnits
 
 
@@ -118,44 +114,3 @@ def read_header_rows(fh: IO[bytes], export: ExportSpec, where: str) -> HeaderRow
                 units[name] = (row[j] if j < len(row) else "", f"column {j + 1}{desc}")
     return HeaderRows(raw[t], len(kinds), units, start)
 
-
-def time_origin(path: Path, start: tuple[str, int] | None, export: ExportSpec, timezone: str) -> int | None:
-    """The file's start time (UTC ns) that a relative ``export.timestamp_format`` counts from: the
-    ``start_time`` header line's (``start``: its text and line), else the first part of the file's
-    name written in ``export.start_time_format`` (``DEMO_20250301T010000.txt`` with
-    ``"%Y%m%dT%H%M%S"``); None for absolute timestamps.
-
-    Raises
-    ------
-    ValvemonError
-        Naming the file and the line (or its name): no start time, or one that cannot be read.
-    """
-    if not export.relative_time:
-        return None
-    fmt = export.start_time_format
-    if start is not None:
-        text, where = start[0], f"{path}: line {start[1]}"
-    else:
-        where = f"{path}: file name {path.name!r}"
-        try:
-            text = start_in_name(path.name, fmt)
-        except IngestError as exc:
-            raise ValvemonError(f"{where}: {exc}") from None
-        if text is None:
-            raise ValvemonError(
-                f"{where}: no start time: no 'start_time' header line (export.header_rows) and no part of the name "
-                f"written in export.start_time_format {fmt!r} (export.timestamp_format {export.timestamp_format!r} counts from the start)"
-            )
-    try:
-        return parse_start_time(text, fmt, timezone)
-    except IngestError as exc:
-        raise ValvemonError(f"{where}: {exc}") from None
-
-
-def without_header_rows(data: bytes | Path, export: ExportSpec, where: str) -> tuple[bytes, HeaderRows]:
-    """A whole file's text with only its ``tag`` header line (what ``read_csv_export`` reads), and
-    its header rows."""
-    raw = data if isinstance(data, bytes) else Path(data).read_bytes()
-    fh = io.BytesIO(raw)
-    header = read_header_rows(fh, export, where)
-    return header.tag_line + raw[fh.tell() :], header

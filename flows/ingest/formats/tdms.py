@@ -12,7 +12,7 @@ or from ``export.tdms_group`` only. The time of sample ``i`` comes from
 All channels read share that one time base (the same length; the same waveform properties), so
 row ``i`` of the frame is sample ``i`` of every channel; the frame's "line" of a sample is
 ``i + 1``. A channel's ``unit_string`` property (NI's convention), when set, is its unit
-(``transforms.ingest.units``). :func:`tdms_batches` reads rows ``[a, b)`` of each channel with
+(``transforms.ingest.units``). :func:`iload` reads rows ``[a, b)`` of each channel with
 ``TdmsChannel.read_data(offset, length)`` (npTDMS finds the segments by a binary search), so memory
 is bounded by the batch, not by the file.
 """
@@ -33,6 +33,9 @@ from flows.common.errors import ValvemonError
 from schemas.plant_config import ExportSpec
 from transforms.ingest.units import FileUnits
 
+SUFFIXES = (".tdms",)
+_MAGIC = b"TDSm"
+"""A TDMS file's first bytes (its first segment's lead-in)."""
 TDMS_EPOCH_S = -2_082_844_800
 """1904-01-01T00:00:00Z, the TDMS epoch, in Unix seconds."""
 
@@ -162,10 +165,14 @@ def open_tdms(path: Path) -> Iterator[TdmsFile]:
             yield tdms
 
 
-def tdms_units(path: Path, export: ExportSpec) -> FileUnits:
-    """The ``unit_string`` of every data channel (:func:`tdms_layout`)."""
-    with open_tdms(path) as tdms:
-        return tdms_layout(tdms, export, str(path)).units
+def detect(head: bytes, name: str) -> str | None:
+    return "tdms" if head.startswith(_MAGIC) else None
+
+
+def describe(src, export: ExportSpec, timezone: str) -> None:
+    """The ``unit_string`` of every data channel (:func:`tdms_layout`); refuses a truncated file."""
+    with open_tdms(src.path) as tdms:
+        src.units = tdms_layout(tdms, export, str(src.path)).units
 
 
 def _times(layout: TdmsLayout, a: int, b: int) -> pl.Series:
@@ -180,11 +187,11 @@ def _times(layout: TdmsLayout, a: int, b: int) -> pl.Series:
     return pl.Series(raw)
 
 
-def tdms_batches(path: Path, export: ExportSpec, batch_samples: int) -> Iterator[tuple[pl.DataFrame, int, bool]]:
+def iload(src, export: ExportSpec, tags, batch_samples: int, block_bytes: int) -> Iterator[tuple[pl.DataFrame, int, bool]]:
     """The recording as wide frames of about ``batch_samples`` samples: ``(frame, first line, last)``,
     columns ``export.timestamp_column`` and one Float64 column per channel (tag)."""
-    with open_tdms(path) as tdms:
-        layout = tdms_layout(tdms, export, str(path))
+    with open_tdms(src.path) as tdms:
+        layout = tdms_layout(tdms, export, str(src.path))
         rows = max(batch_samples // len(layout.channels), 1024)
         for a in range(0, layout.length, rows):
             b = min(a + rows, layout.length)
