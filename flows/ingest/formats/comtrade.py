@@ -317,7 +317,9 @@ def _elapsed_ns(cfg: Cfg, n: np.ndarray, stamps: np.ndarray | None) -> np.ndarra
     return t
 
 
-def _frame(layout: ComtradeLayout, export: ExportSpec, n: np.ndarray, stamps: np.ndarray | None, analog: list[np.ndarray], digital: list[np.ndarray]) -> pl.DataFrame:
+def _frame(layout: ComtradeLayout, export: ExportSpec, n: np.ndarray, stamps: np.ndarray | None, analog: list[np.ndarray], digital: list) -> pl.DataFrame:
+    """One batch as a wide frame: the UTC time of samples ``n`` (1-based), the analog channels
+    scaled (NaN where missing) and the digital ones (numpy arrays or Series of 0/1)."""
     cfg = layout.cfg
     elapsed = _elapsed_ns(cfg, n, stamps)
     ok = np.isfinite(elapsed)
@@ -328,7 +330,7 @@ def _frame(layout: ComtradeLayout, export: ExportSpec, n: np.ndarray, stamps: np
     columns = [time.cast(pl.Datetime("ns", "UTC"))]
     for name, c, raw in zip(layout.columns, cfg.analogs, analog):
         columns.append(pl.Series(name, (c.a * raw + c.b) * c.factor if c.factor != 1.0 else c.a * raw + c.b, dtype=pl.Float64))
-    columns += [pl.Series(name, bits, dtype=pl.UInt8) for name, bits in zip(layout.columns[len(cfg.analogs) :], digital)]
+    columns += [pl.Series(name, bits).cast(pl.UInt8, strict=False) for name, bits in zip(layout.columns[len(cfg.analogs) :], digital)]
     return pl.DataFrame(columns)
 
 
@@ -380,7 +382,7 @@ def _ascii_batches(layout: ComtradeLayout, export: ExportSpec, block_bytes: int)
                 raw = df[f"a{j}"].fill_null(np.nan).to_numpy().copy()
                 raw[raw == ASCII_MISSING] = np.nan
                 analog.append(raw)
-            digital = [df[f"d{k}"].to_numpy().astype(np.uint8) for k in range(n_d)]
+            digital = [df[f"d{k}"] for k in range(n_d)]
             if final and first - 1 + df.height < cfg.samples:
                 raise ValvemonError(f"{layout.dat}: {first - 1 + df.height:,} samples, fewer than the {cfg.samples:,} its .cfg promises (a truncated data file)")
             yield _nan_to_null(_frame(layout, export, n, stamps, analog, digital), layout), first, final
@@ -390,28 +392,35 @@ def _ascii_batches(layout: ComtradeLayout, export: ExportSpec, block_bytes: int)
 
 
 def _ascii_block(block: bytes, schema: dict, dat: Path, first: int) -> pl.DataFrame:
-    """One block of ASCII sample lines → frame (``n, t, a0…, d0…``); a line that is no sample
-    record (other field count, text) refuses the file, naming the line."""
+    """One block of ASCII sample lines (the file's lines ``first``…) → frame (``n, t, a0…, d0…``);
+    a line that is no sample record (another number of fields, a blank line, text where a number
+    belongs) refuses the file, naming the line."""
+    block = block.rstrip(b"\x1a")  # a DOS end-of-file mark after the last line
+    buf = np.frombuffer(block, dtype=np.uint8)
+    ends = np.flatnonzero(buf == ord("\n"))
+    if not block.endswith(b"\n"):
+        ends = np.r_[ends, len(buf)]
+    commas = np.searchsorted(np.flatnonzero(buf == ord(",")), ends)
+    per_line = np.diff(np.r_[0, commas])
+    wrong = np.flatnonzero(per_line != len(schema) - 1)
+    if len(wrong):
+        _refuse_line(block, ends, int(wrong[0]), len(schema), dat, first)
     try:
-        df = pl.read_csv(block, has_header=False, new_columns=list(schema), schema=schema, truncate_ragged_lines=False)
+        return pl.read_csv(block, has_header=False, new_columns=list(schema), schema=schema)
     except pl.exceptions.PolarsError:
-        df = None
-    width = len(schema)
-    if df is None or df["n"].null_count() or (width > 2 + sum(c.startswith("a") for c in schema) and df[list(schema)[-1]].null_count()):
-        for i, line in enumerate(block.split(b"\n")):
-            fields = line.strip().strip(b"\x1a").split(b",")
-            if fields == [b""]:
-                continue
-            bad = len(fields) != width or not fields[0].strip().isdigit()
-            if not bad:
-                try:
-                    [float(x) for x in fields[2:] if x.strip()]
-                except ValueError:
-                    bad = True
-            if bad:
-                raise ValvemonError(f"{dat}: line {first + i}: expected a sample record of {width} fields (n, time stamp, analog and digital values), found {line.decode('utf-8', 'replace').strip()[:80]!r}")
-        raise ValvemonError(f"{dat}: lines {first}…: not a readable COMTRADE ASCII data file")
-    return df
+        pass
+    for i, line in enumerate(block.split(b"\n")[: len(ends)]):
+        try:
+            [float(x) for x in line.split(b",") if x.strip()]
+        except ValueError:
+            _refuse_line(block, ends, i, len(schema), dat, first)
+    raise ValvemonError(f"{dat}: lines {first:,} to {first + len(ends) - 1:,}: not a readable COMTRADE ASCII data file")
+
+
+def _refuse_line(block: bytes, ends: np.ndarray, i: int, width: int, dat: Path, first: int):
+    a = 0 if i == 0 else int(ends[i - 1]) + 1
+    line = block[a : int(ends[i])].decode("utf-8", "replace").strip()
+    raise ValvemonError(f"{dat}: line {first + i}: expected a sample record of {width} fields (n, time stamp, analog and digital values), found {line[:80]!r}")
 
 
 def detect(head: bytes, name: str) -> str | None:
