@@ -2,7 +2,8 @@
 
 In the style of ObsPy's and pyrocko's io plugins, a format is one module of this package with
 
-- ``SUFFIXES``: the file names a folder contributes (``discover_files``);
+- ``SUFFIXES``: the file names a folder contributes (``discover_files``), and ``FILE_FORMATS``: the
+  manifest's ``file_format`` values it reads;
 - ``detect(head, name) -> str | None``: its ``file_format`` (the manifest's) if the file's first
   bytes (and name) are this format's, else None;
 - ``describe(src, export, timezone)``: what the file states before its data — units, the start
@@ -43,8 +44,11 @@ from transforms.ingest.errors import IngestError
 from transforms.ingest.timestamps import parse_start_time, start_in_name
 from transforms.ingest.units import FileUnits
 
-FORMATS = (parquet, tdms, comtrade, text)
-"""The format modules, in the order :func:`detect` asks them (text last: it takes any file)."""
+FORMATS = (tdms, parquet, comtrade, text)
+"""The format modules, in the order :func:`detect` asks them (magic bytes before names; text last:
+it takes any file)."""
+READERS = {name: module for module in FORMATS for name in module.FILE_FORMATS}
+"""``file_format`` → its module."""
 EXPORT_SUFFIXES = tuple(dict.fromkeys(s for f in FORMATS for s in f.SUFFIXES))
 """Files a folder argument contributes (searched recursively, sorted by path)."""
 KIND = {"parquet": "Parquet", "tdms": "TDMS", "comtrade": "COMTRADE"}
@@ -118,11 +122,7 @@ def discover_files(paths: list[str | Path]) -> list[Path]:
 
 def detect(path: Path, head: bytes):
     """The format module and ``file_format`` of a file, from its first bytes and name."""
-    for module in FORMATS:
-        name = module.detect(head, path.name.lower())
-        if name is not None:
-            return module, name
-    raise AssertionError("the text format takes every file")  # pragma: no cover
+    return next((m, name) for m in FORMATS if (name := m.detect(head, path.name.lower())) is not None)  # text takes any file
 
 
 def members(module, path: Path) -> list[Path]:
@@ -211,7 +211,7 @@ def iload(
     ValvemonError
         Naming the file: not a readable export of its format, a truncated gzip, no data rows.
     """
-    module = next(m for m in FORMATS if m.__name__.rsplit(".", 1)[1] == _MODULE.get(src.file_format, src.file_format))
+    module = READERS[src.file_format]
     if whole:
         batch_samples = block_bytes = WHOLE
     rows = 0
@@ -228,8 +228,4 @@ def iload(
     except (pl.exceptions.PolarsError, pa.ArrowException, OSError, ValueError) as exc:
         reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise ValvemonError(f"{src.path}: not a readable {KIND.get(src.file_format, 'CSV')} export ({reason})") from None
-
-
-_MODULE = {"csv": "text", "csv.gz": "text"}
-"""``file_format`` → its module's name, where they differ."""
 

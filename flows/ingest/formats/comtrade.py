@@ -54,6 +54,8 @@ from transforms.ingest.timestamps import localize
 from transforms.ingest.units import FileUnits
 
 SUFFIXES = (".cfg",)
+FILE_FORMATS = ("comtrade",)
+"""The manifest's ``file_format`` of the files this module reads."""
 REVISIONS = ("1999", "2013")
 """``rev_year`` values read (2001 is read as 1999, which it amends)."""
 DAT_KINDS = {"BINARY": "<i2", "BINARY32": "<i4", "FLOAT32": "<f4"}

@@ -23,6 +23,8 @@ from schemas.plant_config import ExportSpec
 from transforms.ingest import TagTable
 
 SUFFIXES = (".parquet", ".pq")
+FILE_FORMATS = ("parquet",)
+"""The manifest's ``file_format`` of the files this module reads."""
 _MAGIC = b"PAR1"
 
 

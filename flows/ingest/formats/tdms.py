@@ -34,6 +34,8 @@ from schemas.plant_config import ExportSpec
 from transforms.ingest.units import FileUnits
 
 SUFFIXES = (".tdms",)
+FILE_FORMATS = ("tdms",)
+"""The manifest's ``file_format`` of the files this module reads."""
 _MAGIC = b"TDSm"
 """A TDMS file's first bytes (its first segment's lead-in)."""
 TDMS_EPOCH_S = -2_082_844_800

@@ -27,6 +27,8 @@ from schemas.plant_config import ExportSpec
 from transforms.ingest import TagTable
 
 SUFFIXES = (".csv", ".csv.gz", ".txt", ".tsv", ".tsv.gz", ".txt.gz")
+FILE_FORMATS = ("csv", "csv.gz")
+"""The manifest's ``file_format`` of the files this module reads."""
 _GZIP_MAGIC = b"\x1f\x8b"
 _NOT_BLANK = re.compile(rb"\S")
 
