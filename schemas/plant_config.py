@@ -28,6 +28,10 @@ Keys the project adds to the specification (all optional; every key is documente
 - ``[export] timestamp_format = "seconds"`` or ``"milliseconds"``: the time column counts from the
   file's start, found on a ``"start_time"`` header line (its second cell) or in the file's name,
   both read with ``[export] start_time_format`` (:data:`RELATIVE_TIME_FORMATS`).
+- ``[export] clock_steps`` (wide only; default ``"quarantine"``): a wide export's rows are in time
+  order, so a backward step of its clock by more than a few sample periods quarantines the rows
+  after it (``clock_step``); ``"accept"`` takes the file's order as untrusted and sorts it as the
+  long layout does (:data:`CLOCK_STEP_RULES`).
 - ``[valves] baseline_window = { start = ..., end = ... }`` (spec) and ``[valves] scenario``
   (written by ``valvemon simulate`` for the record; ignored by monitoring).
 - ``[valve_types.NAME.bounds]``: the condition bounds of step 5b (:class:`ConditionBounds`,
@@ -96,6 +100,9 @@ class ExportSpec:
     start_time_format: str | None = None
     """With a relative ``timestamp_format`` (:data:`RELATIVE_TIME_FORMATS`): the strftime pattern of
     the file's start, on the ``start_time`` header line or in the file's name."""
+    clock_steps: str = "quarantine"
+    """A wide export whose clock steps back: ``"quarantine"`` the rows after the step, or ``"accept"``
+    (sort them in, as the long layout does)."""
 
     @property
     def relative_time(self) -> bool:
@@ -124,6 +131,7 @@ faults fault a few in a thousand (one 1e308 in 2,000 samples is 0.05 %; a transm
 range for a minute of an hour file 1.7 %); ``docs/ingest.md``, "Quarantine or refusal"."""
 
 OTHER_TAGS_RULES: tuple[str, ...] = ("ignore", "error")
+CLOCK_STEP_RULES: tuple[str, ...] = ("quarantine", "accept")
 
 DEFAULT_WINDOW_S = 60.0
 """Default monitoring window length (docs/monitoring.md, "Continuous recordings", measured on
@@ -440,6 +448,7 @@ _EXPORT_KEYS = {
     "layout", "timestamp_column", "timestamp_format", "tag_column", "value_column",
     "quality_column", "good_quality", "separator", "decimal", "sample_rate_hz", "max_gap_s",
     "duplicate_rule", "max_bad_share", "other_tags", "header_rows", "tdms_group", "start_time_format",
+    "clock_steps",
 }  # fmt: skip
 
 
@@ -486,6 +495,7 @@ def _parse_export(raw: Any) -> ExportSpec:
         )
     if "start_time" in kw.get("header_rows", ()) and not relative:
         raise ConfigError(f"export.header_rows: a 'start_time' line needs a relative export.timestamp_format ({' or '.join(map(repr, RELATIVE_TIME_FORMATS))})")
+    kw["clock_steps"] = _str(t.get("clock_steps", "quarantine"), "export.clock_steps", CLOCK_STEP_RULES)
     return ExportSpec(**kw)
 
 
@@ -841,6 +851,8 @@ def plant_config_to_dict(config: PlantConfig) -> dict:
         export["tdms_group"] = e.tdms_group
     if e.start_time_format is not None:
         export["start_time_format"] = e.start_time_format
+    if e.clock_steps != ExportSpec.clock_steps:
+        export["clock_steps"] = e.clock_steps
     valves = []
     for v in config.valves:
         d: dict[str, Any] = {"id": v.id, "type": v.type, "commissioned": _iso(v.commissioned)}

@@ -17,6 +17,7 @@ Method, rules and counts: ``docs/ingest.md``.
 
 from __future__ import annotations
 
+import sys
 import uuid
 from contextlib import AbstractContextManager, contextmanager, nullcontext
 from dataclasses import asdict, dataclass, field
@@ -199,6 +200,8 @@ def merge_batches(
     finally:
         stager.release()
     c = stream.counts
+    if c.clock_step_message:  # ingested, with the rows after the step quarantined: say so
+        print(f"valvemon: warning: {path}: {c.clock_step_message}", file=sys.stderr)
     c.partitions, c.partitions_written = len(stager.days), len(stager.days_written)
     c.rows_added, c.lake_conflicts = stager.rows_added, stager.lake_conflicts
     return FileReport(str(path), src.file_hash, c), file_records(src, c, spill.rows, stream.gap_frame(), run_id, config.export.layout, now)
@@ -237,6 +240,9 @@ def file_records(src, c: ExportCounts, quarantine: QuarantineRows, gap_frame: pl
         "other_tags": len(c.other_tags),
         "other_samples": sum(c.other_tags.values()),
         "other_tag_names": ",".join(c.other_tags),
+        "field_count": c.field_count,
+        "truncated": c.truncated,
+        "clock_step": c.clock_step,
     }
     return manifest, quarantine, gaps
 
