@@ -26,8 +26,6 @@ from typing import Iterator
 
 import numpy as np
 import polars as pl
-from nptdms import TdmsFile
-from nptdms.timestamp import TdmsTimestamp, TimestampArray
 
 from flows.common.errors import ValvemonError
 from schemas.plant_config import ExportSpec
@@ -73,6 +71,8 @@ def _path(ch) -> str:
 
 
 def _waveform(ch, where: str, time_name: str) -> tuple[int, float]:
+    from nptdms.timestamp import TdmsTimestamp
+
     p = ch.properties
     if "wf_start_time" not in p or "wf_increment" not in p:
         raise ValvemonError(
@@ -89,7 +89,7 @@ def _waveform(ch, where: str, time_name: str) -> tuple[int, float]:
     return _ns(start.seconds, start.second_fractions) + offset_ns, increment * 1e9
 
 
-def tdms_layout(tdms: TdmsFile, export: ExportSpec, where: str) -> TdmsLayout:
+def tdms_layout(tdms, export: ExportSpec, where: str) -> TdmsLayout:
     """The channels to read and their time base (module doc).
 
     Raises
@@ -138,7 +138,7 @@ def tdms_layout(tdms: TdmsFile, export: ExportSpec, where: str) -> TdmsLayout:
 
 
 @contextmanager
-def open_tdms(path: Path) -> Iterator[TdmsFile]:
+def open_tdms(path: Path) -> Iterator:
     """The file's metadata (no data read), open for reading slices; refuses a file whose last
     segment was cut off.
 
@@ -151,6 +151,8 @@ def open_tdms(path: Path) -> Iterator[TdmsFile]:
     ValvemonError
         Not a TDMS file, or truncated (npTDMS itself only warns and reads what is there).
     """
+    from nptdms import TdmsFile  # imported when a TDMS file is read
+
     with open(path, "rb") as fh:
         try:
             tdms = TdmsFile.open(fh, raw_timestamps=True)
@@ -178,6 +180,8 @@ def describe(src, export: ExportSpec, timezone: str) -> None:
 
 
 def _times(layout: TdmsLayout, a: int, b: int) -> pl.Series:
+    from nptdms.timestamp import TimestampArray
+
     if layout.time is None:
         step = layout.step_ns
         i = np.arange(a, b, dtype=np.int64)
