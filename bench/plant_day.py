@@ -81,8 +81,11 @@ def day_of(files: list[Path]) -> date:
     return date(int(stem[:4]), int(stem[4:6]), int(stem[6:8]))
 
 
-def path_once(code: Path, cpu: int, config: Path, files: list[Path], warehouse: Path, as_of: date, log: Path) -> dict:
-    """The nightly path into a fresh ``warehouse``: {step: measurement}."""
+def path_once(code: Path, cpu: int, config: Path, files: list[Path], warehouse: Path, as_of: date, log: Path,
+              ingested: Path | None = None, keep: Path | None = None) -> dict:
+    """The nightly path into a fresh ``warehouse``: {step: measurement}. With ``ingested`` (a
+    warehouse the same exports were ingested into) its copy replaces the ingest step; with
+    ``keep`` the warehouse right after the ingest is copied there."""
     if warehouse.exists():
         shutil.rmtree(warehouse)
     wh = ["--warehouse", str(warehouse)]
@@ -92,7 +95,17 @@ def path_once(code: Path, cpu: int, config: Path, files: list[Path], warehouse: 
         "report": ["report", "--config", str(config), *wh],
         "retention": ["retention", "--config", str(config), *wh, "--as-of", as_of.isoformat()],
     }
-    return {step: run_step(code, cpu, argv[step], log) for step in STEPS}
+    out = {}
+    for step in STEPS:
+        if step == "ingest" and ingested is not None:
+            shutil.copytree(ingested, warehouse)
+            continue
+        out[step] = run_step(code, cpu, argv[step], log)
+        if step == "ingest" and keep is not None:
+            if keep.exists():
+                shutil.rmtree(keep)
+            shutil.copytree(warehouse, keep)
+    return out
 
 
 def main() -> None:
@@ -103,7 +116,9 @@ def main() -> None:
     ap.add_argument("--cpu", type=int, default=1, help="the CPU each step is pinned to")
     ap.add_argument("--rounds", type=int, default=1)
     ap.add_argument("--warm-minutes", type=int, default=45, help="minutes of the first file for the warm-up (> 2 M rows: read in spans, as the day)")
-    ap.add_argument("--hours", type=int, default=None, help="only the first N hourly files (a quick check)")
+    ap.add_argument("--hours", type=int, default=None, help="only the first N hourly files")
+    ap.add_argument("--ingest-once", action="store_true",
+                    help="ingest with the first code only and give the others a copy of its warehouse (codes whose ingest is the same)")
     args = ap.parse_args()
 
     codes = [(c.split("=", 1)[0], Path(c.split("=", 1)[1]).resolve()) for c in (args.code or [f"this={ROOT}"])]
@@ -129,12 +144,18 @@ def main() -> None:
     del table
     for label, code in codes:
         path_once(code, args.cpu, config, [warm / files[0].name], args.work / f"wh_warm_{label}", as_of, log)
+    ingested = args.work / "wh_ingested"
 
     results: dict[str, list[dict]] = {label: [] for label, _ in codes}
     rows = export_rows(files)
     for r in range(args.rounds):
         for label, code in codes:
-            res = path_once(code, args.cpu, config, files, args.work / f"wh_{label}", as_of, log)
+            first = label == codes[0][0]
+            once = args.ingest_once
+            res = path_once(code, args.cpu, config, files, args.work / f"wh_{label}", as_of, log,
+                            ingested if once and not first else None, ingested if once and first else None)
+            if "ingest" not in res:
+                res["ingest"] = results[codes[0][0]][-1]["ingest"]
             results[label].append(res)
             print(json.dumps({"round": r + 1, "code": label, **res}), flush=True)
 
