@@ -14,10 +14,13 @@ Runs what a plant runs every night — ``valvemon ingest`` of the day's exports,
 
 ``--code LABEL=TREE`` (repeat; default: this tree) runs the commands with ``PYTHONPATH=TREE`` (a
 ``git archive`` of another commit, say), so two versions of the code are measured on the same
-files in one run, one whole path after the other (``--rounds`` N: N times, alternating). Before the measured
-runs each code runs the whole path once on the first 45 minutes of the same recording (``--warm-minutes``;
-more than the monitor reads at once, so that its chunked reads compile the same kernel signatures)
-so that the numba kernels are compiled into that tree's cache: a nightly run finds them cached.
+files in one run, one whole path after the other (``--rounds`` N: N times, alternating;
+``--ingest-once``: the later codes get a copy of the first one's ingested warehouse, for codes
+whose ingest is the same). Before the measured runs each code runs the whole path once on the
+first 45 minutes of the same recording (``--warm-minutes``, 0: no warm-up; more than the monitor
+reads at once, so that its chunked reads compile the same kernel signatures), so that the numba
+kernels are in that tree's cache, as a nightly run finds them. ``--hours N`` takes the first N
+files and scales the sum to a day (linearly, start-up counted each time: an upper bound).
 The retention step thins the valve-day (``[retention] keep_days = 1``, ``mode = "thin"``,
 ``--as-of`` two days after it), as it would once the day is older than the plant's ``keep_days``.
 
