@@ -215,7 +215,8 @@ class ValveDesign:
     area_law: str = "eq3"
     """The valve family's area law, ``"eq3"`` (the paper's Eq. 3) or ``"sharp"`` (sharp edges, no
     closed-edge leakage): what the simulator builds (``model.area``); the monitor identifies the
-    leakage from the data and does not read it."""
+    leakage from the data and takes the law's open-edge shape as a commissioning baseline's
+    carrier unless the commissioning window shows the other law (docs/monitoring.md)."""
     leakage_factor: float = 1.0
     """Eq. 3's closed-edge leakage times this far from the edge (worn lands; ``model.area``),
     for the simulator; 1 = Eq. 3. [-]"""
