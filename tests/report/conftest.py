@@ -40,7 +40,8 @@ class Warehouse:
                 "updated_at": COMMISSIONED}
         insert_frame(self.con, "condition_bounds", pl.DataFrame([row], schema=polars_schema(CONDITION_BOUNDS_FIELDS)))
 
-    def add_fits(self, valve_id: str, edge: str, hours, alpha, x_pct, e, status="ok", baseline_version: int = 1) -> None:
+    def add_fits(self, valve_id: str, edge: str, hours, alpha, x_pct, e, status="ok", baseline_version: int = 1,
+                 x_determined=None) -> None:
         hours = np.asarray(hours, float)
         n = hours.size
         col = lambda v: np.broadcast_to(np.asarray(v, float), (n,)).copy()  # noqa: E731
@@ -66,6 +67,8 @@ class Warehouse:
                 "baseline_version": [baseline_version] * n,
                 "monitored_at": [COMMISSIONED] * n,
                 "leak_scale": None, "leak_scale_ci_low": None, "leak_scale_ci_high": None,
+                "u_spread_mm": None,
+                "x_hat_determined": None if x_determined is None else np.broadcast_to(np.asarray(x_determined, bool), (n,)).tolist(),
             },
             schema_overrides={k: v for k, v in polars_schema(EDGE_FIT_FIELDS).items()},
         ).cast(dict(polars_schema(EDGE_FIT_FIELDS)))

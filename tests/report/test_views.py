@@ -173,6 +173,23 @@ def test_fits_against_an_older_baseline_are_left_out(wh):
     assert wh.q("SELECT count(*) AS n FROM stg_edge_fits")["n"][0] == HOURS.size
 
 
+def test_x_hat_a_window_did_not_determine_is_left_out(wh):
+    # the latest window's x̂ far beyond the fault bound, but its points too short a range of u to
+    # tell a shift from a scale: its α̂ and e count, its x̂ neither alarms nor is the edge's x̂
+    wh.add_valve("N1")
+    x, det = np.full(HOURS.size, 0.23), np.ones(HOURS.size, bool)
+    x[-1], det[-1] = 11.8, False
+    wh.add_fits("N1", "s1", HOURS, 0.98, x, 0.10, x_determined=det)
+    params = wh.q("SELECT parameter, count(*) AS n FROM stg_fit_parameters GROUP BY parameter ORDER BY parameter")
+    assert params["n"].to_list() == [HOURS.size, HOURS.size, HOURS.size - 1]  # alpha_hat, e_mm2, x_hat_pct
+    assert wh.q("SELECT count(*) AS n FROM fault_alarms")["n"][0] == 0
+    c = wh.condition("N1", "s1")
+    assert c["state"] == "healthy" and c["x_hat_pct"] == pytest.approx(0.23)
+    x[-1], det[-1] = 11.8, True  # the same x̂ determined: faulty
+    wh.add_fits("N1", "s2", HOURS, 0.98, x, 0.10, x_determined=det)
+    assert wh.condition("N1", "s2")["state"] == "faulty"
+
+
 def test_configured_bounds_are_used(wh):
     # the same fits: healthy with the defaults, worn with a tighter α̂ wear bound
     wh.add_valve("K1")
