@@ -539,7 +539,7 @@ DISCREPANCY_CANDIDATE_FIELDS: tuple[Field, ...] = _RUN_FIELDS + (
 
 DISCREPANCY_GAP_FIELDS: tuple[Field, ...] = _RUN_FIELDS + (
     _STAGE,
-    Field("signal", pl.Utf8, "", "Replayed signal.", isin=("p1", "p2", "X")),
+    Field("signal", pl.Utf8, "", "Replayed signal: p1, p2, X of the whole replay; p1_hydraulic, p2_hydraulic of the replay on the recorded cylinder motion, X_mechanical of the replay on the recorded pressures.", isin=("p1", "p2", "X", "p1_hydraulic", "p2_hydraulic", "X_mechanical")),
     _REGION,
     Field("rms", pl.Float64, "", "RMS of replayed reading minus recorded signal, in unit.", nullable=True),
     Field("unit", pl.Utf8, "", "Pa or m."),
