@@ -21,7 +21,8 @@ nuisances must absorb them); ``--declared eq3`` gives every valve Eq. 3, the sha
 taken as exact; with commissioning only α and underlap fitted, ``pipeline.fit_condition``).
 
 Outcome per run: ``named`` (the right effect named first), ``ambiguous`` (the right effect among the
-verdict's readings), ``none``, ``wrong`` (another effect named first, or an ambiguous verdict without
+verdict's readings), ``none``, ``unexplained`` (the equations pointed at an effect whose replay did
+not close its gap: no name given), ``wrong`` (another effect named first, or an ambiguous verdict without
 the right one); on clean data ``none`` is right, ``ambiguous`` is reported as such and ``named`` is
 wrong. Parameter error: |θ̂ − θ| / |θ − neutral| where the right effect is the first reading.
 
@@ -130,7 +131,10 @@ def run_cell(key: str, magnitude: str, commissioning: bool, seed: int, n_windows
         else:
             cp, cc = (commissioning_model if method == "nuisance" else commissioning_condition_before)(seed, n_windows, family, declared)
         d = diagnose(recs, cp, cc, s, monitoring=False)
-        if d.named:
+        if d.verdict is not None:  # unexplained (or gain/offset ambiguous): the verdict decides
+            v = d.verdict
+            verdict, got, got_value, alts = v.verdict, (v.effect.key if v.effect else None), v.value, v.alternative_keys
+        elif d.named:
             first = d.named[0]
             verdict = "ambiguous" if first.alternative is not None else "named"
             got, got_value = first.spec.key, first.value
@@ -143,9 +147,9 @@ def run_cell(key: str, magnitude: str, commissioning: bool, seed: int, n_windows
         v = d.verdict
         verdict, got, got_value, alts, conf = v.verdict, (v.effect.key if v.effect else None), v.value, v.alternative_keys, v.confidence
     if key == "none":
-        outcome = {"none": "none", "ambiguous": "ambiguous", "named": "wrong"}[verdict]
-    elif verdict == "none":
-        outcome = "none"
+        outcome = {"none": "none", "ambiguous": "ambiguous", "named": "wrong", "unexplained": "unexplained"}[verdict]
+    elif verdict in ("none", "unexplained"):
+        outcome = verdict
     elif got == key:
         outcome = verdict
     elif verdict == "ambiguous" and key in alts:
@@ -159,6 +163,7 @@ def run_cell(key: str, magnitude: str, commissioning: bool, seed: int, n_windows
         "effect": key, "magnitude": magnitude, "commissioning": commissioning, "seed": seed, "value": value, "method": method, "family": family, "declared": declared,
         "verdict": verdict, "got": got, "got_value": got_value, "alternatives": alts, "confidence": conf, "outcome": outcome,
         "rel_err": rel_err, "gap_nominal": d.gap_nominal, "gap_before": d.stage_gaps[0], "gap_after": d.stage_gaps[-1],
+        "split_before": d.split_gaps[0], "split_after": d.split_gaps[-1], "floors": d.noise_floors,
         "cpu_s": time.process_time() - t0,
     }
 
@@ -175,15 +180,15 @@ def table(rows: list[dict]) -> str:
     groups = defaultdict(list)
     for r in rows:
         groups[(r["commissioning"], r["magnitude"], r["effect"])].append(r)
-    lines = ["| commissioning | magnitude | effect | runs | named first | ambiguous (right listed) | none | wrong | max rel. error (named) |",
-             "|---|---|---|---|---|---|---|---|---|"]
+    lines = ["| commissioning | magnitude | effect | runs | named first | ambiguous (right listed) | none | unexplained | wrong | max rel. error (named) |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
     for (c, m, e), rs in sorted(groups.items(), key=lambda kv: (kv[0][0], kv[0][1] != "typical", kv[0][2])):
         n = len(rs)
-        cnt = {o: sum(r["outcome"] == o for r in rs) for o in ("named", "ambiguous", "none", "wrong", "error")}
+        cnt = {o: sum(r["outcome"] == o for r in rs) for o in ("named", "ambiguous", "none", "unexplained", "wrong", "error")}
         errs = [r["rel_err"] for r in rs if r.get("rel_err") is not None and r["outcome"] == "named"]
         err = f"{max(errs):.1%}" if errs else "–"
         wrong = f"{cnt['wrong']}" + (f" (+{cnt['error']} errors)" if cnt["error"] else "")
-        lines.append(f"| {'yes' if c else 'no'} | {m if e != 'none' else '–'} | {e} | {n} | {cnt['named']} | {cnt['ambiguous']} | {cnt['none']} | {wrong} | {err} |")
+        lines.append(f"| {'yes' if c else 'no'} | {m if e != 'none' else '–'} | {e} | {n} | {cnt['named']} | {cnt['ambiguous']} | {cnt['none']} | {cnt['unexplained']} | {wrong} | {err} |")
     return "\n".join(lines)
 
 

@@ -103,8 +103,8 @@ def unexplained(spec: EffectSpec, value: float, before: float, after: float, kin
         "unexplained", MAX_CONFIDENCE, spec, value, alternatives=[f"{spec.key} {spec.parameter_name}={value:.3g} {spec.unit} (not confirmed)"],
         separate_by="", reason=(f"the data disagree with the model in a way no library effect explains: {spec.key} fits the equations, "
                                 f"but adding it leaves the {kind} gap at {before:.3g} → {after:.3g} (needs ≥ {GAP_SHRINK:g}× or ≤ "
-                                f"{FLOOR_FACTOR:g}× the noise floor {floor:.2g}); where: {where}"),
-        gap_before=before, gap_after=after, where=where, **kw)
+                                f"{FLOOR_FACTOR:g}× the noise floor {floor:.2g})"),
+        gap_before=before, gap_after=after, where=where, gap_kind=kind, floor=floor, **kw)
 
 
 SEPARATE_BY: dict[str, str] = {
@@ -174,6 +174,10 @@ class Verdict:
     where the effect acts (hydraulic or mechanical)."""
     where: str = ""
     """``unexplained``: which equation, signal, operating region and how large."""
+    gap_kind: str = ""
+    """``unexplained``: the gap where the effect acts (``hydraulic`` or ``mechanical``); its
+    before/after are ``gap_before``/``gap_after``, its noise floor ``floor``."""
+    floor: float = float("nan")
 
 
 def _logistic(d: float) -> float:
