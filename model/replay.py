@@ -37,8 +37,8 @@ DRIVE_FULL, DRIVE_HYDRAULIC, DRIVE_MECHANICAL = 0, 1, 2
 def _replay_kernel(x, ps, pr, F_l, restart_at, restart_state, ecs_row, alpha_row, P, fs, n_sub,
                    p_limit, drive, given, out):
     """Integrate one record; ``out`` (4, n) receives X, v_X, p1, p2 from sample
-    ``restart_at[0]`` on (NaN before). ``drive`` 1: (X, v_X) follow ``given[0:2]`` (linear
-    between samples; no friction branch, only the chamber equations evolve); 2: (p1, p2) follow
+    ``restart_at[0]`` on (NaN before). ``drive`` 1: X follows ``given[0]`` (linear between
+    samples, v_X its slope; no friction branch, only the chamber equations evolve); 2: (p1, p2) follow
     ``given[0:2]`` (the caller zeroes the bulk modulus, so they do not evolve inside a step).
     Returns the first sample index where the state diverged, or -1."""
     n = x.shape[0]
@@ -59,7 +59,7 @@ def _replay_kernel(x, ps, pr, F_l, restart_at, restart_state, ecs_row, alpha_row
                  restart_state[r, 3])
             r += 1
         if drive == 1:
-            s = (s[0], s[1], given[0, k], given[1, k], s[4], s[5])
+            s = (s[0], s[1], given[0, k], s[3], s[4], s[5])
         elif drive == 2:
             s = (s[0], s[1], s[2], s[3], given[0, k], given[1, k])
         out[0, k] = s[2]
@@ -84,11 +84,14 @@ def _replay_kernel(x, ps, pr, F_l, restart_at, restart_state, ecs_row, alpha_row
             ps_h = ps_t + slope_ps * 0.5 * h
             ps_1 = ps_t + slope_ps * h
             if drive != 0:
-                f = j / n_sub
+                # X at the substep's start; the (held) pressures at its midpoint
+                f = j / n_sub if drive == 1 else (j + 0.5) / n_sub
                 g0 = given[0, k] + f * (given[0, k + 1] - given[0, k])
                 g1 = given[1, k] + f * (given[1, k + 1] - given[1, k])
                 if drive == 1:
-                    s = (s[0], s[1], g0, g1, s[4], s[5])
+                    # the cylinder moves at the slope of its recorded position over the interval,
+                    # so the chamber volumes at the samples are exactly the recorded ones
+                    s = (s[0], s[1], g0, (given[0, k + 1] - given[0, k]) / T0, s[4], s[5])
                     k1 = rhs_mode_kernel(s[0], s[1], s[2], s[3], s[4], s[5], 0.0, 0.0, fl, ps_t,
                                          p_r, ecs, alpha, P)
                     s = _rk4(s, 0.0, k1, 0.0, fl, ps_t, ps_h, ps_1, p_r, ecs, alpha, P, h)
@@ -158,13 +161,14 @@ def replay(params: PlantParams, x_m, p_s_pa, p_r_pa, F_l_n, restart_at, restart_
         As in :func:`model.simulate.simulate_inputs`.
     drive : int
         ``DRIVE_FULL`` (default): the whole state is integrated. ``DRIVE_HYDRAULIC``: the
-        cylinder's position and velocity follow ``given`` = (X [m], v_X [m/s]) per sample and
-        only the chamber equations (Eq. 6) are integrated: p1, p2 need no load, mass or
-        friction. ``DRIVE_MECHANICAL``: the chamber pressures follow ``given`` = (p1, p2) [Pa]
+        cylinder's position follows ``given`` = X [m] per sample (linear between samples, so it
+        moves at the slope of the interval and the chamber volumes at the samples are the
+        recorded ones) and only the chamber equations (Eq. 6) are integrated: p1, p2 need no
+        load, mass or friction (the velocity returned is that slope). ``DRIVE_MECHANICAL``: the chamber pressures follow ``given`` = (p1, p2) [Pa]
         (true) per sample and only the motion (Eq. 5, with sticking) is integrated: X needs no
         flow model.
-    given : array_like, shape (2, n), optional
-        The recorded signals of the driven replays (linear between samples).
+    given : array_like, shape (n,) or (2, n), optional
+        The recorded signals of the driven replays (X, resp. (p1, p2)).
 
     Returns
     -------
@@ -190,7 +194,10 @@ def replay(params: PlantParams, x_m, p_s_pa, p_r_pa, F_l_n, restart_at, restart_
     if drive == DRIVE_FULL:
         g = np.zeros((2, n))
     else:
-        g = np.ascontiguousarray(np.asarray(given, float).reshape(2, n))
+        g = np.ascontiguousarray(np.asarray(given, float).reshape(-1, n))
+        if g.shape[0] != (1 if drive == DRIVE_HYDRAULIC else 2):
+            raise ValueError("given: X for the hydraulic replay, (p1, p2) for the mechanical one")
+        g = np.ascontiguousarray(np.vstack([g, np.zeros((2 - g.shape[0], n))]))
         if not np.all(np.isfinite(g)):
             raise ValueError("the driving signals must be finite")
     if drive == DRIVE_MECHANICAL:

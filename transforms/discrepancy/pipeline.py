@@ -224,6 +224,49 @@ def _project_out(Nw: np.ndarray, *cols: np.ndarray) -> list[np.ndarray]:
     return out
 
 
+GAIN_OR_OFFSET = ("pressure_sensor_offset", "pressure_sensor_gain")
+PRESSURE_SPAN = 2.0
+"""Where a transmitter's pressure spans this factor (5th to 95th percentile), a gain error and an
+offset of it have different shapes (the gain's error grows with the pressure): the other one is
+fitted and replayed too, and the two are told apart on the hydraulic gap or reported ambiguous."""
+TOLD_APART = 1.25
+"""... told apart when the other's hydraulic gap is at least this factor larger."""
+
+
+def _gain_or_offset(prepared, first: "NamedEffect", refine, settings, verdict):
+    """The verdict for a named pressure transmitter offset or gain (``GAIN_OR_OFFSET``) where the
+    pressure spans ``PRESSURE_SPAN``: the other reading is fitted and replayed; kept named if the
+    named one's hydraulic gap is ``TOLD_APART`` smaller, else ``ambiguous`` with the better first
+    and both listed. Returns ``verdict`` unchanged where the pressure does not span the factor."""
+    from model.effects import library_entry
+    from transforms.discrepancy.verdict import SEPARATE_BY, Verdict
+
+    v = first.spec.variant
+    p = np.concatenate([q.rec.raw[v] for q in prepared])
+    lo, hi = np.nanpercentile(p, [5, 95])
+    if not (lo > 0 and hi >= PRESSURE_SPAN * lo):
+        return verdict
+    other = library_entry(("pressure_sensor_gain" if first.spec.name == "pressure_sensor_offset" else "pressure_sensor_offset") + f"[{v}]")
+    mean = float(np.nanmean(p))
+    guess = (first.value - 1.0) * mean if other.name == "pressure_sensor_offset" else first.value / mean  # same reading at the mean
+    fx, _, model, _ = refine([other], perturbed(Effects(), other, guess))
+    g_other = _gaps(prepared, *model, fx, settings, set())[0].split_gap("hydraulic")
+    g_first = first.acting_after
+    span = f"{v} spans {lo / 1e5:.3g}–{hi / 1e5:.3g} bar"
+    if g_other >= TOLD_APART * g_first:
+        if verdict is not None:
+            verdict.reason += f"; told from {other.key} ({span}: its replay leaves the hydraulic gap at {g_other:.3g} against {g_first:.3g})"
+        return verdict
+    readings = sorted([(g_first, first.spec, first.value), (g_other, other, other.value(fx))], key=lambda r: r[0])
+    (gb, sb, vb), (gw, sw, vw) = readings
+    return Verdict(
+        "ambiguous", float(min(0.999, gw / (gb + gw))), sb, vb, alternatives=[f"{sw.key} {sw.parameter_name}={vw:.4g} {sw.unit}"],
+        alternative_keys=[sw.key], separate_by=SEPARATE_BY["pressure_sensor_gain"],
+        reason=(f"{sb.key} and {sw.key} replay alike ({span}; hydraulic gap {gb:.3g} and {gw:.3g}, less than {TOLD_APART:g}× apart)"),
+        nuisances=verdict.nuisances if verdict is not None else [], scores=verdict.scores if verdict is not None else [],
+        gap_before=first.gap_before, gap_after=first.gap_after)
+
+
 NUISANCE_COLLINEAR = 0.05
 """A candidate whose regressor keeps less than this fraction of its norm once the nuisance
 directions are projected out is not selected on the residuals (it is a nuisance pattern)."""
@@ -448,10 +491,12 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
             return _gaps(prepared, *model, fx, settings, set())[0]
 
         verdict = nuisance_verdict(prepared, nm, final_fit, named_specs, specs, rows0, w_rows, settings, named, gap_of, stage_gaps[0], floors, stage_acc)
+        gap_nominal = _gaps(prepared, *nominal, base, settings, set())[0].gap()
     elif named and not named[0].confirmed:
         first = named[0]
         verdict = unexplained(first.spec, first.value, first.acting_before, first.acting_after, first.gap_kind, stage_acc[1], first.floor)
-        gap_nominal = _gaps(prepared, *nominal, base, settings, set())[0].gap()
+    if named and (verdict is None or verdict.verdict == "named") and named[0].spec.name in GAIN_OR_OFFSET:
+        verdict = _gain_or_offset(prepared, named[0], refine, settings, verdict)
     return Diagnosis(
         n_records=len(prepared), records=[(p.rec.start_us, p.rec.end_us) for p in prepared], named=named,
         candidates=candidates, gap_rows=gap_rows, residual_rows=residual_rows, stage_effects=stage_effects,

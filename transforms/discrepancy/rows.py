@@ -315,7 +315,7 @@ def _replay_record(p: _Prepared, plant, condition, effects, settings) -> dict[st
     load = _replay_load_for(p, plant, condition, effects, settings)
     args = (plant, x_true, rec.raw["ps"], rec.raw["pr"], load)
     res = replay(*args, starts, states, condition=condition, effects=effects)
-    hyd = replay(*args, starts, states, condition=condition, effects=effects, drive=DRIVE_HYDRAULIC, given=np.vstack([rec.raw["X"], v_all]))
+    hyd = replay(*args, starts, states, condition=condition, effects=effects, drive=DRIVE_HYDRAULIC, given=rec.raw["X"])
     _, p1_rec, p2_rec = true_signals(x_src, rec.raw["p1"], rec.raw["p2"], effects)
     given_p = np.vstack([np.where(np.isfinite(p1_true), p1_true, p1_rec), np.where(np.isfinite(p2_true), p2_true, p2_rec)])
     # the mechanical replay restarts every mechanical_segment_s and where a move begins: while the
