@@ -152,6 +152,9 @@ class Diagnosis:
     """The split gaps (hydraulic, mechanical) the recorded noise alone leaves (``rows.noise_floors``)."""
     split_gaps: list = field(default_factory=list)
     """Per stage: {hydraulic, mechanical} gap."""
+    pressure_delay_samples: int = 0
+    """The pressure channels' delay against the positions the records were aligned for
+    (:mod:`transforms.discrepancy.alignment`)."""
 
     @property
     def final_effects(self) -> Effects:
@@ -343,8 +346,11 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
     from transforms.discrepancy.calibration import CLEARANCE, NuisanceModel, calibrate_best, calibrate_prepared, joint_fit, refine_breakaway
     from transforms.discrepancy.verdict import acting_gap, unexplained
 
+    from transforms.discrepancy.alignment import align_records
+
     settings = settings or DiscrepancySettings()
     condition = plant.nominal_condition if condition is None else condition
+    records, delay = align_records(records, plant, condition, settings)
     prepared = prepare_records(records, plant, condition, settings)
     if not prepared:
         raise ValueError("no record long enough to diagnose")
@@ -502,7 +508,7 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
         candidates=candidates, gap_rows=gap_rows, residual_rows=residual_rows, stage_effects=stage_effects,
         stage_gaps=stage_gaps, traces=traces, n_blocks=B, equation_sigmas=tuple(float(s) for s in sig),
         monitoring=mon, verdict=verdict, gap_nominal=gap_nominal, model=stage_model, noise_floors=floors,
-        split_gaps=[{k: a.split_gap(k) for k in ("hydraulic", "mechanical")} for a in stage_acc],
+        split_gaps=[{k: a.split_gap(k) for k in ("hydraulic", "mechanical")} for a in stage_acc], pressure_delay_samples=delay,
     )
 
 

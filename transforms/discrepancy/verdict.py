@@ -318,19 +318,22 @@ def nuisance_verdict(prepared, nm, fit, named_specs, specs, rows0, w_rows, setti
     if jf is not None:
         table = Calibration(nm=nm, z=jf.z, z_se=jf.z_se, plant=None, condition=None, sigmas=(0.0, 0.0, 0.0)).table()  # type: ignore[arg-type]
     gaps = dict(gap_before=gap_before, gap_after=gap_after)
-    if z >= Z_NAMED and not rivals:
-        if jf is not None:
-            # the effect's replay against the same nuisances without it: does it close its gap?
-            kind = acting_gap(spec)
-            before = gap_of(Effects(), nm.model(jf.z)).split_gap(kind)
-            after = acc_after.split_gap(kind)
-            if not confirmed(before, after, floors[kind]):
-                return unexplained(spec, best["value"], before, after, kind, acc_after, floors[kind], nuisances=table, scores=public)
+    held = ""
+    if z >= Z_NAMED and not rivals and acc_after is not None:
+        # named needs the replay too: the effect must close its gap against the calibrated base
+        # model (whose nuisances explain the same data off their priors); where it does not, the
+        # replay cannot tell the readings apart and the prior alone decides nothing
+        kind = acting_gap(spec)
+        before, after = accs[0].split_gap(kind), acc_after.split_gap(kind)
+        if not confirmed(before, after, floors[kind]):
+            held = f"; its replay does not tell them apart (the {kind} gap {before:.3g} → {after:.3g})"
+    if z >= Z_NAMED and not rivals and not held:
         return Verdict("named", best["confidence"], spec, best["value"], alternatives=[nuis], separate_by=sep,
                        reason=f"without {spec.key} the base model's parameters would have to move {z:.2g}σ outside their tolerances ({nuis})",
                        nuisances=table, scores=public, **gaps)
     return Verdict("ambiguous", best["confidence"], spec, best["value"], alternatives=[nuis] + alts,
                    alternative_keys=[sc["key"] for sc in rivals], separate_by=sep,
                    reason=(f"the data fit either {spec.key} {spec.parameter_name}={best['value']:.3g} {spec.unit} or {nuis}: "
-                           f"{z:.2g}σ from the tolerances, more than manufacturing scatter and datasheets usually allow, too little to rule them out"),
+                           + (f"{z:.2g}σ from the tolerances, more than manufacturing scatter and datasheets usually allow, too little to rule them out"
+                            if not held else f"{z:.2g}σ from the tolerances{held}")),
                    nuisances=table, scores=public, **gaps)
