@@ -27,6 +27,13 @@ Two kinds of evidence (docs/discrepancy.md, "Verdicts"):
    balances the equation rows' small systematic errors but replays worse); the runner-up is not
    promoted.
 
+3. **No name without a shrinking gap.** A named reading must close the gap where it acts (the
+   hydraulic or the mechanical replay, :func:`acting_gap`) by ≥ ``GAP_SHRINK``× or to ≤
+   ``FLOOR_FACTOR`` × its noise floor (:func:`confirmed`). A selection whose effect does not is
+   ``unexplained`` (:func:`unexplained`: the equation, signal, region and size of the
+   disagreement); a reading named by the prior alone that does not beat the calibrated base model
+   in the replay is ``ambiguous``.
+
 Confidence: for (1) Φ(t) of the advantage over the runner-up (0.999 without one); for (2)
 1/(1 + exp(−(ΔO − Z_AMBIGUOUS²)/2)) for the effect reading, which is 0.5 at the ambiguity line;
 for ``none`` one minus the largest of those over all candidates.
