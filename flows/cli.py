@@ -1,4 +1,4 @@
-"""The ``valvemon`` command line (``../shared/spec/interfaces.md``).
+"""The ``valvemon`` command line (``docs/interfaces.md``).
 
 Every command takes ``--warehouse DIR`` (or ``$VALVEMON_WAREHOUSE``; default ``warehouse/``).
 Exit status 0 on success; otherwise non-zero with a one-line reason on stderr (:func:`main`).
