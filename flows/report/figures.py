@@ -228,6 +228,12 @@ def fleet_figure(ranking: pl.DataFrame, conditions: pl.DataFrame, path: Path, ma
         ax_life.errorbar(rem[has], y[has], xerr=np.clip(err, 0, None), fmt="none", ecolor="black", capsize=3, lw=1)
     for k, row in enumerate(top.iter_rows(named=True)):  # the words of the table (now, > horizon, ...)
         ax_life.text(0 if not has[k] else rem[k], y[k], "  " + remaining_text(row), va="center", fontsize=8, color="#616161")
+    reach = np.nanmax(np.concatenate([rem[has], hi[has], [0.0]]))
+    if reach > 0:
+        ax_life.set_xlim(0, 1.3 * reach)  # room for the words beside the bars
+    else:  # nothing but "now" and words: no hour axis to read
+        ax_life.set_xlim(0, 1)
+        ax_life.set_xticks([])
     ax_life.set_yticks(y, [str(v) for v in ids], fontsize=8)
     ax_life.set_ylim(len(ids) - 0.5, -0.5)
     ax_life.set_xlabel("remaining operating hours to a wear bound (bar) with 95 % interval, within the forecast horizon")

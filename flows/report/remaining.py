@@ -28,9 +28,11 @@ def remaining_text(row: dict) -> str:
     if basis in ("faulty", "worn"):
         return f"now ({basis})"
     if basis == "forecast":
-        high = row.get("remaining_hours_high")
-        upper = f"> {two_figures(row['remaining_horizon_hours'], down=True)}" if high is None else two_figures(high)
-        return f"{two_figures(row['remaining_hours'])} h (95 %: {two_figures(row['remaining_hours_low'])}–{upper} h)"
+        point, low, high = (row["remaining_hours"], row["remaining_hours_low"], row.get("remaining_hours_high"))
+        if high is None:  # the interval reaches beyond the horizon
+            horizon = two_figures(row["remaining_horizon_hours"], down=True)
+            return f"{two_figures(point)} h (95 %: {two_figures(low)} h to beyond the {horizon} h horizon)"
+        return f"{two_figures(point)} h (95 %: {two_figures(low)}–{two_figures(high)} h)"
     if basis == "beyond_horizon":
         return f"> {two_figures(row['remaining_horizon_hours'], down=True)} h (no wear toward a bound within the horizon)"
     if basis == "no_trend":
