@@ -172,6 +172,7 @@ RAW_ROW_FIELDS: tuple[Field, ...] = (
 
 QUARANTINE_REASONS: tuple[str, ...] = (
     "bad_quality", "non_numeric", "non_finite", "missing_value", "missing_tag", "bad_timestamp", "implausible_time", "out_of_range",
+    "field_count", "truncated", "clock_step",
 )  # fmt: skip
 """Why a sample is quarantined (``transforms.ingest.samples``; ``docs/ingest.md``)."""
 
@@ -232,6 +233,9 @@ MANIFEST_FIELDS: tuple[Field, ...] = (
     Field("other_tags", pl.Int64, "", "Tags (long) or columns (wide) of the file that no valve has, read past (export.other_tags = 'ignore').", ge=0),
     Field("other_samples", pl.Int64, "", "Rows (long) or non-empty cells (wide) of those tags, not in samples_in.", ge=0),
     Field("other_tag_names", pl.Utf8, "", "Those tags, comma-separated in the order of the file (empty: none)."),
+    Field("field_count", pl.Int64, "", "Of quarantined: samples of text rows whose field count is not the header's.", ge=0),
+    Field("truncated", pl.Int64, "", "1 when the text file's last line has no line end (the file was cut; that line's samples are quarantined), else 0.", ge=0, le=1),
+    Field("clock_step", pl.Int64, "", "Of quarantined: samples of a wide export's rows at and after a backward step of its clock (export.clock_steps).", ge=0),
 )
 """One row per ingested export file (table ``ingest_manifest``)."""
 
@@ -321,10 +325,12 @@ BASELINE_FIELDS: tuple[Field, ...] = (
     Field("x_vs_nominal_mm", pl.Float64, "mm", "Shift of the baseline against the nominal characteristic.", nullable=True),
     Field("created_at", UTC_US, "", "When this version was stored."),
     Field("leak_branch_scale", pl.Float64, "", "λ₁: the edge's closed-edge leakage is Eq. 3's branch × λ₁ ...", nullable=True, ge=0.0),
-    Field("leak_gap_scale", pl.Float64, "", "... + λ₂ × its area at the closing point (a gap flow).", nullable=True, ge=0.0),
+    Field("leak_gap_scale", pl.Float64, "", "... + λ₂ × that branch with worn lands (4× Eq. 3's far from the edge).", nullable=True, ge=0.0),
     Field("leak_scale", pl.Float64, "", "That leakage over Eq. 3's 1 mm inside the edge (1 = Eq. 3, 0 = none).", nullable=True, ge=0.0),
     Field("leak_scale_ci_low", pl.Float64, "", "Lower 95 % bound of leak_scale (NULL: not identified, Eq. 3 kept).", nullable=True),
     Field("leak_scale_ci_high", pl.Float64, "", "Upper bound of the 95 % interval of leak_scale.", nullable=True),
+    Field("edge_law", pl.Utf8, "", "Edge law the characteristic's shape follows: eq3, or sharp where the commissioning window shows straight edges.", nullable=True),
+    Field("edge_law_note", pl.Utf8, "", "Why edge_law is not the configured area_law (empty when it is).", nullable=True),
 )
 """Versioned baseline characteristics per valve and edge (table ``baselines``)."""
 
@@ -434,6 +440,7 @@ VALVE_CONDITION_FIELDS: tuple[Field, ...] = (
     Field("edge_order", pl.Int32, "", "1..4 for s1, 1r, s2, 2r (for sorting)."),
     Field("leak_scale", pl.Float64, "", "Closed-edge leakage over Eq. 3's (0 = none), median of the ok windows.", nullable=True),
     Field("leak_scale_baseline", pl.Float64, "", "The same at commissioning (1 for a nominal baseline: Eq. 3 assumed).", nullable=True),
+    Field("edge_law", pl.Utf8, "", "Edge law of the current baseline's shape (eq3, sharp; a note in reason when not the configured one).", nullable=True),
     _REMAINING_BASIS,
     _REMAINING_HORIZON,
 )
@@ -623,6 +630,7 @@ RETENTION_LOG_FIELDS: tuple[Field, ...] = (
     Field("keep_days", pl.Int32, "d", "retention.keep_days in force.", ge=1),
     Field("thin_keep_s_per_hour", pl.Float64, "s", "retention.thin_keep_s_per_hour in force (null for drop).", nullable=True, ge=0.0),
     Field("as_of", pl.Date, "", "The run's reference date: partitions older than keep_days before it were eligible."),
-    Field("applied_at", UTC_US, "", "When the action was completed."),
+    Field("applied_at", UTC_US, "", "When the action was completed (an intent: when it was recorded)."),
+    Field("state", pl.Utf8, "", "intent: recorded before the data change, which a killed run may have left part-done (the next run completes it); done: completed.", isin=("intent", "done")),
 )
 """Every applied retention action, one row per partition and action (table ``retention_log``)."""
