@@ -407,16 +407,28 @@ STANDSTILL_FIELDS: tuple[Field, ...] = (
 )
 """Eq. 9 at standstill per window (table ``standstill_checks``, filled incrementally from the lake)."""
 
+REMAINING_BASES: tuple[str, ...] = ("faulty", "worn", "forecast", "beyond_horizon", "no_trend", "too_little_data")
+"""What a remaining life rests on (view ``valve_condition``, docs/monitoring.md "Remaining life")."""
+
+_REMAINING_BASIS = Field(
+    "remaining_basis", pl.Utf8, "", "What remaining_hours rests on: faulty or worn (0), forecast (a trend's crossing "
+    "within the horizon), beyond_horizon, no_trend or too_little_data (null).", isin=REMAINING_BASES,
+)
+_REMAINING_HORIZON = Field(
+    "remaining_horizon_hours", pl.Float64, "h", "The forecast horizon of a healthy edge: 3 × the span of operating "
+    "hours its trend was fitted on; no forecast reaches beyond it.", nullable=True,
+)
+
 VALVE_CONDITION_FIELDS: tuple[Field, ...] = (
     _VALVE_ID,
     _EDGE,
     Field("state", pl.Utf8, "", "healthy, worn, faulty or unknown.", isin=STATES),
     Field("reason", pl.Utf8, "", "Why, in words, with the numbers."),
-    Field("remaining_hours", pl.Float64, "h", "Operating hours until a parameter's trend reaches its wear bound (0 when worn).", nullable=True),
+    Field("remaining_hours", pl.Float64, "h", "Operating hours until a parameter's trend reaches its wear bound, within the forecast horizon; 0 when faulty or worn; null otherwise (remaining_basis says why).", nullable=True),
     Field("remaining_hours_low", pl.Float64, "h", "Lower end of its 95 % interval.", nullable=True),
-    Field("remaining_hours_high", pl.Float64, "h", "Upper end of its 95 % interval.", nullable=True),
+    Field("remaining_hours_high", pl.Float64, "h", "Upper end of its 95 % interval (null where it lies beyond the horizon).", nullable=True),
     Field("limiting_parameter", pl.Utf8, "", "The parameter whose trend reaches its bound first.", nullable=True),
-    Field("end_of_life_hours", pl.Float64, "h", "Operating hours at which that happens.", nullable=True),
+    Field("end_of_life_hours", pl.Float64, "h", "Operating hours at which that happens (forecasts within the horizon).", nullable=True),
     Field("operating_hours", pl.Float64, "h", "Operating hours of the latest ok window.", nullable=True),
     Field("last_window_start", UTC_US, "", "Latest monitoring window of the edge (any status).", nullable=True),
     Field("last_ok_window_start", UTC_US, "", "Latest window with an estimate.", nullable=True),
@@ -434,6 +446,8 @@ VALVE_CONDITION_FIELDS: tuple[Field, ...] = (
     Field("leak_scale", pl.Float64, "", "Closed-edge leakage over Eq. 3's (0 = none), median of the ok windows.", nullable=True),
     Field("leak_scale_baseline", pl.Float64, "", "The same at commissioning (1 for a nominal baseline: Eq. 3 assumed).", nullable=True),
     Field("edge_law", pl.Utf8, "", "Edge law of the current baseline's shape (eq3, sharp; a note in reason when not the configured one).", nullable=True),
+    _REMAINING_BASIS,
+    _REMAINING_HORIZON,
 )
 """View ``valve_condition`` (interfaces.md), as exported to ``export/valve_condition.parquet``."""
 
@@ -447,14 +461,16 @@ FLEET_RANKING_FIELDS: tuple[Field, ...] = (
     Field("edges_unknown", pl.Int64, "", "Edges without enough data.", ge=0),
     Field("worst_edge", pl.Utf8, "", "The edge that decides the state.", isin=EDGES),
     Field("reason", pl.Utf8, "", "Its reason."),
-    Field("remaining_hours", pl.Float64, "h", "Soonest remaining life over the edges.", nullable=True),
+    Field("remaining_hours", pl.Float64, "h", "The worst edge's remaining life (valve_condition): 0 when faulty or worn, the soonest forecast within the horizon, else null.", nullable=True),
     Field("remaining_hours_low", pl.Float64, "h", "Lower end of its 95 % interval.", nullable=True),
-    Field("remaining_hours_high", pl.Float64, "h", "Upper end of its 95 % interval.", nullable=True),
-    Field("limiting_edge", pl.Utf8, "", "The edge with the soonest remaining life.", nullable=True),
+    Field("remaining_hours_high", pl.Float64, "h", "Upper end of its 95 % interval (null where beyond the horizon).", nullable=True),
+    Field("limiting_edge", pl.Utf8, "", "The edge the remaining life is of (null when there is none).", nullable=True),
     Field("eq9_ok", pl.Boolean, "", "Latest Eq. 9 standstill check passed.", nullable=True),
     Field("eq9_residual", pl.Float64, "", "Its residual.", nullable=True),
     Field("operating_hours", pl.Float64, "h", "Operating hours of the latest ok window.", nullable=True),
     Field("last_window_start", UTC_US, "", "Latest monitoring window.", nullable=True),
+    _REMAINING_BASIS,
+    _REMAINING_HORIZON,
 )
 """View ``fleet_ranking``, as exported to ``export/fleet_ranking.parquet``."""
 
@@ -522,15 +538,20 @@ the first nine columns are the specified ones."""
 
 # --- discrepancy verdicts with nuisance parameters (issue 17) ---------------------------------
 
-DISCREPANCY_VERDICTS = ("named", "ambiguous", "none")
+DISCREPANCY_VERDICTS = ("named", "ambiguous", "unexplained", "none")
 DISCREPANCY_FINDING_FIELDS = DISCREPANCY_FINDING_FIELDS + (
-    Field("verdict", pl.Utf8, "", "named (the effect explains what the base model's uncertain parameters cannot within their tolerances), ambiguous (another reading explains the same data: see alternatives) or none.", isin=DISCREPANCY_VERDICTS, nullable=True),
+    Field("verdict", pl.Utf8, "", "named (the effect explains what the base model's uncertain parameters cannot within their tolerances, and its replay closes the gap where it acts), ambiguous (another reading explains the same data: see alternatives), unexplained (the equations point at an effect whose replay does not close its gap: the data disagree with the model in a way no library effect explains; see disagreement) or none.", isin=DISCREPANCY_VERDICTS, nullable=True),
     Field("confidence", pl.Float64, "", "How sure the verdict's first reading is, in [0, 1] (docs/discrepancy.md, Verdicts).", ge=0.0, le=1.0, nullable=True),
     Field("alternatives", pl.Utf8, "", "The other readings of the same data ('; '-separated: effects with their values, or the base model with nuisance values); null if none.", nullable=True),
     Field("separate_by", pl.Utf8, "", "What data would tell the readings apart (ambiguous verdicts).", nullable=True),
     Field("verdict_reason", pl.Utf8, "", "One sentence: why this verdict.", nullable=True),
     Field("nuisances", pl.Utf8, "", "The calibrated nuisance parameters, 'name=value unit (zσ)' '; '-separated, z = deviation from nominal in prior σ; null when the model was taken as exact.", nullable=True),
     Field("gap_nominal", pl.Float64, "", "Normalised replay gap of the nominal (design-data, uncalibrated) base model.", ge=0.0, nullable=True),
+    Field("gap_kind", pl.Utf8, "", "Where the effect acts and is judged: hydraulic (p1, p2 replayed on the recorded cylinder motion) or mechanical (X replayed on the recorded pressures); null without one.", isin=("hydraulic", "mechanical"), nullable=True),
+    Field("gap_kind_before", pl.Float64, "", "That gap (RMS on the 1 bar / 1 mm scales) of the model before the effect is added.", ge=0.0, nullable=True),
+    Field("gap_kind_after", pl.Float64, "", "... and with it: named needs ≥ 1.5× less, or ≤ 2× gap_kind_floor.", ge=0.0, nullable=True),
+    Field("gap_kind_floor", pl.Float64, "", "That gap's noise floor: what the recorded sensor noise alone leaves.", ge=0.0, nullable=True),
+    Field("disagreement", pl.Utf8, "", "unexplained: which equation, signal and operating region disagree, and how much.", nullable=True),
 )
 
 DISCREPANCY_CANDIDATE_FIELDS: tuple[Field, ...] = _RUN_FIELDS + (
@@ -551,7 +572,7 @@ DISCREPANCY_CANDIDATE_FIELDS: tuple[Field, ...] = _RUN_FIELDS + (
 
 DISCREPANCY_GAP_FIELDS: tuple[Field, ...] = _RUN_FIELDS + (
     _STAGE,
-    Field("signal", pl.Utf8, "", "Replayed signal.", isin=("p1", "p2", "X")),
+    Field("signal", pl.Utf8, "", "Replayed signal: p1, p2, X of the whole replay; p1_hydraulic, p2_hydraulic of the replay on the recorded cylinder motion, X_mechanical of the replay on the recorded pressures.", isin=("p1", "p2", "X", "p1_hydraulic", "p2_hydraulic", "X_mechanical")),
     _REGION,
     Field("rms", pl.Float64, "", "RMS of replayed reading minus recorded signal, in unit.", nullable=True),
     Field("unit", pl.Utf8, "", "Pa or m."),

@@ -5,10 +5,12 @@
   α̂·Â(u + x̂) of the latest ok window (the paper's Figs. 4, 5, 8 and 9), with the change
   current − baseline underneath, where wear of a few per cent becomes visible.
 * :func:`trends_figure`: per valve, α̂, x̂ and e over operating hours for each edge, with the
-  wear and fault bounds, the rolling median, the fitted trend extrapolated to its bound and the
-  predicted end of life with its 95 % interval (the paper's Fig. 6); alarm windows in red.
+  wear and fault bounds, the rolling median, the fitted trend and, where the edge has a forecast
+  within the horizon (``valve_condition``), the end of life with its 95 % interval (the paper's
+  Fig. 6); alarm windows in red.
 * :func:`fleet_figure`: the fleet at a glance: the state of every edge of the most urgent
-  valves, the remaining life of those with a forecast, and the count of valves per state.
+  valves, their remaining life (bars where there is a figure, the report's words beside), and the
+  count of valves per state.
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ import polars as pl  # noqa: E402
 from matplotlib.colors import ListedColormap  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 
+from flows.report.remaining import remaining_text  # noqa: E402
 from schemas.fields import EDGES, STATES  # noqa: E402
 
 STATE_COLOURS = {"healthy": "#4caf50", "worn": "#ff9800", "faulty": "#d32f2f", "unknown": "#9e9e9e"}
@@ -124,7 +127,8 @@ def characteristics_figure(valve_id: str, curves: dict[str, dict[str, np.ndarray
     return _save(fig, path)
 
 
-def trends_figure(valve_id: str, trend: pl.DataFrame, lines: pl.DataFrame, path: Path, leak: pl.DataFrame | None = None) -> Path:
+def trends_figure(valve_id: str, trend: pl.DataFrame, lines: pl.DataFrame, life: dict[str, dict], path: Path,
+                  leak: pl.DataFrame | None = None) -> Path:
     """α̂, x̂, e and the closed-edge leakage over operating hours for the four edges of one valve.
 
     Parameters
@@ -132,7 +136,10 @@ def trends_figure(valve_id: str, trend: pl.DataFrame, lines: pl.DataFrame, path:
     trend : DataFrame
         Rows of view ``trend_operating_hours`` for the valve.
     lines : DataFrame
-        Rows of view ``parameter_trends`` for the valve (slope, intercept, bounds, end of life).
+        Rows of view ``parameter_trends`` for the valve (slope, intercept).
+    life : dict
+        edge → its ``valve_condition`` row: the end of life is drawn where that row has a
+        forecast (``remaining_basis`` forecast, on its ``limiting_parameter``), nowhere else.
     leak : DataFrame, optional
         edge, operating_hours, leak_scale, leak_scale_ci_low, leak_scale_ci_high of the valve's
         ok windows (``stg_edge_fits``) and leak_scale_baseline per edge: the bottom row.
@@ -163,13 +170,13 @@ def trends_figure(valve_id: str, trend: pl.DataFrame, lines: pl.DataFrame, path:
             ax.plot(h, med, "-", color="#8e24aa", lw=1, alpha=0.8, label="rolling median")
             x_end = h.max()
             lp = lines.filter((pl.col("edge") == edge) & (pl.col("parameter") == p))
-            predicted = lp.filter(pl.col("crossing_status") == "predicted").sort("end_of_life_hours")
-            if predicted.height:
-                eol = predicted.row(0, named=True)
-                x_end = max(x_end, min(eol["end_of_life_hours"], h.max() + 20 * max(h.max() - h.min(), 1.0)))
-                ax.axvline(eol["end_of_life_hours"], color=STATE_COLOURS["worn"], lw=1.2)
-                lo, hi = eol["end_of_life_hours_low"], eol["end_of_life_hours_high"]
-                ax.axvspan(lo, min(hi, x_end * 1.05), color=STATE_COLOURS["worn"], alpha=0.15, label="end of life (95 %)")
+            c = life.get(edge, {})
+            if c.get("remaining_basis") == "forecast" and c.get("limiting_parameter") == p:
+                now = c["operating_hours"]
+                x_end = max(x_end, c["end_of_life_hours"])
+                ax.axvline(c["end_of_life_hours"], color=STATE_COLOURS["worn"], lw=1.2)
+                hi = c["remaining_hours_high"] if c["remaining_hours_high"] is not None else c["remaining_horizon_hours"]
+                ax.axvspan(now + c["remaining_hours_low"], now + hi, color=STATE_COLOURS["worn"], alpha=0.15, label="end of life (95 %)")
             if lp.height and lp["slope_per_hour"][0] is not None and lp["n_fits"][0] >= 3:
                 xs = np.array([h.min(), x_end])
                 ax.plot(xs, lp["intercept"][0] + lp["slope_per_hour"][0] * xs, "--", color="#ef6c00", lw=1.2, label="trend (OLS)")
@@ -219,11 +226,17 @@ def fleet_figure(ranking: pl.DataFrame, conditions: pl.DataFrame, path: Path, ma
         ax_life.barh(y[has], rem[has], color=[c for c, k in zip(colours, has) if k], alpha=0.85)
         err = np.vstack([rem[has] - lo[has], np.where(np.isfinite(hi[has]), hi[has] - rem[has], 0)])
         ax_life.errorbar(rem[has], y[has], xerr=np.clip(err, 0, None), fmt="none", ecolor="black", capsize=3, lw=1)
-    for k in np.flatnonzero(~has):
-        ax_life.text(0, y[k], "  no forecast", va="center", fontsize=8, color="#616161")
+    for k, row in enumerate(top.iter_rows(named=True)):  # the words of the table (now, > horizon, ...)
+        ax_life.text(0 if not has[k] else rem[k], y[k], "  " + remaining_text(row), va="center", fontsize=8, color="#616161")
+    reach = np.nanmax(np.concatenate([rem[has], hi[has], [0.0]]))
+    if reach > 0:
+        ax_life.set_xlim(0, 1.3 * reach)  # room for the words beside the bars
+    else:  # nothing but "now" and words: no hour axis to read
+        ax_life.set_xlim(0, 1)
+        ax_life.set_xticks([])
     ax_life.set_yticks(y, [str(v) for v in ids], fontsize=8)
     ax_life.set_ylim(len(ids) - 0.5, -0.5)
-    ax_life.set_xlabel("remaining operating hours to a wear bound (bar) with 95 % interval")
+    ax_life.set_xlabel("remaining operating hours to a wear bound (bar) with 95 % interval, within the forecast horizon")
     ax_life.set_title("remaining service life")
     ax_life.grid(axis="x", alpha=0.3)
     counts = {s: int((ranking["state"] == s).sum()) for s in STATES}

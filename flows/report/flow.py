@@ -195,7 +195,7 @@ def run_report(config_path: str | Path, warehouse: str | Path, *, detail: int = 
                 [vid],
             )
             jobs += [(characteristics_figure, (vid, _edge_curves(config, vid, baselines, latest), latest, out_dir / f"characteristics_{vid}.png")),
-                     (trends_figure, (vid, trend, lines, out_dir / f"trends_{vid}.png", leak))]  # fmt: skip
+                     (trends_figure, (vid, trend, lines, latest, out_dir / f"trends_{vid}.png", leak))]  # fmt: skip
         discrepancy = discrepancy_results(con, warehouse)
         quality = data_quality(con)
     finally:
