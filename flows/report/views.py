@@ -36,7 +36,7 @@ from pathlib import Path
 import duckdb
 
 from flows.common.errors import ValvemonError
-from flows.common.warehouse_db import DB_NAME, db_path, ensure_tables, transaction
+from flows.common.warehouse_db import DB_NAME, add_missing_columns, db_path, ensure_tables, transaction
 from schemas.fields import CONDITION_BOUNDS_FIELDS, STANDSTILL_FIELDS, STANDSTILL_PROGRESS_FIELDS
 
 SQL_DIR = Path(__file__).resolve().parents[2] / "sql"
@@ -123,6 +123,7 @@ def ensure_report_tables(con: duckdb.DuckDBPyConnection) -> None:
 
     ensure_monitor_tables(con)
     ensure_tables(con, {name: (fields, None) for name, fields in REPORT_TABLES.items()})
+    add_missing_columns(con, REPORT_TABLES)
     con.execute("CREATE UNIQUE INDEX IF NOT EXISTS standstill_checks_key ON standstill_checks (valve_id, window_start)")
 
 
