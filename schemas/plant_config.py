@@ -144,7 +144,7 @@ class ConditionBounds:
       e above the 0.10–0.32 mm² seen on sound valves → 0.50 mm². Lower bounds catch the
       opposite drift (silting, a clogged edge): α̂ 0.80, x̂ −5 %.
     - **change detection** (a significant departure from the edge's own recent trend): a robust
-      z-score of each window against the median and MAD (×1.4826) of its history: the ok windows
+      z-score of each window against the median and IQR (/1.349) of its history: the ok windows
       of the previous ``change_history_hours`` (a day: 24 hourly snapshots, 1,440 one-minute
       windows of a continuous recording), or the previous ``change_history_windows`` ok windows
       if those reach further back (sparse snapshots); |z| > ``change_z`` alarms. The scale is never taken
