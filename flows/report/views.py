@@ -143,6 +143,34 @@ def create_views(con: duckdb.DuckDBPyConnection, sql_dir: Path = SQL_DIR) -> lis
     return [v.name for v in views]
 
 
+def materialise_views(con: duckdb.DuckDBPyConnection, names: tuple[str, ...], sql_dir: Path = SQL_DIR) -> list[str]:
+    """Compute the views ``names`` and the core and report views they read once each, in
+    dependency order, into temporary tables of the same names in this connection.
+
+    DuckDB resolves a name to a temporary object before the database's own, also inside a view's
+    body, so every later query of this connection reads the tables: a report that reads
+    ``valve_condition``, ``fleet_ranking``, ``parameter_trends`` and ``trend_daily`` evaluates
+    ``fit_checks`` (the rolling median and quartiles over every ok window) once, not once per
+    query and valve. Nothing is written to the database (a read-only connection will do).
+    Returns the views materialised, in order."""
+    views = discover_views(sql_dir)
+    wanted: set[str] = set()
+
+    def add(name: str) -> None:
+        if name not in wanted and views[name].layer != "staging":
+            wanted.add(name)
+            for d in views[name].depends_on:
+                add(d)
+
+    for name in names:
+        add(name)
+    db = con.execute("SELECT current_database()").fetchone()[0]
+    done = [v.name for v in ordered_views(views) if v.name in wanted]
+    for name in done:
+        con.execute(f'CREATE OR REPLACE TEMP TABLE {name} AS SELECT * FROM "{db}".main.{name}')
+    return done
+
+
 def snapshot_path(warehouse: str | Path) -> Path:
     """``WAREHOUSE/snapshot/valvemon.duckdb``, the copy readers open."""
     return Path(warehouse) / SNAPSHOT_DIR / DB_NAME
