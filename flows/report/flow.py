@@ -57,6 +57,8 @@ DETAIL_VALVES = 20
 """Valves shown with pictures in the HTML report by default: the most urgent ones."""
 REPORT_VIEWS = ("valve_condition", "fleet_ranking", "parameter_trends", "trend_daily")
 """The views the report reads, each computed once per run (:func:`flows.report.views.materialise_views`)."""
+REPORT_MEMORY = "2GB"
+"""DuckDB's memory limit for the report's queries; beyond it they spill to ``WAREHOUSE/.report_tmp``."""
 U_GRID_POINTS = 281
 
 
@@ -175,6 +177,8 @@ def run_report(config_path: str | Path, warehouse: str | Path, *, detail: int = 
     out_dir.mkdir(parents=True, exist_ok=True)
     con = connect_snapshot(warehouse)
     try:
+        con.execute(f"SET memory_limit = '{REPORT_MEMORY}'")
+        con.execute("SET temp_directory = ?", [str(warehouse / ".report_tmp")])
         materialise_views(con, REPORT_VIEWS)
         exports = export_bi(con, warehouse)
         ranking = query_frame(con, "SELECT * FROM fleet_ranking ORDER BY urgency_rank")
