@@ -283,6 +283,7 @@ def retention(
     valves: Valves = None,
     as_of: Annotated[Optional[str], typer.Option("--as-of", help="Reference date (ISO): partitions older than keep_days before it are eligible. [default: today, UTC]")] = None,
     list_all: Annotated[bool, typer.Option("--list", help="Also print every partition's decision.")] = False,
+    force: Annotated[bool, typer.Option("--force", help="Accept an --as-of later than today or more than a day after the latest ingest.")] = False,
     warehouse: Warehouse = None,
 ) -> None:
     """Thin or drop lake partitions older than retention.keep_days (plant TOML) once their fits exist."""
@@ -294,7 +295,7 @@ def retention(
     wh = warehouse_dir(warehouse)
     with nullcontext() if dry_run else publishing(config, wh):  # a dry run writes nothing, not even the snapshot
         summary = run_flow(
-            retention_flows.retention_flow, config_path=str(config), warehouse=str(wh), valve_ids=valves, as_of=as_of, dry_run=dry_run
+            retention_flows.retention_flow, config_path=str(config), warehouse=str(wh), valve_ids=valves, as_of=as_of, dry_run=dry_run, force=force
         )
     if summary is None:
         typer.echo(f"{config}: no [retention] table: retention is off, nothing is deleted (docs/warehouse.md, Retention)")
@@ -341,6 +342,12 @@ def _first_line(exc: BaseException) -> str:
     return text.splitlines()[0] if text else type(exc).__name__
 
 
+def _interrupted(exc: BaseException) -> bool:
+    """Whether DuckDB gave up a statement because of Ctrl-C (its ``InterruptException``, or the
+    ``RuntimeError`` its Python client raises when it notices the signal itself)."""
+    return type(exc).__name__ == "InterruptException" or (isinstance(exc, RuntimeError) and str(exc).startswith("Query interrupted"))
+
+
 def _fail(message: str, code: int = 1) -> None:
     print(f"valvemon: error: {message}", file=sys.stderr)
     sys.exit(code)
@@ -363,9 +370,13 @@ def main() -> None:
         _fail(_first_line(exc) + (f" (see '{ctx.command_path} --help')" if ctx is not None else ""), exc.exit_code)
     except typer.Abort:
         _fail("aborted")
+    except KeyboardInterrupt:
+        sys.exit(130)
     except OSError as exc:  # the file system: permissions, a full disk, a vanished file
         _fail(f"{exc.filename}: {exc.strerror}" if exc.filename and exc.strerror else _first_line(exc))
     except Exception as exc:  # noqa: BLE001 - a bug or an unforeseen failure: still one line (the traceback on request)
+        if _interrupted(exc):  # DuckDB stopped a statement for Ctrl-C: its transaction is rolled back
+            sys.exit(130)
         if os.environ.get(TRACEBACK_ENV) == "1":
             raise
         _fail(f"unexpected {type(exc).__name__}: {_first_line(exc)} (set {TRACEBACK_ENV}=1 for the traceback)")

@@ -172,6 +172,7 @@ RAW_ROW_FIELDS: tuple[Field, ...] = (
 
 QUARANTINE_REASONS: tuple[str, ...] = (
     "bad_quality", "non_numeric", "non_finite", "missing_value", "missing_tag", "bad_timestamp", "implausible_time", "out_of_range",
+    "field_count", "truncated", "clock_step",
 )  # fmt: skip
 """Why a sample is quarantined (``transforms.ingest.samples``; ``docs/ingest.md``)."""
 
@@ -232,6 +233,9 @@ MANIFEST_FIELDS: tuple[Field, ...] = (
     Field("other_tags", pl.Int64, "", "Tags (long) or columns (wide) of the file that no valve has, read past (export.other_tags = 'ignore').", ge=0),
     Field("other_samples", pl.Int64, "", "Rows (long) or non-empty cells (wide) of those tags, not in samples_in.", ge=0),
     Field("other_tag_names", pl.Utf8, "", "Those tags, comma-separated in the order of the file (empty: none)."),
+    Field("field_count", pl.Int64, "", "Of quarantined: samples of text rows whose field count is not the header's.", ge=0),
+    Field("truncated", pl.Int64, "", "1 when the text file's last line has no line end (the file was cut; that line's samples are quarantined), else 0.", ge=0, le=1),
+    Field("clock_step", pl.Int64, "", "Of quarantined: samples of a wide export's rows at and after a backward step of its clock (export.clock_steps).", ge=0),
 )
 """One row per ingested export file (table ``ingest_manifest``)."""
 
@@ -608,6 +612,7 @@ RETENTION_LOG_FIELDS: tuple[Field, ...] = (
     Field("keep_days", pl.Int32, "d", "retention.keep_days in force.", ge=1),
     Field("thin_keep_s_per_hour", pl.Float64, "s", "retention.thin_keep_s_per_hour in force (null for drop).", nullable=True, ge=0.0),
     Field("as_of", pl.Date, "", "The run's reference date: partitions older than keep_days before it were eligible."),
-    Field("applied_at", UTC_US, "", "When the action was completed."),
+    Field("applied_at", UTC_US, "", "When the action was completed (an intent: when it was recorded)."),
+    Field("state", pl.Utf8, "", "intent: recorded before the data change, which a killed run may have left part-done (the next run completes it); done: completed.", isin=("intent", "done")),
 )
 """Every applied retention action, one row per partition and action (table ``retention_log``)."""

@@ -25,6 +25,10 @@ Keys the project adds to the specification (all optional; every key is documente
   leaves ``unit`` out), ``"name"`` (descriptions, shown in messages) or ``"skip"`` (anything
   else) — iba's ASCII export is ``["tag", "name", "unit"]`` (:data:`HEADER_ROW_KINDS`).
 - ``[export] tdms_group`` (optional): the TDMS group whose channels are read (default: every group).
+- ``[export] clock_steps`` (wide only; default ``"quarantine"``): a wide export's rows are in time
+  order, so a backward step of its clock by more than a few sample periods quarantines the rows
+  after it (``clock_step``); ``"accept"`` takes the file's order as untrusted and sorts it as the
+  long layout does (:data:`CLOCK_STEP_RULES`).
 - ``[valves] baseline_window = { start = ..., end = ... }`` (spec) and ``[valves] scenario``
   (written by ``valvemon simulate`` for the record; ignored by monitoring).
 - ``[valve_types.NAME.bounds]``: the condition bounds of step 5b (:class:`ConditionBounds`,
@@ -90,6 +94,9 @@ class ExportSpec:
     """What each header line of a text export holds, in order (:data:`HEADER_ROW_KINDS`)."""
     tdms_group: str | None = None
     """The TDMS group that holds the tags (None: every group)."""
+    clock_steps: str = "quarantine"
+    """A wide export whose clock steps back: ``"quarantine"`` the rows after the step, or ``"accept"``
+    (sort them in, as the long layout does)."""
 
     @property
     def units_in_file(self) -> bool:
@@ -109,6 +116,7 @@ faults fault a few in a thousand (one 1e308 in 2,000 samples is 0.05 %; a transm
 range for a minute of an hour file 1.7 %); ``docs/ingest.md``, "Quarantine or refusal"."""
 
 OTHER_TAGS_RULES: tuple[str, ...] = ("ignore", "error")
+CLOCK_STEP_RULES: tuple[str, ...] = ("quarantine", "accept")
 
 DEFAULT_WINDOW_S = 60.0
 """Default monitoring window length (docs/monitoring.md, "Continuous recordings", measured on
@@ -429,7 +437,7 @@ _RETENTION_KEYS = {"keep_days", "mode", "thin_keep_s_per_hour"}
 _EXPORT_KEYS = {
     "layout", "timestamp_column", "timestamp_format", "tag_column", "value_column",
     "quality_column", "good_quality", "separator", "decimal", "sample_rate_hz", "max_gap_s",
-    "duplicate_rule", "max_bad_share", "other_tags", "header_rows", "tdms_group",
+    "duplicate_rule", "max_bad_share", "other_tags", "header_rows", "tdms_group", "clock_steps",
 }  # fmt: skip
 
 
@@ -464,6 +472,7 @@ def _parse_export(raw: Any) -> ExportSpec:
         kw["header_rows"] = _parse_header_rows(t["header_rows"], layout)
     if "tdms_group" in t:
         kw["tdms_group"] = _str(t["tdms_group"], "export.tdms_group")
+    kw["clock_steps"] = _str(t.get("clock_steps", "quarantine"), "export.clock_steps", CLOCK_STEP_RULES)
     return ExportSpec(**kw)
 
 
@@ -817,6 +826,8 @@ def plant_config_to_dict(config: PlantConfig) -> dict:
         export["header_rows"] = list(e.header_rows)
     if e.tdms_group is not None:
         export["tdms_group"] = e.tdms_group
+    if e.clock_steps != ExportSpec.clock_steps:
+        export["clock_steps"] = e.clock_steps
     valves = []
     for v in config.valves:
         d: dict[str, Any] = {"id": v.id, "type": v.type, "commissioned": _iso(v.commissioned)}

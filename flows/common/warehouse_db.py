@@ -25,7 +25,7 @@ import uuid
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterator, Mapping
+from typing import Callable, Iterator, Mapping, TypeVar
 
 import duckdb
 import polars as pl
@@ -34,6 +34,7 @@ from flows.common.errors import ValvemonError
 from schemas.fields import GAP_FIELDS, INGEST_RUN_FIELDS, MANIFEST_FIELDS, QUARANTINE_FIELDS, Field
 
 DB_NAME = "valvemon.duckdb"
+T = TypeVar("T")
 
 INGEST_TABLES: dict[str, tuple[tuple[Field, ...], str | None]] = {
     "ingest_manifest": (MANIFEST_FIELDS, "file_hash"),
@@ -288,6 +289,44 @@ def insert_frame(con: duckdb.DuckDBPyConnection, table: str, frame: pl.DataFrame
         con.execute(f"{verb} INTO {table} BY NAME SELECT * FROM _valvemon_frame")
     finally:
         con.unregister("_valvemon_frame")
+
+
+INTERRUPT_WAIT_S = 5.0
+"""After Ctrl-C, how long :func:`interruptible` waits for DuckDB to stop the interrupted statement
+(it stops within milliseconds; the wait only bounds a statement that ignores the interrupt). [s]"""
+
+
+def interruptible(con: duckdb.DuckDBPyConnection, work: Callable[[], T]) -> T:
+    """``work()`` (statements on ``con``) run in a worker thread, so that Ctrl-C stops it at once.
+
+    A statement running inside DuckDB does not see Python's SIGINT until it returns (a cross join
+    ran on for minutes). Here the main thread only waits; on ``KeyboardInterrupt`` it calls
+    ``con.interrupt()`` (DuckDB cancels the statement within milliseconds), waits for the worker
+    to give up and raises ``KeyboardInterrupt``, so the caller's ``finally`` closes the
+    connection and the command exits with 130, leaving the database as before.
+    """
+    result: dict[str, object] = {}
+    done = threading.Event()
+
+    def run() -> None:
+        try:
+            result["value"] = work()
+        except BaseException as exc:  # noqa: BLE001 - handed to the main thread
+            result["error"] = exc
+        finally:
+            done.set()
+
+    threading.Thread(target=run, name="valvemon-duckdb", daemon=True).start()
+    try:
+        while not done.wait(0.05):
+            pass
+    except KeyboardInterrupt:
+        con.interrupt()
+        done.wait(INTERRUPT_WAIT_S)
+        raise
+    if "error" in result:
+        raise result["error"]
+    return result["value"]
 
 
 def query_frame(con: duckdb.DuckDBPyConnection, sql: str, params: list | None = None) -> pl.DataFrame:

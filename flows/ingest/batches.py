@@ -21,7 +21,7 @@ import pyarrow.parquet as pq
 
 from flows.common.errors import ValvemonError
 from flows.ingest.header_rows import HeaderRows, read_header_rows
-from flows.ingest.read import _NOT_BLANK, RaggedLine, _is_text, _mapped, _value_columns, content_hash, enum_column, read_csv_export, sniff_format
+from flows.ingest.read import _NOT_BLANK, _is_text, _mapped, _value_columns, content_hash, enum_column, read_csv_export, sniff_format
 from schemas.plant_config import ExportSpec
 from transforms.ingest import TagTable
 from transforms.ingest.units import FileUnits
@@ -209,10 +209,7 @@ def _csv_batches(src: ExportSource, export: ExportSpec, tags: TagTable | None, b
         any_block = False
         for block, final in _lookahead(_blocks(fh, block_bytes)):
             any_block = True
-            try:
-                df = read_csv_export(header + block, export, tags)
-            except RaggedLine as exc:
-                raise ValvemonError(f"{src.path}: {exc.at(first)}") from None
+            df = read_csv_export(header + block, export, tags)
             if tags is not None and export.tag_column in df.columns and not isinstance(df[export.tag_column].dtype, pl.Enum):
                 tags = None  # a tag no valve has (or a value that is no number): the next blocks read tags as text, not twice
             yield df, first, final

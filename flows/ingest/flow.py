@@ -16,6 +16,7 @@ Method, rules and counts: ``docs/ingest.md``.
 
 from __future__ import annotations
 
+import sys
 import uuid
 from contextlib import AbstractContextManager, contextmanager, nullcontext
 from dataclasses import asdict, dataclass, field
@@ -211,6 +212,8 @@ def merge_batches(
     finally:
         stager.release()
     c = stream.counts
+    if c.clock_step_message:  # ingested, with the rows after the step quarantined: say so
+        print(f"valvemon: warning: {path}: {c.clock_step_message}", file=sys.stderr)
     report = FileReport(str(path), source.file_hash, rows_in=c.rows_in, samples_in=c.samples_in, quarantined=c.quarantined)
     report.duplicates, report.conflicts, report.gaps, report.rows_out = c.duplicates, c.conflicts, c.gaps, c.rows_out
     report.valves = c.valves
@@ -254,6 +257,9 @@ def file_records(
         "other_tags": len(c.other_tags),
         "other_samples": sum(c.other_tags.values()),
         "other_tag_names": ",".join(c.other_tags),
+        "field_count": c.field_count,
+        "truncated": c.truncated,
+        "clock_step": c.clock_step,
     }
     return manifest, quarantine, gaps
 

@@ -5,14 +5,13 @@ one (:mod:`flows.ingest.batches`)."""
 
 from __future__ import annotations
 
-import csv
 import gzip
 import hashlib
 import mmap
 import os
 import re
 import zlib
-from contextlib import contextmanager
+from contextlib import contextmanager, nullcontext
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterator
@@ -26,6 +25,7 @@ from blake3 import blake3
 from flows.common.errors import ValvemonError
 from schemas.plant_config import ExportSpec
 from transforms.ingest import TagTable
+from transforms.ingest.text_rows import FIELD_COUNT, ROW_FAULT_COLUMN, TRUNCATED, ragged_rows, unterminated, width_bounds
 from transforms.ingest.units import FileUnits
 
 EXPORT_SUFFIXES = (".csv", ".csv.gz", ".txt", ".tsv", ".tsv.gz", ".txt.gz", ".parquet", ".pq", ".tdms")
@@ -151,9 +151,11 @@ def read_csv_export(data: bytes | Path, export: ExportSpec, tags: TagTable | Non
 
     Value columns are read as Float64 and, in the long layout, the tag column as an Enum of
     the plant's tags (the fast path). Only if that fails (a cell that is no number, a tag the
-    plant does not have, bytes that are not UTF-8) is the file read again with those columns
-    as text (invalid UTF-8 replaced), so that quarantine and the error message can show what
-    the file says.
+    plant does not have, bytes that are not UTF-8, a row with more fields than the header) is the
+    file read again with those columns as text (invalid UTF-8 replaced), so that quarantine and
+    the error message can show what the file says. Rows whose field count is not the header's,
+    and a last line without a line end, are marked in :data:`ROW_FAULT_COLUMN` (added only then;
+    :func:`mark_row_faults`).
     """
     opts = _csv_options(export)
     try:
@@ -166,58 +168,57 @@ def read_csv_export(data: bytes | Path, export: ExportSpec, tags: TagTable | Non
     if export.layout == "long" and tags is not None and export.tag_column in header:
         overrides[export.tag_column] = tags.enum
     try:
-        return pl.read_csv(data, schema_overrides=overrides, **opts)
+        return mark_row_faults(pl.read_csv(data, schema_overrides=overrides, **opts), data, export.separator)
     except pl.exceptions.ComputeError:
-        pass  # a value that is no number, a tag the plant does not have, bad UTF-8: the careful path
+        pass  # a value that is no number, a tag the plant does not have, bad UTF-8, a row too wide: the careful path
     opts = _csv_options(export, "utf8-lossy")
     overrides.pop(export.tag_column, None)
+    too_wide = False
     try:
         df = pl.read_csv(data, schema_overrides=overrides, ignore_errors=True, **opts)
-    except pl.exceptions.ComputeError as exc:
-        raise (ragged_line(data, export.separator) or exc) from None
+    except pl.exceptions.ComputeError:
+        if _binary(data):  # NUL bytes: not text at all, not a row too wide
+            raise
+        too_wide = opts["truncate_ragged_lines"] = True  # a row too wide: read, and marked below
+        df = pl.read_csv(data, schema_overrides=overrides, ignore_errors=True, **opts)
     suspicious = [c for c in values if df[c].null_count()]
     if suspicious:
         text = pl.read_csv(data, columns=suspicious, **opts)
         df = df.with_columns([text[c] for c in suspicious])
-    return df
+    return mark_row_faults(df, data, export.separator, maybe_wide=too_wide)
 
 
-class RaggedLine(ValueError):
-    """A CSV line with more fields than the header; ``row`` counts the lines after the header
-    (the first data line is 1), blank ones included."""
-
-    def __init__(self, row: int, fields: int, expected: int):
-        self.row, self.fields, self.expected = row, fields, expected
-        super().__init__(f"{fields} fields where the header has {expected} (a separator too many?)")
-
-    def at(self, first_line: int) -> str:
-        """The message, with the file's line (``first_line``: the file's line of row 1)."""
-        return f"line {first_line + self.row - 1}: {self}"
+def _binary(data: bytes | Path) -> bool:
+    """Whether the text's first 64 KiB hold a NUL byte (binary data, not text)."""
+    if isinstance(data, Path):
+        with open(data, "rb") as fh:
+            return b"\x00" in fh.read(1 << 16)
+    return b"\x00" in data[: 1 << 16]
 
 
-def ragged_line(data: bytes | Path, separator: str) -> RaggedLine | None:
-    """The first line of CSV text (header first) with more fields than the header, quotes
-    respected; None if there is none or the bytes are no text (NUL bytes: the caller's read failed
-    for another reason)."""
-    text = data.read_bytes() if isinstance(data, Path) else data
-    if b"\x00" in text[: 1 << 16]:
-        return None
-    sep = separator.encode()
-    lines = text.split(b"\n")
+def mark_row_faults(df: pl.DataFrame, data: bytes | Path, separator: str, *, maybe_wide: bool = False) -> pl.DataFrame:
+    """``df`` (the decoder's frame of ``data``) with :data:`ROW_FAULT_COLUMN` when a row's field
+    count is not the header's or the last line has no line end (``transforms.ingest.text_rows``).
 
-    def fields(line: bytes) -> int:
-        if b'"' not in line:
-            return line.count(sep) + 1
-        try:
-            return len(next(csv.reader([line.decode("utf-8", "replace").rstrip("\r")], delimiter=separator)))
-        except csv.Error:  # not CSV at all (binary): not a ragged line
-            return 0
-
-    expected = fields(lines[0])
-    for row, line in enumerate(lines[1:], start=1):
-        if line.count(sep) >= expected and (n := fields(line)) > expected:
-            return RaggedLine(row, n, expected)
-    return None
+    The text is scanned only when a row may be of the wrong width: the decoder fills a short
+    row's missing fields with nulls, so a last named column without nulls rules short rows out,
+    and a row too wide made the fast read fail (``maybe_wide``)."""
+    lo, hi = width_bounds(df.columns)
+    maybe_short = df.height > 0 and df[df.columns[lo - 1]].null_count() > 0
+    with _mapped(data) if isinstance(data, Path) else nullcontext(data) as text:
+        cut = unterminated(text)
+        if not (maybe_short or maybe_wide or cut):
+            return df
+        rows = ragged_rows(text, separator, lo, hi)[0] if maybe_short or maybe_wide else np.zeros(0, dtype=np.int64)
+    rows = rows[rows < df.height]
+    if not len(rows) and not (cut and df.height):
+        return df
+    fault = pl.repeat(None, df.height, dtype=pl.String, eager=True).alias(ROW_FAULT_COLUMN)
+    if len(rows):
+        fault = fault.scatter(rows, FIELD_COUNT)
+    if cut and df.height:
+        fault = fault.scatter(df.height - 1, TRUNCATED)
+    return df.with_columns(fault)
 
 
 def _is_text(t: pa.DataType) -> bool:
@@ -349,8 +350,6 @@ def read_export(path: Path, export: ExportSpec, tags: TagTable | None = None) ->
             first_line = 2
     except ValvemonError:
         raise
-    except RaggedLine as exc:
-        raise ValvemonError(f"{path}: {exc.at(2)}") from None
     except (pl.exceptions.PolarsError, pa.ArrowException, OSError, ValueError) as exc:
         kind = {"parquet": "Parquet", "tdms": "TDMS"}.get(fmt, "CSV")
         reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__

@@ -50,7 +50,8 @@ def data_quality(con) -> DataQuality | None:
     counts = dict(con.execute("SELECT reason, count(*) FROM quarantine GROUP BY reason").fetchall()) if _has(con, "quarantine") else {}
     files = query_frame(
         con,
-        "SELECT source_file, samples_in, quarantined, out_of_range, bad_timestamp, implausible_time, other_tags, other_tag_names "
+        "SELECT source_file, samples_in, quarantined, out_of_range, bad_timestamp, implausible_time, field_count, clock_step, truncated, "
+        "other_tags, other_tag_names "
         "FROM ingest_manifest WHERE quarantined > 0 OR other_tags > 0 ORDER BY quarantined DESC, other_samples DESC, source_file "
         f"LIMIT {FILES_SHOWN}",
     )
@@ -81,12 +82,13 @@ def quality_section(q: DataQuality) -> list[str]:
     if q.files.height:
         parts.append(
             "<table><tr><th>file</th><th>samples</th><th>quarantined</th><th>out of range</th><th>bad timestamp</th>"
-            "<th>implausible time</th><th>other tags</th></tr>"
+            "<th>implausible time</th><th>wrong field count</th><th>after a clock step</th><th>cut (truncated)</th><th>other tags</th></tr>"
         )
         for r in q.files.iter_rows(named=True):
             parts.append(
                 f"<tr><td>{html.escape(r['source_file'])}</td><td class='num'>{r['samples_in']:,}</td><td class='num'>{r['quarantined']:,}</td>"
                 f"<td class='num'>{r['out_of_range']:,}</td><td class='num'>{r['bad_timestamp']:,}</td><td class='num'>{r['implausible_time']:,}</td>"
+                f"<td class='num'>{r['field_count']:,}</td><td class='num'>{r['clock_step']:,}</td><td>{'yes' if r['truncated'] else ''}</td>"
                 f"<td>{html.escape(_names(r['other_tag_names']))}</td></tr>"
             )
         parts.append("</table>")
@@ -97,8 +99,9 @@ def quality_section(q: DataQuality) -> list[str]:
     parts.append(
         '<p class="note">A sample is quarantined (table <code>quarantine</code>, with file, line and raw text) for a bad '
         "quality code, a missing or non-numeric value, an unreadable timestamp, a time later than the ingest's + 1 day "
-        "or before the valve was commissioned, or a value outside its column's physical range; a file is refused when "
-        "a tag's faults of the last three kinds exceed <code>export.max_bad_share</code>. Tags of other equipment are "
+        "or before the valve was commissioned, a value outside its column's physical range, a text row whose field count "
+        "is not the header's, a cut last line, or a wide row at or after a step back of the recorder's clock; a file is refused when "
+        "a tag's unreadable timestamps, implausible times or values out of range exceed <code>export.max_bad_share</code>. Tags of other equipment are "
         "read past (<code>export.other_tags</code>). Per file: table <code>ingest_manifest</code>.</p>"
     )
     return parts

@@ -8,6 +8,8 @@ ISO-8601 UTC) or Parquet (``--out`` required).
 A query never changes the warehouse or writes a file (:func:`check_read_only`,
 :func:`lock_down`): the database is attached read-only, only a single ``SELECT`` (or
 ``EXPLAIN`` of one) runs, and DuckDB's file system is closed except for reading the lake.
+Ctrl-C stops a running query at once (``flows.common.warehouse_db.interruptible``): the command
+exits with 130 and the database is released.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ import duckdb
 import polars as pl
 
 from flows.common.errors import ValvemonError
+from flows.common.warehouse_db import interruptible
 from flows.report.views import connect_snapshot
 
 FORMATS = ("table", "csv", "json", "parquet")
@@ -54,7 +57,8 @@ def check_read_only(sql: str) -> None:
 
 
 def lock_down(con: duckdb.DuckDBPyConnection, warehouse: Path) -> None:
-    """Close DuckDB's file system for ``con`` except for the lake, then lock the settings.
+    """Close DuckDB's file system for ``con`` except for the lake, turn off the progress bar
+    (DuckDB prints it on stdout, into the result), then lock the settings.
 
     ``enable_external_access = false`` refuses every file, extension install or load and
     ``ATTACH`` outside ``allowed_directories``; the lake stays readable for
@@ -64,6 +68,7 @@ def lock_down(con: duckdb.DuckDBPyConnection, warehouse: Path) -> None:
     lake = str((Path(warehouse) / "lake").resolve()).replace("'", "''")
     con.execute(f"SET allowed_directories = ['{lake}/']")
     con.execute("SET enable_external_access = false")
+    con.execute("SET enable_progress_bar = false")  # DuckDB draws it on stdout, into the result (a query over 2 s)
     con.execute("SET lock_configuration = true")
 
 
@@ -73,14 +78,15 @@ def fetch(sql: str, warehouse: Path, *, live: bool = False) -> pl.DataFrame:
     con = connect_snapshot(warehouse, live=live)
     try:
         lock_down(con, warehouse)
-        try:
+
+        def run():
             rel = con.sql(sql)
-        except duckdb.Error as exc:
-            raise ValvemonError(f"query failed: {str(exc).splitlines()[0]}") from None
-        if rel is None:
-            raise ValvemonError("the statement returned no result (only queries are supported)")
+            if rel is None:
+                raise ValvemonError("the statement returned no result (only queries are supported)")
+            return rel.to_arrow_table()
+
         try:
-            return pl.from_arrow(rel.to_arrow_table())
+            return pl.from_arrow(interruptible(con, run))  # Ctrl-C stops the query (exit 130)
         except duckdb.Error as exc:
             raise ValvemonError(f"query failed: {str(exc).splitlines()[0]}") from None
     finally:

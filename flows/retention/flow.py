@@ -5,18 +5,29 @@ the plant's valves, :func:`run_retention` decides with :func:`transforms.retenti
 (older than ``keep_days``, not a commissioning day, every sample inside a fitted window, read by
 the standstill check; thin mode: not thinned yet) and, unless it is a dry run, applies it:
 
-* **drop**: the ``date=`` folder is renamed to a hidden name beside it and the parent fsynced
-  (the commit point: from then on no reader sees the partition), the action is recorded in
-  ``retention_log``, then the hidden folder is deleted. A run killed after the rename leaves the
-  hidden folder; the next run deletes it (and records it first if the record is missing).
-* **thin**: each file of the partition is streamed batch by batch (memory holds one batch, never
-  a day) and replaced atomically by its kept rows (:func:`flows.common.lake.write_partition_pieces`);
-  then the action is recorded. A run killed in between leaves some files thinned and some not,
-  never a mix within a file; the next run thins the rest.
+Every action is recorded before it changes the lake: an *intent* row of ``retention_log``
+(``state = 'intent'``, with the rows before and after) is committed first, then the data changes,
+then the row is completed (``state = 'done'``, the sizes measured, ``applied_at``). So a run
+killed at any point leaves a record of what it was removing, and the next run completes it
+(:func:`complete_interrupted`) before anything else:
+
+* **drop**: intent; the ``date=`` folder is renamed to a hidden name beside it and the parent
+  fsynced (the commit point: from then on no reader sees the partition); the hidden folder is
+  deleted; done. Killed before the rename, the partition is whole and the intent is withdrawn
+  (nothing was removed; the run decides the partition again); after it, the hidden folder is
+  deleted and the intent completed.
+* **thin**: intent; each file of the partition is streamed batch by batch (memory holds one
+  batch, never a day) and replaced atomically by its kept rows
+  (:func:`flows.common.lake.write_partition_pieces`); done. Killed in between, some files are
+  thinned and some not, never a mix within a file; the next run thins the partition again
+  (thinning a thinned file keeps it as it is) and completes the intent, whose ``rows_before``
+  is the partition's before the first run touched it.
 
 The lake and the database are read first; a dry run (and the summary it prints) writes nothing,
 not even the database's tables. Only the hidden folders of interrupted drops are handled before
-anything else (a dry run reports them). One retention run at a time per warehouse
+anything else (a dry run reports them). An ``as_of`` later than today, or more than a day after
+the warehouse's latest ingest, is refused unless forced (:func:`check_as_of`): a typo in a year
+would otherwise make every partition old. One retention run at a time per warehouse
 (``WAREHOUSE/.retention.lock``); each partition is locked like an ingest's merge while it is read
 and changed, so an ingest of late data into the same day waits.
 
@@ -43,6 +54,7 @@ from flows.common.lake import (
     dropped_folders,
     iter_file_batches,
     partition_bytes,
+    partition_path,
     partition_folders,
     partition_rows,
     remove_dropped,
@@ -52,7 +64,7 @@ from flows.common.lake import (
 )
 from flows.common.locks import file_lock, partition_lock
 from flows.common.prefect_run import flow
-from flows.common.warehouse_db import connect, db_path, ensure_tables, insert_frame, query_frame
+from flows.common.warehouse_db import add_missing_columns, connect, db_path, ensure_tables, insert_frame, query_frame
 from schemas.fields import RETENTION_LOG_FIELDS, polars_schema
 from schemas.plant_config import PlantConfig, RetentionSpec
 from transforms.retention import (
@@ -101,8 +113,10 @@ class RetentionSummary:
     dry_run: bool
     outcomes: list[PartitionOutcome] = field(default_factory=list)
     interrupted: list[tuple[str, date]] = field(default_factory=list)
-    """Drops a killed run had committed (renamed) but not finished; completed by this run
-    (reported only, in a dry run)."""
+    """Actions a killed run had begun (recorded as intents, or renamed for a drop) but not
+    finished; completed by this run (reported only, in a dry run)."""
+    today: date | None = None
+    """The real date of the run, for the age of the oldest data it touches."""
 
     def groups(self) -> list[tuple[str, str, int, int, int, int, int]]:
         """(action, reason, partitions, rows before, rows after, bytes before, bytes after) per
@@ -138,7 +152,16 @@ class RetentionSummary:
                 out.append(f"  {verb:5} {n:6d} partitions  {reason}  rows {r0:,} -> {r1:,}  bytes {_size(b0)} -> {approx}{_size(b1)}")
         if self.interrupted:
             verb = "would complete" if self.dry_run else "completed"
-            out.append(f"  {verb} {len(self.interrupted)} drop(s) a killed run had begun: " + ", ".join(f"{v} {d}" for v, d in self.interrupted))
+            out.append(f"  {verb} {len(self.interrupted)} action(s) a killed run had begun: " + ", ".join(f"{v} {d}" for v, d in self.interrupted))
+        touched = [o for o in self.outcomes if o.action != KEEP]
+        if touched and self.today is not None:
+            oldest = min(touched, key=lambda o: o.day)
+            newest = max(touched, key=lambda o: o.day)
+            verb = "would touch" if self.dry_run else "touched"
+            out.append(
+                f"  oldest data it {verb}: {oldest.valve_id} {oldest.day}, {(self.today - oldest.day).days:,} days old today ({self.today}); "
+                f"newest {newest.valve_id} {newest.day}, {(self.today - newest.day).days:,} days old"
+            )
         if not self.outcomes:
             out.append("  no lake partitions")
         out.append(("would free " if self.dry_run else "freed ") + _size(self.freed_bytes()))
@@ -209,9 +232,10 @@ def read_state(warehouse: Path, candidates: dict[str, tuple[date, date]], action
         if "retention_log" in have and action_ids:
             logged = {r[0] for r in con.execute("SELECT action_id FROM retention_log WHERE list_contains(?, action_id)", [action_ids]).fetchall()}
         if "retention_log" in have and candidates:
+            done = "" if "state" not in log_columns(con) else f" AND state <> '{INTENT}'"
             rows = con.execute(
                 "SELECT valve_id, date, size_after_bytes, epoch_us(applied_at), thin_keep_s_per_hour FROM retention_log "
-                "WHERE action = 'thin' AND list_contains(?, valve_id) QUALIFY applied_at = max(applied_at) OVER (PARTITION BY valve_id, date)",
+                f"WHERE action = 'thin'{done} AND list_contains(?, valve_id) QUALIFY applied_at = max(applied_at) OVER (PARTITION BY valve_id, date)",
                 [list(candidates)],
             ).fetchall()
             thinned = {(v, d): (b, t, k) for v, d, b, t, k in rows}
@@ -269,52 +293,164 @@ def thin_partition(scan: PartitionScan, per_file: dict[Path, FileThinning], keep
     return sum(ft.kept for ft in per_file.values())
 
 
-def _log_row(action_id: str, o: PartitionOutcome, spec: RetentionSpec, as_of: date) -> pl.DataFrame:
+INTENT, DONE = "intent", "done"
+"""``retention_log.state``: recorded before the data change, and completed after it."""
+
+
+def _log_row(action_id: str, o: PartitionOutcome, spec: RetentionSpec, as_of: date, state: str = DONE) -> pl.DataFrame:
     return pl.DataFrame(
         [{
             "action_id": action_id, "valve_id": o.valve_id, "date": o.day, "action": o.action,
             "rows_before": o.rows_before, "rows_after": o.rows_after,
             "size_before_bytes": o.bytes_before, "size_after_bytes": o.bytes_after,
             "keep_days": spec.keep_days, "thin_keep_s_per_hour": spec.thin_keep_s_per_hour if o.action == "thin" else None,
-            "as_of": as_of, "applied_at": datetime.now(timezone.utc),
+            "as_of": as_of, "applied_at": datetime.now(timezone.utc), "state": state,
         }],
         schema=polars_schema(RETENTION_LOG_FIELDS),
     )  # fmt: skip
 
 
+def _ensure_log(con) -> None:
+    """``retention_log`` as the registry has it; rows of an older warehouse (no ``state``) are done."""
+    ensure_tables(con, RETENTION_TABLES)
+    add_missing_columns(con, {"retention_log": RETENTION_LOG_FIELDS})
+    con.execute(f"UPDATE retention_log SET state = '{DONE}' WHERE state = ''")
+
+
 def record(warehouse: Path, rows: pl.DataFrame) -> None:
-    """Append applied actions to ``retention_log`` (created from the field registry if missing)."""
+    """Append actions to ``retention_log`` (created from the field registry if missing): an
+    intent before the data change, or a completed action."""
     with connect(warehouse) as con:
-        ensure_tables(con, RETENTION_TABLES)
+        _ensure_log(con)
         insert_frame(con, "retention_log", rows)
 
 
+def complete(warehouse: Path, action_id: str, rows_after: int, bytes_after: int) -> None:
+    """Mark an intent done, with what the partition holds after the change."""
+    with connect(warehouse) as con:
+        _ensure_log(con)
+        con.execute(
+            f"UPDATE retention_log SET state = '{DONE}', rows_after = ?, size_after_bytes = ?, applied_at = ? WHERE action_id = ?",
+            [rows_after, bytes_after, datetime.now(timezone.utc), action_id],
+        )
+
+
+def withdraw(warehouse: Path, action_id: str) -> None:
+    """Delete an intent whose data change never began (the partition is whole)."""
+    with connect(warehouse) as con:
+        con.execute("DELETE FROM retention_log WHERE action_id = ? AND state = ?", [action_id, INTENT])
+
+
+def log_columns(con) -> set[str]:
+    """The columns ``retention_log`` has (none without the table; no ``state`` in an older warehouse)."""
+    return {r[0] for r in con.execute(
+        "SELECT column_name FROM duckdb_columns() WHERE database_name = current_database() AND table_name = 'retention_log'"
+    ).fetchall()}  # fmt: skip
+
+
+def pending_intents(warehouse: Path, valve_ids: list[str] | None) -> list[tuple[str, str, date, str]]:
+    """``(action_id, valve_id, date, action)`` of the intents a killed run left (read-only)."""
+    if not db_path(warehouse).exists():
+        return []
+    with connect(warehouse, read_only=True) as con:
+        if "state" not in log_columns(con):
+            return []
+        rows = con.execute("SELECT action_id, valve_id, date, action FROM retention_log WHERE state = ? ORDER BY valve_id, date", [INTENT]).fetchall()
+    return [r for r in rows if valve_ids is None or r[1] in valve_ids]
+
+
 def complete_interrupted(warehouse: Path, spec: RetentionSpec, as_of: date, valve_ids: list[str] | None, dry_run: bool) -> list[tuple[str, date]]:
-    """Finish the drops a killed run committed (renamed) but did not delete: record those not in
-    ``retention_log`` yet (measured from what is left), then delete them."""
+    """Finish what a killed run began (module doc): the drops it renamed but did not delete
+    (recorded first if an older version left them without a record), and its intents: a drop
+    completed or, if the partition was never renamed, withdrawn; a thinning done again and
+    completed. Returns the partitions completed (in a dry run: that would be)."""
     left = dropped_folders(warehouse, valve_ids)
-    if dry_run or not left:
-        return [(v, d) for v, d, _, _ in left]
+    pending = pending_intents(warehouse, valve_ids)
+    begun = sorted({(v, d) for v, d, _, _ in left} | {(v, d) for _, v, d, _ in pending})
+    if dry_run or not begun:
+        return begun
     logged = read_state(warehouse, {}, [a for _, _, a, _ in left]).logged
     for vid, day, action_id, hidden in left:
         if action_id not in logged:
             o = PartitionOutcome(vid, day, "drop", "", partition_bytes(hidden), partition_rows(hidden), 0, 0)
             record(warehouse, _log_row(action_id, o, spec, as_of))
         remove_dropped(hidden)
-    return [(v, d) for v, d, _, _ in left]
+    for action_id, vid, day, action in pending:
+        folder = partition_path(warehouse, vid, day).parent
+        present = folder.is_dir() and bool(day_files(folder))
+        if action == "drop":
+            if present:
+                withdraw(warehouse, action_id)
+                begun.remove((vid, day))
+            else:
+                complete(warehouse, action_id, 0, 0)
+            continue
+        if not present:
+            complete(warehouse, action_id, 0, 0)
+            continue
+        with partition_lock(warehouse, folder / PART_NAME):
+            scan = scan_partition(folder, (np.zeros(0, np.int64), np.zeros(0, np.int64)), True)
+            per_file = count_kept(folder, scan, spec.thin_keep_s_per_hour)
+            complete(warehouse, action_id, thin_partition(scan, per_file, spec.thin_keep_s_per_hour), partition_bytes(folder))
+    return begun
+
+
+AS_OF_AFTER_INGEST = timedelta(days=1)
+"""How far after the warehouse's latest ingest an ``as_of`` may lie without ``force``."""
+EARLIEST_ZONE = timedelta(hours=14)
+"""The furthest any time zone is ahead of UTC (UTC+14): "today" there is the latest ``as_of`` that
+is today somewhere (the nightly run's is the plant's local today)."""
+
+
+def latest_today(now: datetime) -> date:
+    """The latest date that is today in some time zone at ``now``."""
+    return (now.astimezone(timezone.utc) + EARLIEST_ZONE).date()
+
+
+def check_as_of(warehouse: Path, as_of: date, today: date) -> None:
+    """Refuse an ``as_of`` later than ``today`` (:func:`latest_today`) or more than
+    :data:`AS_OF_AFTER_INGEST` after the latest ingest (``ingest_manifest.ingested_at``): it would
+    make data look older than it is.
+
+    Raises
+    ------
+    ValvemonError
+        Naming the date, the limit and ``--force``.
+    """
+    if as_of > today:
+        raise ValvemonError(f"--as-of {as_of} is later than today ({today}): data would count as older than it is; give --force if that is meant")
+    if not db_path(warehouse).exists():
+        return
+    with connect(warehouse, read_only=True) as con:
+        if not con.execute("SELECT count(*) FROM duckdb_tables() WHERE database_name = current_database() AND table_name = 'ingest_manifest'").fetchone()[0]:
+            return
+        latest = con.execute("SELECT max(ingested_at) FROM ingest_manifest").fetchone()[0]
+    if latest is not None and as_of > (latest + AS_OF_AFTER_INGEST).date():
+        raise ValvemonError(
+            f"--as-of {as_of} is more than a day after the latest ingest ({latest:%Y-%m-%d %H:%M} UTC): "
+            "data would count as older than it is; give --force if that is meant"
+        )
 
 
 def run_retention(
     config: PlantConfig, warehouse: str | Path, *, valve_ids: list[str] | None = None, as_of: date | None = None, dry_run: bool = False,
+    force: bool = False,
 ) -> RetentionSummary:
-    """Apply (or with ``dry_run`` only report) the plant's ``[retention]`` to the lake (module doc)."""
+    """Apply (or with ``dry_run`` only report) the plant's ``[retention]`` to the lake (module doc).
+
+    ``as_of`` (default today) later than today or more than a day after the latest ingest is
+    refused unless ``force`` (:func:`check_as_of`); a dry run only reports."""
     spec = config.retention
     if spec is None:
         raise ValueError("run_retention: the plant configures no [retention]")
     warehouse = Path(warehouse)
     ids = plant_valves(config, valve_ids, "--valves")
-    as_of = as_of or datetime.now(timezone.utc).date()
-    summary = RetentionSummary(as_of, spec, dry_run)
+    now = datetime.now(timezone.utc)
+    today = now.date()
+    if as_of is not None and not force and not dry_run:
+        check_as_of(warehouse, as_of, latest_today(now))
+    as_of = as_of or today
+    summary = RetentionSummary(as_of, spec, dry_run, today=today)
     # a dry run takes no lock either: even a lock file would be a write
     lock = nullcontext() if dry_run else file_lock(warehouse / ".retention.lock", f"{warehouse}: another retention run is working on this warehouse")
     with lock:
@@ -359,21 +495,25 @@ def _one_partition(
         o.rows_after, o.bytes_after = 0, 0
         if not dry_run:
             action_id = uuid.uuid4().hex
-            hidden = drop_partition(folder, action_id)
-            record(warehouse, _log_row(action_id, o, spec, as_of))
-            remove_dropped(hidden)
+            record(warehouse, _log_row(action_id, o, spec, as_of, INTENT))
+            remove_dropped(drop_partition(folder, action_id))
+            complete(warehouse, action_id, 0, 0)
     elif d.action == "thin":
         o.rows_after = scan.rows_kept
         o.bytes_after = round(bytes_before * scan.rows_kept / scan.rows) if scan.rows else 0
         if not dry_run:
+            action_id = uuid.uuid4().hex
+            record(warehouse, _log_row(action_id, o, spec, as_of, INTENT))  # rows after exact, bytes after estimated
             o.rows_after = thin_partition(scan, per_file, spec.thin_keep_s_per_hour)
             o.bytes_after = partition_bytes(folder)
-            record(warehouse, _log_row(uuid.uuid4().hex, o, spec, as_of))
+            complete(warehouse, action_id, o.rows_after, o.bytes_after)
     return o
 
 
 @flow(name="valvemon-retention", persist_result=False, validate_parameters=False)
-def retention_flow(config_path: str, warehouse: str, valve_ids: list[str] | None = None, as_of: str | None = None, dry_run: bool = False) -> RetentionSummary | None:
+def retention_flow(
+    config_path: str, warehouse: str, valve_ids: list[str] | None = None, as_of: str | None = None, dry_run: bool = False, force: bool = False
+) -> RetentionSummary | None:
     """The Prefect flow behind ``valvemon retention`` (and the nightly run's last step); None when
     the plant configures no ``[retention]``."""
     config = load_plant_config(config_path)
@@ -383,4 +523,4 @@ def retention_flow(config_path: str, warehouse: str, valve_ids: list[str] | None
         day = date.fromisoformat(as_of) if as_of else None
     except ValueError:
         raise ValvemonError(f"--as-of: {as_of!r} is not an ISO date (YYYY-MM-DD)") from None
-    return run_retention(config, warehouse, valve_ids=valve_ids, as_of=day, dry_run=dry_run)
+    return run_retention(config, warehouse, valve_ids=valve_ids, as_of=day, dry_run=dry_run, force=force)

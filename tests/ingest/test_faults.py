@@ -1,5 +1,5 @@
 """Issue 18, the ingest rows: sample-level faults quarantined, a file refused above
-``export.max_bad_share``, tags of other equipment read past, ragged lines named, and the bad
+``export.max_bad_share``, tags of other equipment read past, and the bad
 inputs that must keep failing cleanly. Each test starts from a warehouse holding one clean
 window (``base_long.csv``) and asserts the lake and the ledger (``ingest_manifest``,
 ``quarantine``) before and after.
@@ -324,27 +324,6 @@ def test_other_tags_error_keeps_the_refusal(warehouse, tmp_path):
     cfg, wh = warehouse(other_tags="error")
     path = write_csv(tmp_path / "mixed.csv", long_rows(extra=_other))
     assert refused(cfg, path, wh) == f"{path}: line 8: unknown tag 'MILL1.V099.P1': no valve of the plant configuration has it"
-
-
-# --- a ragged line -----------------------------------------------------------------------------
-
-
-@pytest.mark.parametrize("blocks", [False, True], ids=["one-block", "small-blocks"])
-def test_a_ragged_line_is_refused_with_its_line_number(warehouse, tmp_path, monkeypatch, blocks):
-    """Today: "not a readable CSV export (found more fields than defined in 'Schema' …)"."""
-    cfg, wh = warehouse()
-    if blocks:
-        small_batches(monkeypatch)
-    path = write_csv(tmp_path / "ragged.csv", long_rows(edit=lambda i, s, row: row.append("extra") if (i, s) == (250, "p1") else None))
-    assert refused(cfg, path, wh) == f"{path}: line {line_of(250, 'p1')}: 5 fields where the header has 4 (a separator too many?)"
-
-
-def test_a_quoted_separator_is_no_ragged_line(warehouse, tmp_path):
-    cfg, wh = warehouse()
-    rows = long_rows(seconds=5, extra=lambda i, t: [[t, '"MILL1.V099,NOTE"', "1.0", "Good"]] if i == 2 else [])
-    rows.append(["2025-03-02T00:00:09Z", "MILL1.V017.PS", "1.0", "Good", "x"])
-    path = write_csv(tmp_path / "quoted.csv", rows)
-    assert refused(cfg, path, wh) == f"{path}: line {len(rows) + 1}: 5 fields where the header has 4 (a separator too many?)"
 
 
 # --- what held up and must stay ------------------------------------------------------------------

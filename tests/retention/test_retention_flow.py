@@ -131,82 +131,68 @@ class Killed(BaseException):
     """Stands for the process being killed at that point (not caught by ordinary handlers)."""
 
 
-def test_killed_drop_is_completed_by_the_next_run(base, wh, tmp_path, monkeypatch):
-    plant = plant_with(base, tmp_path, keep_days=3, mode="drop")
-    lake_before = read_lake(wh).collect()
-    rows = dict(((v, d), n) for v, d, n in lake_before.group_by("valve_id", "date").len().iter_rows())
-
-    def killed(*a, **k):
-        raise Killed
-
-    # killed after the rename, before the record: the hidden folder stays, readers do not see it
-    monkeypatch.setattr(fr, "record", killed)
-    with pytest.raises(Killed):
-        fr.run_retention(plant, wh, as_of=AS_OF)
-    monkeypatch.undo()
-    left = dropped_folders(wh)
-    assert [(v, d) for v, d, _, _ in left] == [("V001", DAYS[1])]
-    assert read_lake(wh).collect().height == lake_before.height - rows[("V001", DAYS[1])]
-    # killed after the record, before the delete
-    real_remove = fr.remove_dropped
-    calls = []
-
-    def killed_once(hidden):
-        calls.append(hidden)
-        if len(calls) == 2:  # the first is the left-over, the second the next drop
-            raise Killed
-        real_remove(hidden)
-
-    monkeypatch.setattr(fr, "remove_dropped", killed_once)
-    with pytest.raises(Killed):
-        fr.run_retention(plant, wh, as_of=AS_OF)
-    monkeypatch.undo()
-    assert [(v, d) for v, d, _, _ in dropped_folders(wh)] == [("V001", DAYS[2])]
-    summary = fr.run_retention(plant, wh, as_of=AS_OF)
-    assert summary.interrupted == [("V001", DAYS[2])]
-    assert not dropped_folders(wh) and not list((wh / "lake").rglob(".date=*"))
-    log = _q(wh, "SELECT valve_id, date, rows_before FROM retention_log ORDER BY ALL")
-    dropped = [("V001", DAYS[1]), ("V001", DAYS[2]), ("V002", DAYS[0]), ("V002", DAYS[1]), ("V002", DAYS[2])]
-    assert log.rows() == [(v, d, rows[(v, d)]) for v, d in dropped]  # each recorded once, with its rows
-
-
-def test_partition_of_several_files_is_thinned_file_by_file(base, wh, tmp_path, monkeypatch):
-    """A day stored as hour files is one partition; a run killed between
-    two files leaves each file whole or thinned, and the next run finishes the same result."""
-    plant = plant_with(base, tmp_path, keep_days=3, mode="thin", thin_keep_s_per_hour=2.0)
-    folder = next(f for v, d, f in partition_folders(wh) if (v, d) == ("V002", DAYS[0]))
+def _split_into_hour_files(wh: Path, valve_id: str, day: date) -> None:
+    """Store a partition as two hour files (as the ingest stores a continuous day)."""
+    folder = next(f for v, d, f in partition_folders(wh) if (v, d) == (valve_id, day))
     (only,) = day_files(folder)
-    day = pl.read_parquet(only)
-    write_partition(hour_path(folder, 0), day.filter(pl.col("timestamp_utc").dt.hour() < 12))
-    write_partition(hour_path(folder, 12), day.filter(pl.col("timestamp_utc").dt.hour() >= 12))
-    only.unlink()  # the day is stored as hour files (as the ingest stores a continuous day)
-    reference = tmp_path / "ref"
-    shutil.copytree(wh, reference)
-    fr.run_retention(plant, reference, valve_ids=["V002"], as_of=AS_OF)
-    expected = _files(reference / folder.relative_to(wh))
-
-    real = fr.write_partition_pieces
-    calls = []
-
-    def killed_second(path, pieces):
-        calls.append(path)
-        if len(calls) == 2:
-            raise Killed
-        real(path, pieces)
-
-    monkeypatch.setattr(fr, "write_partition_pieces", killed_second)
-    with pytest.raises(Killed):
-        fr.run_retention(plant, wh, valve_ids=["V002"], as_of=AS_OF)
-    monkeypatch.undo()
-    assert partition_rows(folder) == 3 * 2000 + 3 * 10_000  # the first hour file thinned, the second not yet
-    fr.run_retention(plant, wh, valve_ids=["V002"], as_of=AS_OF)
-    assert _files(folder).equals(expected) and expected.height == 6 * 2000
-    assert len(day_files(folder)) == 2
+    frame = pl.read_parquet(only)
+    write_partition(hour_path(folder, 0), frame.filter(pl.col("timestamp_utc").dt.hour() < 12))
+    write_partition(hour_path(folder, 12), frame.filter(pl.col("timestamp_utc").dt.hour() >= 12))
+    only.unlink()
 
 
-def _files(folder: Path) -> pl.DataFrame:
-    """All files of a partition, by time."""
-    return pl.concat([pl.read_parquet(f) for f in day_files(folder)]).sort("timestamp_utc")
+def _log(wh: Path) -> pl.DataFrame:
+    return _q(wh, "SELECT valve_id, date, action, rows_before, rows_after, state FROM retention_log ORDER BY valve_id, date, action")
+
+
+KILL_POINTS = {
+    # drop: intent → rename → delete → done; the n-th call of the step is where the run dies (before it)
+    "drop": [("drop_partition", 1), ("remove_dropped", 1), ("complete", 1), ("drop_partition", 2)],
+    # thin (V002's first day in two hour files): intent → file → file → done
+    "thin": [("write_partition_pieces", 1), ("write_partition_pieces", 2), ("complete", 1)],
+}
+
+
+@pytest.mark.parametrize("mode", ["drop", "thin"])
+def test_a_run_killed_at_any_point_leaves_every_removed_row_in_the_log(base, wh, tmp_path, monkeypatch, mode):
+    """Before: killed after a thinned file was in place but before its log row, the rows it removed
+    were in no record and the rerun said "already thinned". Now the intent is recorded first: at
+    every point the log accounts for at least every removed row, and the next run completes it to
+    the clean run's lake and log."""
+    plant = plant_with(base, tmp_path, keep_days=3, mode=mode, thin_keep_s_per_hour=2.0)
+    if mode == "thin":
+        _split_into_hour_files(wh, "V002", DAYS[0])
+    rows_before = read_lake(wh, ["V002"]).collect().height
+    clean = tmp_path / "clean"
+    shutil.copytree(wh, clean)
+    fr.run_retention(plant, clean, valve_ids=["V002"], as_of=AS_OF)
+    expected_lake, expected_log = read_lake(clean, ["V002"]).collect(), _log(clean)
+    assert set(expected_log["state"]) == {"done"} and expected_log.height == 3
+    for k, (step, n) in enumerate(KILL_POINTS[mode]):
+        run = tmp_path / f"killed{k}"
+        shutil.copytree(wh, run)
+        real, calls = getattr(fr, step), []
+
+        def dies(*a, _real=real, _calls=calls, _n=n, **kw):
+            _calls.append(1)
+            if len(_calls) == _n:
+                raise Killed
+            return _real(*a, **kw)
+
+        monkeypatch.setattr(fr, step, dies)
+        with pytest.raises(Killed):
+            fr.run_retention(plant, run, valve_ids=["V002"], as_of=AS_OF)
+        monkeypatch.undo()
+        removed = rows_before - read_lake(run, ["V002"]).collect().height
+        log = _log(run)
+        assert "intent" in set(log["state"]), (step, n)
+        assert removed <= (log["rows_before"] - log["rows_after"]).sum(), (step, n)  # every removed row is in a record
+        summary = fr.run_retention(plant, run, valve_ids=["V002"], as_of=AS_OF)
+        begun = step != "drop_partition"  # a drop killed before its rename is withdrawn: nothing was removed
+        assert bool(summary.interrupted) == begun and not dropped_folders(run)
+        assert read_lake(run, ["V002"]).collect().equals(expected_lake), (step, n)
+        assert _log(run).equals(expected_log), (step, n)
+
 
 
 def test_standstill_progress_is_the_last_sample_the_report_read(base, wh):

@@ -15,11 +15,17 @@ non_numeric    the value is text that is no number, e.g. PI digital states ``I/O
                ``Bad Input``, ``Shutdown``
 non_finite     NaN or ±inf
 bad_timestamp  the timestamp is missing or not in ``export.timestamp_format``
+clock_step     a wide row at or after a backward step of the file's clock
+               (``transforms.ingest.clock``)
 implausible_time
                the time is later than the ingest's time + :data:`FUTURE_TOLERANCE_NS`
                or before the ``commissioned`` time of the tag's valve
 out_of_range   the value in SI lies outside the physical range of its lake column
                (``schemas.fields.SENSOR_FIELDS``), e.g. a transmitter's 1e308
+field_count    a text row whose field count is not the header's: every sample of the row
+               (which cell holds which tag is not known), before any other check
+truncated      every sample of a text file's last line when it has no line end (the file
+               was cut inside it)
 ============== ======================================================================
 
 The last three are *faults*: counted per tag (:attr:`Samples.faults`), and a file in which they
@@ -45,7 +51,9 @@ import polars as pl
 
 from schemas.fields import FAULT_REASONS, REQUIRED_SIGNALS, SENSOR_FIELDS, SIGNAL_COLUMN
 from schemas.plant_config import ExportSpec, PlantConfig
+from transforms.ingest.clock import ClockSteps
 from transforms.ingest.errors import IngestError
+from transforms.ingest.text_rows import ROW_FAULT_COLUMN
 from transforms.ingest.timestamps import UTC_NS, parse_timestamps, unreadable_timestamp
 
 QUARANTINE_COLUMNS = ("line", "tag", "timestamp_raw", "value_raw", "quality", "reason")
@@ -122,12 +130,14 @@ class Samples:
     """(tag id, fault) → what is wrong with its first sample of the frame, naming line and tag."""
     other_tags: dict[str, int]
     """Tags (columns) no valve has → their samples, in the order of the frame (read past)."""
+    truncated: bool = False
+    """The frame ends with a text file's last line that has no line end (a cut file)."""
 
 
 def _require_columns(df: pl.DataFrame, wanted: dict[str, str]) -> None:
     for key, name in wanted.items():
         if name not in df.columns:
-            found = ", ".join(repr(c) for c in df.columns[:12])
+            found = ", ".join(repr(c) for c in df.columns[:12] if c != ROW_FAULT_COLUMN)
             raise IngestError(f"missing column {name!r} (export.{key}); the file's columns are {found}")
 
 
@@ -193,7 +203,7 @@ def empty_quarantine() -> pl.DataFrame:
     return pl.DataFrame(schema={c: (pl.Int64 if c == "line" else pl.String) for c in QUARANTINE_COLUMNS})
 
 
-_MASK_REASONS = ("missing_tag", "bad_timestamp", "bad_quality", "missing_value", "non_numeric", "non_finite")
+_MASK_REASONS = ("missing_tag", "bad_timestamp", "clock_step", "bad_quality", "missing_value", "non_numeric", "non_finite")
 
 
 def _reason(*masks) -> pl.Expr:
@@ -224,6 +234,32 @@ def _drop_blank(df: pl.DataFrame, first_line: int) -> tuple[pl.DataFrame, pl.Ser
         keep = ~blank
         return df.filter(keep), lines.filter(keep)
     return df, lines
+
+
+def _take_broken(df: pl.DataFrame, lines: pl.Series) -> tuple[pl.DataFrame, pl.Series, pl.DataFrame | None, pl.Series | None]:
+    """Rows the text reader marked (:data:`ROW_FAULT_COLUMN`: a field count that is not the
+    header's, a cut last line) taken out: ``(the other rows, their lines, the marked rows, their
+    lines)``; the marked ones are quarantined whole, before any other check."""
+    if ROW_FAULT_COLUMN not in df.columns:
+        return df, lines, None, None
+    bad = df[ROW_FAULT_COLUMN].is_not_null()
+    return df.filter(~bad).drop(ROW_FAULT_COLUMN), lines.filter(~bad), df.filter(bad), lines.filter(bad)
+
+
+def _and_marks(df: pl.DataFrame, columns) -> list[str]:
+    """``columns`` and, when the text reader added it, :data:`ROW_FAULT_COLUMN` (a marked row is
+    not blank, whatever its cells)."""
+    return [*columns, *([ROW_FAULT_COLUMN] if ROW_FAULT_COLUMN in df.columns else [])]
+
+
+def _cut(broken: pl.DataFrame | None) -> bool:
+    """Whether the marked rows hold a cut last line."""
+    return broken is not None and bool(broken[ROW_FAULT_COLUMN].eq("truncated").any())
+
+
+def _present(col: pl.Series) -> pl.Series:
+    """Cells that hold something (a wide export's empty cell is no sample)."""
+    return col.is_not_null() if col.dtype != pl.String else col.str.strip_chars().str.len_bytes().fill_null(0) > 0
 
 
 def _tag_enum(col: pl.Series, tags: TagTable) -> pl.Series:
@@ -394,8 +430,13 @@ def long_samples(df: pl.DataFrame, export: ExportSpec, timezone: str, tags: TagT
     if export.quality_column:
         wanted["quality_column"] = export.quality_column
     _require_columns(df, wanted)
-    df, lines = _drop_blank(df.select(list(wanted.values())), first_line)
+    df, lines = _drop_blank(df.select(_and_marks(df, wanted.values())), first_line)
     rows_in = df.height
+    df, lines, broken, broken_lines = _take_broken(df, lines)
+    broken_q = None
+    if broken is not None:
+        q = broken[export.quality_column] if export.quality_column else None
+        broken_q = _quarantine_frame(broken_lines, broken[export.tag_column], broken[export.timestamp_column], broken[export.value_column], q, broken[ROW_FAULT_COLUMN])
     tag_raw = df[export.tag_column]
     tag = _tag_enum(tag_raw, tags)
     missing_tag = None
@@ -427,7 +468,7 @@ def long_samples(df: pl.DataFrame, export: ExportSpec, timezone: str, tags: TagT
             bad_ts = None
     values, missing, non_numeric, non_finite = _value_checks(df[export.value_column], export.decimal)
     bad_quality = _bad_quality(df[export.quality_column], export.good_quality) if export.quality_column else None
-    masks = (missing_tag, bad_ts, bad_quality, missing, non_numeric, non_finite)
+    masks = (missing_tag, bad_ts, None, bad_quality, missing, non_numeric, non_finite)
     rejected = _any(masks)
     counts = _code_counts(tag_id.drop_nulls().to_numpy(), len(tags.tags))
     tags_present = frozenset(tags.tags[i] for i in np.flatnonzero(counts))
@@ -444,7 +485,10 @@ def long_samples(df: pl.DataFrame, export: ExportSpec, timezone: str, tags: TagT
         faulted = _faulted(fault, kept, raw)
         ok = pl.Series(fault == 0)
         lines, tag, ts, value_si = lines.filter(ok), tag.filter(ok), ts.filter(ok), value_si[fault == 0]
-    return Samples(_accepted(lines, tag, ts, value_si), _concat([set_aside, faulted]), rows_in, n, tags_present, counts, faults.counts, faults.first, other)
+    n_broken = 0 if broken_q is None else broken_q.height
+    return Samples(
+        _accepted(lines, tag, ts, value_si), _concat([broken_q, set_aside, faulted]), rows_in, n + n_broken, tags_present, counts, faults.counts, faults.first, other, _cut(broken)
+    )
 
 
 def _is_placeholder(df: pl.DataFrame, name: str) -> bool:
@@ -452,17 +496,21 @@ def _is_placeholder(df: pl.DataFrame, name: str) -> bool:
     return (name == "" or name.startswith("_duplicated_")) and df[name].null_count() == df.height
 
 
-def wide_samples(df: pl.DataFrame, export: ExportSpec, timezone: str, tags: TagTable, *, first_line: int = 2, now_ns: int | None = None) -> Samples:
+def wide_samples(
+    df: pl.DataFrame, export: ExportSpec, timezone: str, tags: TagTable, *, first_line: int = 2, now_ns: int | None = None, clock: ClockSteps | None = None
+) -> Samples:
     """Samples of a wide export: a time column (and optionally a quality column) and a column per tag.
 
     An empty cell is no sample. A row whose quality code is bad, or whose timestamp cannot be
-    read, quarantines every sample in it. Parameters as :func:`long_samples`.
+    read, quarantines every sample in it, and so does a row at or after a step of the file's
+    clock (``clock``, which follows the file across its batches; None: not checked).
+    Other parameters as :func:`long_samples`.
     """
     wanted = {"timestamp_column": export.timestamp_column}
     if export.quality_column:
         wanted["quality_column"] = export.quality_column
     _require_columns(df, wanted)
-    tag_columns = [c for c in df.columns if c not in wanted.values() and not _is_placeholder(df, c)]
+    tag_columns = [c for c in df.columns if c not in wanted.values() and c != ROW_FAULT_COLUMN and not _is_placeholder(df, c)]
     ids = tags.ids
     other: dict[str, int] = {}
     for c in tag_columns:
@@ -471,15 +519,27 @@ def wide_samples(df: pl.DataFrame, export: ExportSpec, timezone: str, tags: TagT
                 raise IngestError(f"unknown tag {c!r} (column {df.columns.index(c) + 1}): no valve of the plant configuration has it")
             other[c] = df.height - df[c].null_count()
     tag_columns = [c for c in tag_columns if c in ids]
-    df, lines = _drop_blank(df.select([*wanted.values(), *tag_columns]), first_line)
+    df, lines = _drop_blank(df.select(_and_marks(df, [*wanted.values(), *tag_columns])), first_line)
+    rows_in = df.height
+    df, lines, broken, broken_lines = _take_broken(df, lines)
     n = df.height
     ts_raw = df[export.timestamp_column]
     ts = parse_timestamps(ts_raw, export.timestamp_format, timezone, lines=lines, unreadable="null")
     bad_ts = ts.is_null() if ts.null_count() else None
+    after_step = None if clock is None else clock.after_step(ts.cast(UTC_NS).to_physical(), lines)
     faults = _Faults(tags, time.time_ns() if now_ns is None else now_ns)
     bad_quality = _bad_quality(df[export.quality_column], export.good_quality) if export.quality_column else None
     accepted, quarantined = [], []
     samples_in = 0
+    if broken is not None:  # every non-empty cell of a marked row, under the tag of its column
+        q = broken[export.quality_column] if export.quality_column else None
+        for c in tag_columns:
+            at = _present(broken[c]).arg_true()
+            if len(at):
+                samples_in += len(at)
+                pick = lambda s: None if s is None else s.gather(at)  # noqa: E731
+                tag = pl.repeat(c, len(at), dtype=pl.String, eager=True)
+                quarantined.append(_quarantine_frame(pick(broken_lines), tag, pick(broken[export.timestamp_column]), pick(broken[c]), pick(q), pick(broken[ROW_FAULT_COLUMN])))
     tag_samples = np.zeros(len(tags.tags), dtype=np.int64)
     code_dtype = pl.Series(dtype=tags.enum).to_physical().to_numpy().dtype  # as a long frame's codes: one compiled kernel
     for c in tag_columns:
@@ -496,7 +556,8 @@ def wide_samples(df: pl.DataFrame, export: ExportSpec, timezone: str, tags: TagT
         if bad_t is not None and bad_t.any():
             at = bad_t.arg_true()
             faults.bad_timestamps(np.full(len(at), tid), lines.gather(at).to_numpy(), ts_raw.gather(at), export.timestamp_format)
-        masks = (None, bad_t, bad_q, None, non_numeric, non_finite)
+        bad_c = None if after_step is None else (after_step if present is None else after_step & present)
+        masks = (None, bad_t, bad_c, bad_q, None, non_numeric, non_finite)
         rejected = _any(masks)
         raw = {
             "line": lines,
@@ -523,14 +584,18 @@ def wide_samples(df: pl.DataFrame, export: ExportSpec, timezone: str, tags: TagT
             tag = tag.head(len(value_si))
         accepted.append(_accepted(col_lines, tag, col_ts, value_si))
     acc = pl.concat(accepted) if accepted else _empty_accepted(tags)
-    return Samples(acc, _concat(quarantined), n, samples_in, frozenset(tag_columns), tag_samples, faults.counts, faults.first, other)
+    return Samples(acc, _concat(quarantined), rows_in, samples_in, frozenset(tag_columns), tag_samples, faults.counts, faults.first, other, _cut(broken))
 
 
-def samples_of(df: pl.DataFrame, config: PlantConfig, tags: TagTable | None = None, *, first_line: int = 2, now_ns: int | None = None) -> Samples:
-    """Samples of an export in the configured layout (``export.layout``)."""
+def samples_of(
+    df: pl.DataFrame, config: PlantConfig, tags: TagTable | None = None, *, first_line: int = 2, now_ns: int | None = None, clock: ClockSteps | None = None
+) -> Samples:
+    """Samples of an export in the configured layout (``export.layout``); ``clock``: the wide
+    layout's clock-step check (:func:`wide_samples`)."""
     tags = tags or TagTable.from_config(config)
-    reader = long_samples if config.export.layout == "long" else wide_samples
-    return reader(df, config.export, config.timezone, tags, first_line=first_line, now_ns=now_ns)
+    if config.export.layout == "long":
+        return long_samples(df, config.export, config.timezone, tags, first_line=first_line, now_ns=now_ns)
+    return wide_samples(df, config.export, config.timezone, tags, first_line=first_line, now_ns=now_ns, clock=clock)
 
 
 def check_required_signals(tags_present: frozenset[str], config: PlantConfig) -> list[str]:

@@ -36,7 +36,8 @@ from schemas.plant_config import PlantConfig
 from transforms.ingest.errors import IngestError
 from transforms.ingest.frames import assemble_valve, validate_raw_rows, validate_sensor_frame
 from transforms.ingest.grid import Grid, Gridded, prepare_tag, to_grid
-from transforms.ingest.samples import QUARANTINE_COLUMNS, TagTable, check_required_signals, empty_quarantine, samples_of, split_by_tag
+from transforms.ingest.clock import ClockSteps
+from transforms.ingest.samples import FUTURE_TOLERANCE_NS, QUARANTINE_COLUMNS, TagTable, check_required_signals, empty_quarantine, samples_of, split_by_tag
 
 GAP_COLUMNS = {
     "valve_id": pl.String,
@@ -76,6 +77,14 @@ class ExportCounts:
     """Of ``quarantined``: the faults whose share ``export.max_bad_share`` bounds."""
     other_tags: dict[str, int] = field(default_factory=dict)
     """Tags (columns) no valve has → their samples, read past (not in ``samples_in``)."""
+    field_count: int = 0
+    """Of ``quarantined``: samples of text rows whose field count is not the header's."""
+    truncated: int = 0
+    """1 when the file's last line has no line end (a cut file; its samples are quarantined), else 0."""
+    clock_step: int = 0
+    """Of ``quarantined``: samples of a wide export's rows at and after a step of its clock."""
+    clock_step_message: str | None = None
+    """Where the clock stepped back, by how much, and what became of the rows after it."""
 
 
 @dataclass
@@ -170,6 +179,10 @@ class ExportStream:
         self._valves: dict[str, _ValveRows] = {}
         self._span: list[int] = []
         self._batches = 0
+        export = config.export
+        self.clock = None
+        if export.layout == "wide" and export.clock_steps == "quarantine":
+            self.clock = ClockSteps.for_grid(export.sample_rate_hz, self.now_ns + FUTURE_TOLERANCE_NS)
 
     def feed(self, df: pl.DataFrame, *, first_line: int, final: bool) -> list[pl.DataFrame]:
         """The lake rows this batch completes: one validated sensor frame per valve, in time order.
@@ -192,13 +205,17 @@ class ExportStream:
         """
         self._batches += 1
         export, tags = self.config.export, self.tags
-        samples = samples_of(df, self.config, tags, first_line=first_line, now_ns=self.now_ns)
+        samples = samples_of(df, self.config, tags, first_line=first_line, now_ns=self.now_ns, clock=self.clock)
         c = self.counts
         c.rows_in += samples.rows_in
         c.samples_in += samples.samples_in
         c.quarantined += samples.quarantine.height
         if samples.quarantine.height:
             self.quarantine.append(samples.quarantine)
+            reasons = samples.quarantine["reason"]
+            c.field_count += int(reasons.eq("field_count").sum())
+            c.clock_step += int(reasons.eq("clock_step").sum())
+        c.truncated |= int(samples.truncated)
         self._present |= samples.tags_present
         self._tag_samples += samples.tag_samples
         self._faults += samples.faults
@@ -208,6 +225,7 @@ class ExportStream:
             c.other_tags[name] = c.other_tags.get(name, 0) + k
         if final:
             c.bad_timestamp, c.implausible_time, c.out_of_range = (int(x) for x in self._faults.sum(axis=0))
+            c.clock_step_message = None if self.clock is None else self.clock.message(c.clock_step)
             if c.other_tags and not self._present:
                 names = ", ".join(list(c.other_tags)[:5]) + (", …" if len(c.other_tags) > 5 else "")
                 raise IngestError(f"no tag of the plant configuration in the file, only {len(c.other_tags)} other tags ({names})")
