@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from flows.report.views import materialise_views
 from schemas.fields import EDGES
 
 MINUTE = 1 / 60
@@ -43,6 +44,7 @@ def test_a_week_of_a_healthy_continuous_valve_raises_no_alarm_and_uses_all_its_w
     rng = np.random.default_rng(27)
     for edge in EDGES:
         wh.add_fits("C1", edge, WEEK_MINUTES, *healthy(WEEK_MINUTES, edge, rng))
+    materialise_views(wh.con, ("valve_condition", "parameter_trends", "trend_daily"))  # as the report does: each view once
     checks = wh.q("SELECT count(*) FILTER (WHERE is_alarm) AS alarms, count(*) FILTER (WHERE beyond_wear_bound) AS breaches, "
                   "min(ref_n) FILTER (WHERE operating_hours >= 24) AS lo, max(ref_n) AS hi FROM fit_checks").row(0)
     # no alarm, no bound crossed; the history is a day of windows once a day has passed, not 24 minutes
@@ -68,6 +70,7 @@ def test_the_first_alarm_is_the_first_window_after_a_break(wh, step_h):
             if edge == "1r":
                 a, x, e = a + jump[0] * broken, x + jump[1] * broken, e + jump[2] * broken
             wh.add_fits(valve, edge, hours, a, x, e)
+    materialise_views(wh.con, ("valve_condition",))
     first = wh.q("SELECT valve_id, edge, min(operating_hours) AS h, bool_or(beyond_fault_bound) AS bound "
                  "FROM window_alarms WHERE is_alarm GROUP BY ALL ORDER BY valve_id")
     # none before the break, the first in its first window; B2 by the change detector alone
