@@ -10,7 +10,7 @@ core (``taskset -c CORE``), under ``/usr/bin/time`` (CPU = user + sys, peak resi
 then every view is read whole from the published snapshot, each in its own process, the same way.
 The bench warehouse is deleted at the end (``--keep`` keeps it).
 
-    .venv/bin/python bench/report_scale.py --valves 500 --days 7 [--core 1] [--views] [--tmp DIR]
+    .venv/bin/python bench/report_scale.py --valves 500 --days 7 [--core 1] [--views] [--detail 20] [--tmp DIR] [--src DIR]
 """
 
 from __future__ import annotations
@@ -69,10 +69,12 @@ def add_days(warehouse: Path, valves: int, first_day: int, days: int) -> int:
         return con.execute("SELECT count(*) FROM edge_fits").fetchone()[0] - before
 
 
-def timed(cmd: list[str], core: int) -> dict:
-    """Run ``cmd`` pinned to ``core`` under /usr/bin/time: wall, CPU (user + sys), peak RSS."""
+def timed(cmd: list[str], core: int, src: str | None = None) -> dict:
+    """Run ``cmd`` pinned to ``core`` under /usr/bin/time: wall, CPU (user + sys, its picture
+    processes included), peak RSS. ``src``: a checkout whose code runs instead (``PYTHONPATH``)."""
     full = ["taskset", "-c", str(core), "/usr/bin/time", "-f", "TIME %e %U %S %M", *cmd]
-    p = subprocess.run(full, capture_output=True, text=True)
+    env = os.environ | ({"PYTHONPATH": src} if src else {})
+    p = subprocess.run(full, capture_output=True, text=True, env=env)
     if p.returncode != 0:
         raise SystemExit(f"{' '.join(cmd)} failed:\n{p.stderr[-3000:]}")
     wall, user, sys_, rss_kb = p.stderr.strip().splitlines()[-1].split()[1:]
@@ -94,6 +96,8 @@ def main() -> None:
     ap.add_argument("--days", type=int, default=7, help="days of history before the night")
     ap.add_argument("--core", type=int, default=1)
     ap.add_argument("--views", action="store_true", help="also read every view from the snapshot")
+    ap.add_argument("--detail", type=int, default=20, help="valves pictured by the report (its --detail)")
+    ap.add_argument("--src", help="run the report of this checkout (e.g. `git archive main | tar -x -C DIR`) instead: the before")
     ap.add_argument("--tmp", default=os.environ.get("BENCH_TMP"), help="folder for the bench warehouse")
     ap.add_argument("--keep", action="store_true", help="keep the bench warehouse")
     ap.add_argument("--read-view", nargs=2, metavar=("SNAPSHOT", "VIEW"), help=argparse.SUPPRESS)
@@ -107,10 +111,10 @@ def main() -> None:
         t0 = time.perf_counter()
         history = add_days(wh, a.valves, 0, a.days)
         write_s = time.perf_counter() - t0
-        report = [str(ROOT / ".venv" / "bin" / "valvemon"), "report", "--config", str(config), "--warehouse", str(wh)]
-        first = timed(report, a.core)  # the report that finds the history (a first run, or after an upgrade)
+        report = [str(ROOT / ".venv" / "bin" / "valvemon"), "report", "--config", str(config), "--warehouse", str(wh), "--detail", str(a.detail)]
+        first = timed(report, a.core, a.src)  # the report that finds the history (a first run, or after an upgrade)
         tonight = add_days(wh, a.valves, a.days, 1)
-        night = timed(report, a.core)  # the nightly report after one more day
+        night = timed(report, a.core, a.src)  # the nightly report after one more day
         size_gb = db_path(wh).stat().st_size / 1e9
         print(f"load {os.getloadavg()[0]:.1f} (1-min average, 2 cores); {a.valves} valves; history {a.days} d = "
               f"{history:,} edge_fits rows written in {write_s:.0f} s; database {size_gb:.2f} GB; tonight {tonight:,} rows")
