@@ -153,8 +153,8 @@ def throughput(seconds: int, repeat: int) -> None:
 
 
 STAGES = [
-    ("flows.ingest.batches", "open_export", "BLAKE3 of the mapped file, in blocks"),
-    ("flows.ingest.batches", "read_csv_export", "CSV decode (per block of lines)"),
+    ("flows.ingest.formats", "open_export", "format, BLAKE3 of the mapped file in blocks, header"),
+    ("flows.ingest.formats.text", "read_csv_export", "CSV decode (per block of lines)"),
     ("transforms.ingest.stream", "samples_of", "samples: tags, timestamps, values, quarantine"),
     ("transforms.ingest.samples", "parse_timestamps", "  of which: timestamps to UTC"),
     ("transforms.ingest.stream", "validate_raw_rows", "pandera: raw rows"),

@@ -161,6 +161,7 @@ def monitor(config: Config, valves: Valves = None, start: From = None, end: To =
     for r in reports:
         statuses = ", ".join(f"{s} {n}" for s, n in sorted(r.status_counts.items()))
         baseline = r.baseline_source + ("" if r.baseline_plausible else " (IMPLAUSIBLE: step 5a failed)")
+        baseline += f" ({r.edge_law_note})" if r.edge_law_note else ""
         typer.echo(f"{r.valve_id}: {r.windows} windows, {r.rows_read} rows, fits {statuses or 'none'}; baseline {baseline}")
 
 

@@ -15,7 +15,12 @@ Two variants beside Eq. 3 (:class:`model.params.ValveGeometry` ``area_law``, ``l
 * worn lands, ``leakage_factor`` k: A_l = pi (R + r) c^(3/2) / (c + (x_l - u)(x_l + x_u) / k), equal
   to Eq. 3 at u = x_l (continuous) and k times Eq. 3's leakage far from the edge;
 * the sharp-edged family (``area_law = "sharp"``): A(u) = 2 pi R sin(phi) (u + x_u) for u >= -x_u,
-  0 below -- the slope of Eq. 3's open branch at h = 0, no radial-clearance intercept, no leakage.
+  0 below -- the slope of Eq. 3's open branch at h = 0, no radial-clearance intercept, no leakage;
+* the linear-gradient, hard-corner family (``area_law = "linear"``), the edge of hydraulic system
+  simulators' servo-valve components: A(u) = f pi d max(u + x_u, 0) with the area gradient
+  f = sin(phi) of the edge's port and the spool diameter d = 2 r -- the sharp-edged law with the
+  spool's diameter for the bore's (a gradient 0.1 % smaller on Table 1), likewise without
+  radial-clearance intercept or leakage.
 
 The scalar kernel :func:`edge_area_kernel` works on a precomputed constant vector (see
 :func:`edge_constants`), so the simulator evaluates the equation without trigonometry; the
@@ -38,14 +43,19 @@ N_EDGE_CONST = 13
 
 @njit(cache=True)
 def edge_constants_kernel(underlap_m, taper_angle_rad, bore_radius_m, spool_radius_m, x_l_m,
-                          sharp=False, leakage_factor=1.0):
-    """Constants of Eq. 3 (or of the sharp-edged law, ``sharp``) for one edge, as a tuple of
-    N_EDGE_CONST floats (layout private to this module; a tuple so that numba passes it by
-    value). ``leakage_factor`` [-] scales the leakage branch (module docstring)."""
+                          sharp=False, leakage_factor=1.0, linear=False):
+    """Constants of Eq. 3 (or of the sharp-edged law, ``sharp``, or the linear-gradient law,
+    ``linear``) for one edge, as a tuple of N_EDGE_CONST floats (layout private to this module;
+    a tuple so that numba passes it by value). ``leakage_factor`` [-] scales the leakage branch
+    (module docstring)."""
     gap = bore_radius_m - spool_radius_m
     w = x_l_m + underlap_m
     c = gap * gap + w * w
-    ks = 2.0 * math.pi * bore_radius_m * math.sin(taper_angle_rad) if sharp else 0.0
+    ks = 0.0
+    if sharp:
+        ks = 2.0 * math.pi * bore_radius_m * math.sin(taper_angle_rad)
+    elif linear:
+        ks = math.pi * 2.0 * spool_radius_m * math.sin(taper_angle_rad)
     return (underlap_m, x_l_m, math.sin(taper_angle_rad), math.cos(taper_angle_rad),
             gap * math.cos(taper_angle_rad), gap * math.tan(taper_angle_rad),
             2.0 * bore_radius_m, math.pi * (bore_radius_m + spool_radius_m), gap * gap, c,
@@ -61,7 +71,7 @@ def edge_tuple_kernel(row):
 
 @njit(cache=True)
 def edge_area_kernel(u, ec):
-    """Eq. 3 (or the sharp-edged law): opening area [m^2] of one edge at opening coordinate
+    """Eq. 3 (or the sharp-edged or linear-gradient law): opening area [m^2] of one edge at opening coordinate
     ``u`` [m].
 
     ``ec`` is the edge's constant tuple from :func:`edge_constants_kernel`.
@@ -114,7 +124,7 @@ def edge_constants(underlap_m: float, taper_angle_rad: float, bore_radius_m: flo
             f"({-underlap_m:.6g}, {-underlap_m + delta:.6g}] m (model.md, Eq. 3)")
     return edge_constants_kernel(float(underlap_m), float(taper_angle_rad),
                                  float(bore_radius_m), float(spool_radius_m), float(x_l_m),
-                                 area_law == "sharp", float(leakage_factor))
+                                 area_law == "sharp", float(leakage_factor), area_law == "linear")
 
 
 def edge_area(u, underlap_m: float, taper_angle_rad: float, bore_radius_m: float,
@@ -135,7 +145,7 @@ def edge_area(u, underlap_m: float, taper_angle_rad: float, bore_radius_m: float
     x_l_m : float, optional
         Onset of the leakage branch, in (-x_u, -x_u + delta]; default -x_u + delta/2. [m]
     area_law : str
-        ``"eq3"`` (default) or ``"sharp"`` (module docstring). [-]
+        ``"eq3"`` (default), ``"sharp"`` or ``"linear"`` (module docstring). [-]
     leakage_factor : float
         Eq. 3's leakage branch far from the edge times this (continuous at x_l); default 1. [-]
 

@@ -25,7 +25,7 @@ EDGE_PORT: dict[str, int] = {"s1": 1, "1r": 1, "s2": 2, "2r": 2}
 
 
 #: The valve families' area laws (:class:`ValveGeometry` ``area_law``).
-AREA_LAWS: tuple[str, str] = ("eq3", "sharp")
+AREA_LAWS: tuple[str, str, str] = ("eq3", "sharp", "linear")
 
 
 def edge_index(edge: str) -> int:
@@ -63,8 +63,11 @@ class ValveGeometry:
         Taper angle phi2 of the control edges of port 2 (s2, 2r). [rad] (Table 1: 5.24 deg)
     area_law : str
         The valve family's area law (:mod:`model.area`): ``"eq3"`` (the paper's Eq. 3, with the
-        radial-clearance annulus and the closed edge's leakage branch) or ``"sharp"`` (sharp
-        edges: A = 0 below -x_u, linear above, no radial-clearance intercept, no leakage). [-]
+        radial-clearance annulus and the closed edge's leakage branch), ``"sharp"`` (sharp
+        edges: A = 0 below -x_u, linear above, no radial-clearance intercept, no leakage) or
+        ``"linear"`` (the linear-gradient, hard-corner edge of system simulators' valve
+        components: A = sin(phi) pi d max(u + x_u, 0), d = 2r the spool diameter; no
+        clearance, no leakage). [-]
     leakage_factor : float
         Eq. 3 only: the closed edge's leakage branch, far from the edge, is this many times
         Eq. 3's (worn lands); continuous at x_l; 1 = Eq. 3. [-]
@@ -530,10 +533,13 @@ TABLE1: PlantParams = PlantParams()
 
 #: Named valve-family presets on Table 1's geometry (issue 16; ``model.area``): ``eq3`` the
 #: paper's valve, ``sharp`` sharp edges without closed-edge leakage or clearance intercept,
-#: ``worn3`` / ``worn4`` Eq. 3 with worn lands leaking up to 3× / 4× Eq. 3's.
+#: ``worn3`` / ``worn4`` Eq. 3 with worn lands leaking up to 3× / 4× Eq. 3's, ``linear`` the
+#: linear-gradient, hard-corner edge (area gradient sin φ·π·d per port, d the spool diameter; no
+#: clearance, no leakage: a third-party simulator's servo valve).
 GEOMETRY_FAMILIES: dict[str, ValveGeometry] = {
     "eq3": TABLE1.geometry,
     "sharp": replace(TABLE1.geometry, area_law="sharp"),
     "worn3": replace(TABLE1.geometry, leakage_factor=3.0),
     "worn4": replace(TABLE1.geometry, leakage_factor=4.0),
+    "linear": replace(TABLE1.geometry, area_law="linear"),
 }

@@ -325,10 +325,12 @@ BASELINE_FIELDS: tuple[Field, ...] = (
     Field("x_vs_nominal_mm", pl.Float64, "mm", "Shift of the baseline against the nominal characteristic.", nullable=True),
     Field("created_at", UTC_US, "", "When this version was stored."),
     Field("leak_branch_scale", pl.Float64, "", "λ₁: the edge's closed-edge leakage is Eq. 3's branch × λ₁ ...", nullable=True, ge=0.0),
-    Field("leak_gap_scale", pl.Float64, "", "... + λ₂ × its area at the closing point (a gap flow).", nullable=True, ge=0.0),
+    Field("leak_gap_scale", pl.Float64, "", "... + λ₂ × that branch with worn lands (4× Eq. 3's far from the edge).", nullable=True, ge=0.0),
     Field("leak_scale", pl.Float64, "", "That leakage over Eq. 3's 1 mm inside the edge (1 = Eq. 3, 0 = none).", nullable=True, ge=0.0),
     Field("leak_scale_ci_low", pl.Float64, "", "Lower 95 % bound of leak_scale (NULL: not identified, Eq. 3 kept).", nullable=True),
     Field("leak_scale_ci_high", pl.Float64, "", "Upper bound of the 95 % interval of leak_scale.", nullable=True),
+    Field("edge_law", pl.Utf8, "", "Edge law the characteristic's shape follows: eq3, or sharp where the commissioning window shows straight edges.", nullable=True),
+    Field("edge_law_note", pl.Utf8, "", "Why edge_law is not the configured area_law (empty when it is).", nullable=True),
 )
 """Versioned baseline characteristics per valve and edge (table ``baselines``)."""
 
@@ -427,6 +429,7 @@ VALVE_CONDITION_FIELDS: tuple[Field, ...] = (
     Field("edge_order", pl.Int32, "", "1..4 for s1, 1r, s2, 2r (for sorting)."),
     Field("leak_scale", pl.Float64, "", "Closed-edge leakage over Eq. 3's (0 = none), median of the ok windows.", nullable=True),
     Field("leak_scale_baseline", pl.Float64, "", "The same at commissioning (1 for a nominal baseline: Eq. 3 assumed).", nullable=True),
+    Field("edge_law", pl.Utf8, "", "Edge law of the current baseline's shape (eq3, sharp; a note in reason when not the configured one).", nullable=True),
 )
 """View ``valve_condition`` (interfaces.md), as exported to ``export/valve_condition.parquet``."""
 

@@ -25,6 +25,9 @@ Keys the project adds to the specification (all optional; every key is documente
   leaves ``unit`` out), ``"name"`` (descriptions, shown in messages) or ``"skip"`` (anything
   else) — iba's ASCII export is ``["tag", "name", "unit"]`` (:data:`HEADER_ROW_KINDS`).
 - ``[export] tdms_group`` (optional): the TDMS group whose channels are read (default: every group).
+- ``[export] timestamp_format = "seconds"`` or ``"milliseconds"``: the time column counts from the
+  file's start, found on a ``"start_time"`` header line (its second cell) or in the file's name,
+  both read with ``[export] start_time_format`` (:data:`RELATIVE_TIME_FORMATS`).
 - ``[export] clock_steps`` (wide only; default ``"quarantine"``): a wide export's rows are in time
   order, so a backward step of its clock by more than a few sample periods quarantines the rows
   after it (``clock_step``); ``"accept"`` takes the file's order as untrusted and sorts it as the
@@ -94,9 +97,17 @@ class ExportSpec:
     """What each header line of a text export holds, in order (:data:`HEADER_ROW_KINDS`)."""
     tdms_group: str | None = None
     """The TDMS group that holds the tags (None: every group)."""
+    start_time_format: str | None = None
+    """With a relative ``timestamp_format`` (:data:`RELATIVE_TIME_FORMATS`): the strftime pattern of
+    the file's start, on the ``start_time`` header line or in the file's name."""
     clock_steps: str = "quarantine"
     """A wide export whose clock steps back: ``"quarantine"`` the rows after the step, or ``"accept"``
     (sort them in, as the long layout does)."""
+
+    @property
+    def relative_time(self) -> bool:
+        """Whether the time column counts from the file's start (``"seconds"``, ``"milliseconds"``)."""
+        return self.timestamp_format in RELATIVE_TIME_FORMATS
 
     @property
     def units_in_file(self) -> bool:
@@ -104,9 +115,13 @@ class ExportSpec:
         return "unit" in self.header_rows
 
 
-HEADER_ROW_KINDS: tuple[str, ...] = ("tag", "name", "unit", "skip")
+HEADER_ROW_KINDS: tuple[str, ...] = ("tag", "name", "unit", "skip", "start_time")
 """What a header line of a text export can hold: the tags (the column names; exactly one such
-line), names (descriptions), units, or anything else (skipped)."""
+line), names (descriptions), units, the recording's start (its second cell, with a relative
+``timestamp_format``), or anything else (skipped)."""
+
+RELATIVE_TIME_FORMATS: tuple[str, ...] = ("seconds", "milliseconds")
+"""``timestamp_format`` values of a time column that counts from the file's start."""
 
 
 DEFAULT_MAX_BAD_SHARE = ExportSpec.max_bad_share
@@ -220,7 +235,8 @@ class ValveDesign:
     area_law: str = "eq3"
     """The valve family's area law, ``"eq3"`` (the paper's Eq. 3) or ``"sharp"`` (sharp edges, no
     closed-edge leakage): what the simulator builds (``model.area``); the monitor identifies the
-    leakage from the data and does not read it."""
+    leakage from the data and takes the law's open-edge shape as a commissioning baseline's
+    carrier unless the commissioning window shows the other law (docs/monitoring.md)."""
     leakage_factor: float = 1.0
     """Eq. 3's closed-edge leakage times this far from the edge (worn lands; ``model.area``),
     for the simulator; 1 = Eq. 3. [-]"""
@@ -437,7 +453,8 @@ _RETENTION_KEYS = {"keep_days", "mode", "thin_keep_s_per_hour"}
 _EXPORT_KEYS = {
     "layout", "timestamp_column", "timestamp_format", "tag_column", "value_column",
     "quality_column", "good_quality", "separator", "decimal", "sample_rate_hz", "max_gap_s",
-    "duplicate_rule", "max_bad_share", "other_tags", "header_rows", "tdms_group", "clock_steps",
+    "duplicate_rule", "max_bad_share", "other_tags", "header_rows", "tdms_group", "start_time_format",
+    "clock_steps",
 }  # fmt: skip
 
 
@@ -472,6 +489,18 @@ def _parse_export(raw: Any) -> ExportSpec:
         kw["header_rows"] = _parse_header_rows(t["header_rows"], layout)
     if "tdms_group" in t:
         kw["tdms_group"] = _str(t["tdms_group"], "export.tdms_group")
+    relative = kw["timestamp_format"] in RELATIVE_TIME_FORMATS
+    if "start_time_format" in t:
+        if not relative:
+            raise ConfigError(f"export.start_time_format: only with a relative export.timestamp_format ({' or '.join(map(repr, RELATIVE_TIME_FORMATS))})")
+        kw["start_time_format"] = _str(t["start_time_format"], "export.start_time_format")
+    elif relative:
+        raise ConfigError(
+            f"export.start_time_format: required with export.timestamp_format = {kw['timestamp_format']!r} "
+            "(the pattern of the file's start time, on its 'start_time' header line or in its name)"
+        )
+    if "start_time" in kw.get("header_rows", ()) and not relative:
+        raise ConfigError(f"export.header_rows: a 'start_time' line needs a relative export.timestamp_format ({' or '.join(map(repr, RELATIVE_TIME_FORMATS))})")
     kw["clock_steps"] = _str(t.get("clock_steps", "quarantine"), "export.clock_steps", CLOCK_STEP_RULES)
     return ExportSpec(**kw)
 
@@ -483,7 +512,7 @@ def _parse_header_rows(raw: Any, layout: str) -> tuple[str, ...]:
     for i, r in enumerate(raw):
         if r not in HEADER_ROW_KINDS:
             raise ConfigError(f"{key}[{i}]: {r!r} is not one of {', '.join(repr(k) for k in HEADER_ROW_KINDS)}")
-    for kind, most in (("tag", 1), ("unit", 1), ("name", 1)):
+    for kind, most in (("tag", 1), ("unit", 1), ("name", 1), ("start_time", 1)):
         if raw.count(kind) > most:
             raise ConfigError(f"{key}: {kind!r} may occur only once (the file has one line of {kind}s)")
     if "tag" not in raw:
@@ -826,6 +855,8 @@ def plant_config_to_dict(config: PlantConfig) -> dict:
         export["header_rows"] = list(e.header_rows)
     if e.tdms_group is not None:
         export["tdms_group"] = e.tdms_group
+    if e.start_time_format is not None:
+        export["start_time_format"] = e.start_time_format
     if e.clock_steps != ExportSpec.clock_steps:
         export["clock_steps"] = e.clock_steps
     valves = []

@@ -6,8 +6,10 @@ of its port: o's closed-branch area at −u_i times the pressure ratio
     ratio_i = sign(Δp_o) sqrt|Δp_o| / (sign(Δp_e) sqrt|Δp_e|).
 
 The closed branch is a two-term family (:func:`closed_leakage`): Eq. 3's leakage branch at o's
-state times λ₁ plus λ₂ times o's area at its closing point (a constant gap flow, which worn lands
-tend to), λ₁, λ₂ ≥ 0; (1, 0) is Eq. 3's, (0, 0) no leakage (sharp edges). The two regressors at the
+state times λ₁ plus λ₂ times the same branch with worn lands (:func:`worn_branch`: equal to it at
+the closing point, :data:`WORN_FACTOR` = 4 times it far from the edge), λ₁, λ₂ ≥ 0; (1, 0) is
+Eq. 3's, (0, 0) no leakage (sharp edges). The two span the worn-lands branches of ``model.area``
+(factors 1–4) to within about a per cent where the points lie, 1–3.5 mm inside the edge. The two regressors at the
 points are :func:`leak_columns`; the coefficients are fitted at commissioning together with the
 characteristic (:func:`transforms.baseline.leak_scale_lstsq`, called by
 :func:`transforms.monitor.commissioning_baseline`), and reported as one number,
@@ -28,7 +30,8 @@ import numpy as np
 from transforms.characteristic import Characteristic
 from transforms.fit import walk_segment
 
-__all__ = ["LEAK_REF_M", "closed_leakage", "effective_scale", "inflation", "leak_columns", "leak_scale_step"]
+__all__ = ["LEAK_REF_M", "WORN_FACTOR", "closed_leakage", "effective_scale", "inflation", "leak_columns", "leak_scale_step",
+           "worn_branch"]
 
 
 @numba.njit(cache=True)
@@ -116,29 +119,44 @@ LEAK_REF_M = 1e-3
 far inside the closed edge (1 mm: where the monitor's points begin, the spool margin)."""
 
 
+WORN_FACTOR = 4.0
+"""The second leakage term is Eq. 3's branch with lands worn so that it leaks this many times
+Eq. 3's far from the edge (:func:`worn_branch`)."""
+
+
+def worn_branch(a, a_close: float) -> np.ndarray:
+    """Eq. 3's leakage branch ``a`` = A_l(u) [m²] with worn lands, from its value ``a_close`` at the
+    closing point [m²]: A_l = N/(c + d·w) (d the distance inside the edge) becomes N/(c + d·w/k),
+    k = :data:`WORN_FACTOR`, i.e. 1/(1/a_c + (1/a − 1/a_c)/k) -- equal at the closing point, k
+    times Eq. 3's far from it (``model.area``'s ``leakage_factor``). [m²]"""
+    a = np.maximum(np.asarray(a, dtype=np.float64), 1e-300)
+    return 1.0 / (1.0 / a_close + (1.0 / a - 1.0 / a_close) / WORN_FACTOR)
+
+
 def closed_leakage(char: Characteristic, u_close: float, lam) -> Characteristic:
     """α·A of an edge over the whole stroke with its closed branch (u < ``u_close``, the closing
-    point) replaced by λ₁·A(u) + λ₂·A(u_close): Eq. 3's branch scaled, plus a constant gap
-    flow (worn lands: the leakage tends to the radial-clearance annulus). [m²]"""
+    point) replaced by λ₁·A(u) + λ₂·W(u), W the branch with worn lands (:func:`worn_branch`): Eq. 3's
+    branch scaled, plus a worn-lands one. [m²]"""
     k = char.knots_u_m
     keep = k < u_close
     knots = np.append(k[keep], [u_close, *k[~keep & (k > u_close)]])
     vals = char.evaluate(knots)
     vc = float(char.evaluate(u_close))
     below = knots < u_close
-    vals[below] = lam[0] * vals[below] + lam[1] * vc
+    vals[below] = lam[0] * vals[below] + lam[1] * worn_branch(vals[below], vc)
     return Characteristic(knots, vals)
 
 
 def leak_columns(char: Characteristic, u_close: float, u: np.ndarray, ratio: np.ndarray) -> np.ndarray:
     """The two leakage regressors of the closed edge at the points (its opening coordinate −u):
-    A(−u)·ratio and A(u_close)·ratio, shape (n, 2). [m²]"""
-    return np.column_stack([char.evaluate(-u) * ratio, np.full(u.shape, float(char.evaluate(u_close))) * ratio])
+    A(−u)·ratio and W(−u)·ratio (:func:`worn_branch`), shape (n, 2). [m²]"""
+    a = char.evaluate(-u)
+    return np.column_stack([a * ratio, worn_branch(a, float(char.evaluate(u_close))) * ratio])
 
 
 def effective_scale(char: Characteristic, u_close: float, lam, cov) -> tuple[float, float]:
     """(λ_eff, its standard error): the identified leakage over Eq. 3's at :data:`LEAK_REF_M`
     inside the closed edge; 1 = Eq. 3, 0 = none."""
     a_ref = float(char.evaluate(u_close - LEAK_REF_M))
-    g = np.array([1.0, float(char.evaluate(u_close)) / a_ref])
+    g = np.array([1.0, float(worn_branch(a_ref, float(char.evaluate(u_close)))) / a_ref])
     return float(g @ np.asarray(lam)), float(np.sqrt(max(g @ np.asarray(cov) @ g, 0.0)))

@@ -27,7 +27,16 @@ import numpy as np
 import polars as pl
 from scipy.special import stdtrit
 
-from transforms.baseline import Plausibility, carrier_fit, choose_knots, fit_characteristic, leak_scale_lstsq, plausibility
+from transforms.baseline import (
+    EDGE_LAWS,
+    Plausibility,
+    carrier_fit,
+    choose_knots,
+    fit_characteristic,
+    leak_scale_lstsq,
+    plausibility,
+    recognise_edge_law,
+)
 from transforms.characteristic import Characteristic, scaled_shifted
 from transforms.derivatives import add_savgol, savgol_arrays
 from transforms.fit import fit_arrays, fit_groups, sorted_fits, walk_segment
@@ -631,6 +640,11 @@ class BaselineFit:
     leak_reference: Characteristic | None = None
     """α_b·nominal(u + x_b): Eq. 3's leakage at the commissioning state, the unit in which the
     windows report theirs (the ``leak_reference`` argument of :func:`monitor`)."""
+    edge_law: str = "eq3"
+    """The edge law Â's carrier follows: the configured one, or the one the commissioning points
+    show (:func:`transforms.baseline.recognise_edge_law`; the same for the valve's four edges)."""
+    edge_law_note: str = ""
+    """Why the edge law is not the configured one (empty when it is)."""
 
 
 LEAK_ITERATIONS = 3
@@ -646,15 +660,24 @@ def commissioning_baseline(
     leakage: bool = True,
     leakage_passes: int | None = None,
     engine: str = "numba",
+    law: str = "eq3",
+    laws: Mapping[str, Mapping[str, Characteristic]] | None = None,
 ) -> dict[str, BaselineFit]:
     """Steps 2–4a and 5a on one valve's commissioning rows: Â per edge and its plausibility.
 
     Â is :func:`transforms.baseline.fit_characteristic` with the nominal characteristic as
     carrier (the points' knots, sampled every ``params.baseline_grid_m``, widened by the fit's
-    search bound). With ``leakage`` (the default, and what :func:`monitor` then must use too)
+    search bound). ``nominal`` is Eq. 3's (the edges' states and the leakage are in its units);
+    ``laws[name]`` are the nominal characteristics of the other edge laws (``area_law`` names,
+    e.g. ``"sharp"``) the valve may have, ``law`` the configured one: Â's carrier is the
+    configured law's, unless the corrected points of the four edges follow another one clearly
+    better (:func:`transforms.baseline.recognise_edge_law`); every :class:`BaselineFit` says
+    which (``edge_law``, ``edge_law_note``). The carrier carries the shape beyond and between
+    the knots, so a wrong one biases x̂ in proportion to the shift (docs/monitoring.md, "x̂ on
+    any edge law"). With ``leakage`` (the default, and what :func:`monitor` then must use too)
     the points are corrected for the closed edge's flow: its nominal branch at the state that
-    edge's own points give (Eq. 8 onto the nominal: α_b, x_b), scaled by λ₁, plus λ₂ times a
-    constant gap flow (:func:`transforms.leakage.closed_leakage`), (λ₁, λ₂) ≥ 0 identified with
+    edge's own points give (Eq. 8 onto the nominal: α_b, x_b), scaled by λ₁, plus λ₂ times the
+    same with worn lands (:func:`transforms.leakage.closed_leakage`), (λ₁, λ₂) ≥ 0 identified with
     the characteristic (:func:`transforms.baseline.leak_scale_lstsq`: means of
     ``leak_block_points`` points, prior N((1, 0), ``leak_scale_prior_sd``²) about Eq. 3's; only
     from ≥ ``leak_min_points`` points of the other edge, else Eq. 3's is kept); first
@@ -702,6 +725,17 @@ def commissioning_baseline(
                 new_lam[o], cov[o] = leak_scale_lstsq(u[e], plain[e], cols_o[e], knots, shape, block=params.leak_block_points,
                                                       prior=np.array([1.0, 0.0]), prior_sd=params.leak_scale_prior_sd)  # fmt: skip
         lam = new_lam
+    candidates = {"eq3": nominal, **(laws or {})}
+    if law not in candidates:
+        raise ValueError(f"configured edge law {law!r} has no nominal characteristic (laws: {sorted(candidates)})")
+    edge_law, note = law, ""
+    if len(candidates) > 1:
+        edge_law, ssr = recognise_edge_law(u, area, candidates, law, x_search_m=params.x_hat_bound_m)
+        if edge_law != law:
+            note = (f"edge law: the commissioning window shows {EDGE_LAWS.get(edge_law, edge_law)} edges, not the configured "
+                    f"{EDGE_LAWS.get(law, law)} ones ({1 - ssr[edge_law] / ssr[law]:.0%} less Eq. 8 residual); "
+                    f"the baseline follows area_law = \"{edge_law}\"")
+    carrier = candidates[edge_law]
     out: dict[str, BaselineFit] = {}
     for e in EDGES:
         ue, ae = u[e], area[e]
@@ -714,12 +748,12 @@ def commissioning_baseline(
         if n >= params.min_points and rng[1] - rng[0] >= params.min_knot_spacing_m:
             char = fit_characteristic(
                 ue, ae, max_knots=params.max_knots, min_spacing_m=params.min_knot_spacing_m,
-                points_per_interval=params.points_per_knot_interval, carrier=nominal[e],
+                points_per_interval=params.points_per_knot_interval, carrier=carrier[e],
                 extend_m=params.x_hat_bound_m, grid_step_m=params.baseline_grid_m,
                 closed=(own, closing(e), -params.x_max_m) if leakage else None,
             )  # fmt: skip
             check = plausibility(char, nominal[e], u_range=rng, x_search_m=params.x_hat_bound_m)
         eff, se = effective_scale(scaled_shifted(nominal[e], ab, xb), closing(e), lam[e], cov[e]) if leakage else (1.0, float("nan"))
         out[e] = BaselineFit(e, char, n, rng, ab, xb, own, check, (float(lam[e][0]), float(lam[e][1])), eff, se,
-                             scaled_shifted(nominal[e], ab, xb))  # fmt: skip
+                             scaled_shifted(nominal[e], ab, xb), edge_law, note)  # fmt: skip
     return out

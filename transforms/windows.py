@@ -99,9 +99,13 @@ def _flags_kernel(t_us, gap_us, length_us):
         while b < n and not new[b]:
             b += 1
         if t_us[b - 1] - t_us[a] >= min_span:
+            # t is sorted: t_i // L differs from t_{i-1} // L where t_i reaches the next
+            # multiple of L after t_{i-1} (one division per cut, not two per sample)
+            nxt = (t_us[a] // length_us + 1) * length_us
             for i in range(a + 1, b):
-                if t_us[i] // length_us != t_us[i - 1] // length_us:
+                if t_us[i] >= nxt:
                     new[i] = True
+                    nxt = (t_us[i] // length_us + 1) * length_us
         a = b
     return new
 

@@ -1,8 +1,9 @@
 """``valvemon ingest``: historian exports into the sensor lake (the Prefect flow and its plain core).
 
-:func:`run_ingest` does the work file by file: hash the file (``flows.ingest.batches.open_export``;
-a file whose content hash is in the manifest is skipped, ``force`` re-reads it), read it in
-bounded batches (``export_batches``), turn each into lake rows
+:func:`run_ingest` does the work file by file: tell the file's format and hash it
+(``flows.ingest.formats.open_export``; a file whose content hash is in the manifest is skipped,
+``force`` re-reads it), read it in bounded batches (``flows.ingest.formats.iload``, the one reader
+of every format), turn each into lake rows
 (``transforms.ingest.stream.ExportStream``), merge them with the lake's files into staged files
 that are put in place together after the last batch (``flows.ingest.staging``,
 ``flows.common.lake``), then record the file in the manifest together with its quarantined
@@ -32,13 +33,7 @@ from flows.common.errors import ValvemonError
 from flows.common.locks import file_lock
 from flows.common.prefect_run import flow, task
 from flows.common.warehouse_db import connect, ensure_ingest_tables, insert_frame, transaction
-from flows.ingest.read import (
-    LEGACY_HASH_PREFIX,
-    ExportFile,
-    discover_files,
-    legacy_hash,
-    read_export,
-)
+from flows.ingest.hashing import LEGACY_HASH_PREFIX, legacy_hash
 from flows.ingest.spill import QuarantineRows, QuarantineSpill
 from schemas.fields import GAP_FIELDS, GAP_SCHEMA, INGEST_RUN_FIELDS, MANIFEST_FIELDS, polars_schema
 from schemas.plant_config import ConfigError, PlantConfig
@@ -47,23 +42,15 @@ from transforms.ingest import ExportCounts, Grid, IngestError, TagTable
 
 @dataclass
 class FileReport:
-    """What ingesting one file did."""
+    """What ingesting one file did: its identity and its counts (None: skipped, already ingested)."""
 
     path: str
     file_hash: str
-    skipped: bool = False
-    rows_in: int = 0
-    samples_in: int = 0
-    quarantined: int = 0
-    duplicates: int = 0
-    conflicts: int = 0
-    gaps: int = 0
-    rows_out: int = 0
-    rows_added: int = 0
-    lake_conflicts: int = 0
-    partitions: int = 0
-    partitions_written: int = 0
-    valves: tuple[str, ...] = ()
+    counts: ExportCounts | None = None
+
+    @property
+    def skipped(self) -> bool:
+        return self.counts is None
 
 
 def _now() -> datetime:
@@ -71,8 +58,8 @@ def _now() -> datetime:
 
 
 def in_manifest(warehouse: Path, ef) -> bool:
-    """Whether the manifest already holds a file with this content (an :class:`ExportFile` or a
-    ``flows.ingest.batches.ExportSource``, or a content hash).
+    """Whether the manifest already holds a file with this content (an
+    ``flows.ingest.formats.ExportSource``, or a content hash).
 
     A manifest row of an older warehouse holds the file's SHA-256 (``sha256:…``); only when one
     such row has the file's size is the file's SHA-256 computed, and on a match the file's rows
@@ -118,29 +105,22 @@ def ingest_file(path: str | Path, config: PlantConfig, warehouse: str | Path, ru
     """Ingest one export file into the lake and record it (module doc).
 
     The file is hashed first (a file in the manifest is not read), then read, processed and
-    merged batch by batch (``flows.ingest.batches``, ``transforms.ingest.stream``), so memory does
-    not grow with the file; an export whose order does not allow that (``NotStreamable``: times
-    going back across a batch edge, tags one after the other) is processed whole.
+    merged batch by batch (:func:`merge_export`), so memory does not grow with the file.
 
     Raises
     ------
     ValvemonError
         Naming the file and, where it applies, the line, tag, time and what was expected.
     """
-    from flows.ingest.batches import export_batches, open_export
-    from transforms.ingest.stream import NotStreamable
+    from flows.ingest.formats import open_export
 
     path, warehouse = Path(path), Path(warehouse)
     retain_freed_memory()  # the next file's arrays reuse this one's heap: no page faults (flows/common/allocator.py)
     tags = tags or TagTable.from_config(config)
-    src = open_export(path, config.export)
+    src = open_export(path, config.export, config.timezone)
     if not force and in_manifest(warehouse, src):
-        return FileReport(str(path), src.file_hash, skipped=True)
-    try:
-        report, records = merge_batches(path, src, export_batches(src, config.export, tags), config, warehouse, run_id, tags)
-    except NotStreamable:
-        ef = read_export(path, config.export, tags)
-        report, records = merge_export(path, ef, config, warehouse, run_id, tags)
+        return FileReport(str(path), src.file_hash)
+    report, records = merge_export(src, config, warehouse, run_id, tags)
     record_file(warehouse, *records)
     return report
 
@@ -150,34 +130,41 @@ def _unlocked(target: Path) -> AbstractContextManager:
 
 
 def merge_export(
-    path: Path,
-    ef: ExportFile,
+    src,
     config: PlantConfig,
     warehouse: Path,
     run_id: str,
     tags: TagTable,
     lock: Callable[[Path], AbstractContextManager] = _unlocked,
-) -> tuple[FileReport, tuple[dict, pl.DataFrame, pl.DataFrame]]:
-    """Turn a read export (whole) into lake rows and merge them into the lake (:func:`merge_batches`)."""
-    return merge_batches(path, ef, [(ef.frame, ef.first_line, True)], config, warehouse, run_id, tags, lock)
+) -> tuple[FileReport, tuple[dict, QuarantineRows, pl.DataFrame]]:
+    """Read an opened export (``flows.ingest.formats.open_export``) batch by batch into the lake
+    (:func:`merge_batches`); an export whose order does not allow that (``NotStreamable``: times
+    going back across a batch edge, tags one after the other) is read again by the same reader
+    as one batch. Returns the file's report and its database rows, which the caller writes."""
+    from flows.ingest.formats import iload
+    from transforms.ingest.stream import NotStreamable
+
+    try:
+        return merge_batches(src, iload(src, config.export, tags), config, warehouse, run_id, tags, lock)
+    except NotStreamable:
+        return merge_batches(src, iload(src, config.export, tags, whole=True), config, warehouse, run_id, tags, lock)
 
 
 def merge_batches(
-    path: Path,
-    source,
+    src,
     batches: Iterable[tuple[pl.DataFrame, int, bool]],
     config: PlantConfig,
     warehouse: Path,
     run_id: str,
     tags: TagTable,
     lock: Callable[[Path], AbstractContextManager] = _unlocked,
-) -> tuple[FileReport, tuple[dict, pl.DataFrame, pl.DataFrame]]:
+) -> tuple[FileReport, tuple[dict, QuarantineRows, pl.DataFrame]]:
     """Turn an export's batches into lake rows and merge them into the lake's files.
 
-    ``source`` identifies the file (``file_hash``, ``size_bytes``, ``file_format``). The files
-    are staged and committed together after the last batch (``flows.ingest.staging``);
-    ``lock(day file)`` is held from a day folder's first write to the commit. Returns the file's
-    report and its database rows (:func:`file_records`), which the caller writes.
+    ``src`` is the export's ``ExportSource`` (identity, units, start time). The files are staged
+    and committed together after the last batch (``flows.ingest.staging``); ``lock(day file)`` is
+    held from a day folder's first write to the commit. Returns the file's report and its
+    database rows (:func:`file_records`), which the caller writes.
 
     Raises
     ------
@@ -190,11 +177,12 @@ def merge_batches(
     from transforms.ingest.stream import ExportStream
     from transforms.ingest.units import tags_with_file_units
 
+    path = src.path
     now = _now()
     stager = LakeStager(warehouse, config, lock)
-    spill = QuarantineSpill({"file_hash": source.file_hash, "source_file": str(path), "run_id": run_id, "ingested_at": now})
+    spill = QuarantineSpill({"file_hash": src.file_hash, "source_file": str(path), "run_id": run_id, "ingested_at": now})
     try:
-        stream = ExportStream(config, tags_with_file_units(tags, config, source.units))  # the file's own units, where it states them
+        stream = ExportStream(config, tags_with_file_units(tags, config, src.units), origin_ns=src.origin_ns)  # the file's own units, where it states them
         for df, first_line, final in batches:
             for frame in stream.feed(df, first_line=first_line, final=final):
                 stager.add(frame)
@@ -214,20 +202,15 @@ def merge_batches(
     c = stream.counts
     if c.clock_step_message:  # ingested, with the rows after the step quarantined: say so
         print(f"valvemon: warning: {path}: {c.clock_step_message}", file=sys.stderr)
-    report = FileReport(str(path), source.file_hash, rows_in=c.rows_in, samples_in=c.samples_in, quarantined=c.quarantined)
-    report.duplicates, report.conflicts, report.gaps, report.rows_out = c.duplicates, c.conflicts, c.gaps, c.rows_out
-    report.valves = c.valves
-    report.partitions = len(stager.days)
-    report.partitions_written = len(stager.days_written)
-    report.rows_added, report.lake_conflicts = stager.rows_added, stager.lake_conflicts
-    return report, file_records(path, source, c, spill.rows, stream.gap_frame(), report, run_id, config.export.layout, now)
+    c.partitions, c.partitions_written = len(stager.days), len(stager.days_written)
+    c.rows_added, c.lake_conflicts = stager.rows_added, stager.lake_conflicts
+    return FileReport(str(path), src.file_hash, c), file_records(src, c, spill.rows, stream.gap_frame(), run_id, config.export.layout, now)
 
 
-def file_records(
-    path: Path, ef, c: ExportCounts, quarantine: QuarantineRows, gap_frame: pl.DataFrame, report: FileReport, run_id: str, layout: str, now: datetime
-) -> tuple[dict, QuarantineRows, pl.DataFrame]:
+def file_records(src, c: ExportCounts, quarantine: QuarantineRows, gap_frame: pl.DataFrame, run_id: str, layout: str, now: datetime) -> tuple[dict, QuarantineRows, pl.DataFrame]:
     """The manifest row, quarantine rows (already rows of the table) and gap rows of one
-    ingested file, per the registry."""
+    ingested file (``src``: its ``ExportSource``), per the registry."""
+    path, ef = src.path, src
     gaps = _table(gap_frame.with_columns(file_hash=pl.lit(ef.file_hash), source_file=pl.lit(str(path))), GAP_FIELDS)
     GAP_SCHEMA.validate(gaps, lazy=True)
     manifest = {
@@ -243,9 +226,9 @@ def file_records(
         "conflicts": c.conflicts,
         "gaps": c.gaps,
         "rows_out": c.rows_out,
-        "rows_added": report.rows_added,
-        "lake_conflicts": report.lake_conflicts,
-        "partitions": report.partitions,
+        "rows_added": c.rows_added,
+        "lake_conflicts": c.lake_conflicts,
+        "partitions": c.partitions,
         "valves": ",".join(c.valves),
         "time_start": c.time_start,
         "time_end": c.time_end,
@@ -310,20 +293,21 @@ class RunSummary:
 
     def add(self, r: FileReport) -> None:
         self.files.append(r)
-        if r.skipped:
+        c = r.counts
+        if c is None:
             self.files_skipped += 1
             return
         self.files_ingested += 1
-        self.rows_read += r.rows_in
-        self.samples_read += r.samples_in
-        self.rows_written += r.rows_out
-        self.rows_added += r.rows_added
-        self.quarantined += r.quarantined
-        self.duplicates += r.duplicates
-        self.conflicts += r.conflicts
-        self.lake_conflicts += r.lake_conflicts
-        self.gaps += r.gaps
-        self.partitions_written += r.partitions_written
+        self.rows_read += c.rows_in
+        self.samples_read += c.samples_in
+        self.rows_written += c.rows_out
+        self.rows_added += c.rows_added
+        self.quarantined += c.quarantined
+        self.duplicates += c.duplicates
+        self.conflicts += c.conflicts
+        self.lake_conflicts += c.lake_conflicts
+        self.gaps += c.gaps
+        self.partitions_written += c.partitions_written
 
     def counts(self) -> dict:
         d = asdict(self)
@@ -382,6 +366,8 @@ def preflight(config_path: str | Path, paths: list[str | Path]) -> tuple[PlantCo
         Grid.from_export(config.export.sample_rate_hz, config.export.max_gap_s)
     except IngestError as exc:
         raise ConfigError(f"{config_path}: {exc}") from None
+    from flows.ingest.formats import discover_files
+
     return config, discover_files(paths)
 
 

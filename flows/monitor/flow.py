@@ -112,12 +112,19 @@ def monitor_params(valve: ValveSpec, sample_rate_hz: float, window_s: float | No
     )
 
 
-def nominal_characteristic(valve: ValveSpec, edge: str, x_hat_bound_m: float) -> Characteristic:
-    """α_nominal · A(u) of Eq. 3 for one edge, sampled over [−x_max, x_max + x̂ bound]."""
+def nominal_characteristic(valve: ValveSpec, edge: str, x_hat_bound_m: float, area_law: str = "eq3") -> Characteristic:
+    """α_nominal · A(u) of Eq. 3 (or of another edge law, ``model.area``) for one edge, sampled
+    over [−x_max, x_max + x̂ bound]."""
     d = valve.design
     u = np.arange(-d.x_max_m, d.x_max_m + x_hat_bound_m + NOMINAL_GRID_STEP_M / 2, NOMINAL_GRID_STEP_M)
-    area = edge_area(u, d.underlap_m[EDGES.index(edge)], d.taper_angle_rad(edge), d.bore_radius_m, d.spool_radius_m)
+    area = edge_area(u, d.underlap_m[EDGES.index(edge)], d.taper_angle_rad(edge), d.bore_radius_m, d.spool_radius_m,
+                     area_law=area_law)  # fmt: skip
     return Characteristic.from_arrays(u, d.contraction_coefficient * area)
+
+
+OTHER_EDGE_LAWS = ("sharp",)
+"""The edge laws besides Eq. 3 that step 4a may recognise from a commissioning window (the
+linear-gradient edge is one of them: straight, like the sharp-edged law)."""
 
 
 def _design_definition(valve: ValveSpec) -> dict:
@@ -128,11 +135,12 @@ def _design_definition(valve: ValveSpec) -> dict:
         "underlap_m": list(d.underlap_m), "contraction_coefficient": d.contraction_coefficient,
         "piston_diameter_m": valve.piston_diameter_m, "rod_diameter_m": valve.rod_diameter_m,
         "v01_m3": valve.v01_m3, "v02_m3": valve.v02_m3, "bulk_modulus_pa": valve.bulk_modulus_pa,
-        "density_kg_m3": valve.density_kg_m3,
+        "density_kg_m3": valve.density_kg_m3, "area_law": d.area_law,
     }  # fmt: skip
 
 
-BASELINE_METHOD = "carrier-shaped step 4a, closed-edge leakage identified (λ₁ branch + λ₂ gap, block means)"
+BASELINE_METHOD = ("carrier-shaped step 4a, closed-edge leakage identified (λ₁ branch + λ₂ worn-lands branch, block means), "
+                   "carrier of the edge law the commissioning window shows")
 """How baselines are built now (part of their definition: a change of method makes new versions)."""
 
 
@@ -173,6 +181,8 @@ class Baseline:
     """The identified leakage over Eq. 3's 1 mm inside the edge (``baselines.leak_scale``)."""
     leak_reference: Characteristic | None = None
     """Eq. 3's α·A at the baseline state (the unit of the windows' ``leak_scale``)."""
+    edge_law_note: str = ""
+    """Why the baseline's edge law is not the configured one (``baselines.edge_law_note``)."""
 
     @classmethod
     def from_row(cls, valve: ValveSpec, params: MonitorParams, row: dict) -> Baseline:
@@ -190,7 +200,7 @@ class Baseline:
             Characteristic.from_arrays(np.array(row["knots_u_mm"]) * 1e-3, np.array(row["values_mm2"]) * 1e-6),
             row["version"], row["source"], row["plausible"], row["plausibility_reasons"],
             closed_leakage(state, -params.underlap(row["edge"]) - x_mm * 1e-3, lam),
-            1.0 if eff is None or not np.isfinite(eff) else float(eff), state,
+            1.0 if eff is None or not np.isfinite(eff) else float(eff), state, row.get("edge_law_note") or "",
         )  # fmt: skip
 
 
@@ -203,7 +213,7 @@ def _baseline_rows(valve: ValveSpec, params: MonitorParams, warehouse: Path, ver
     if valve.baseline_window is None:
         for e in EDGES:
             c = nominal[e]
-            rows.append((e, "nominal", c, 0, True, "", 1.0, 0.0, (1.0, 0.0), 1.0, float("nan")))
+            rows.append((e, "nominal", c, 0, True, "", 1.0, 0.0, (1.0, 0.0), 1.0, float("nan"), "eq3", ""))
     else:
         start, end = valve.baseline_window
         lake = read_lake(warehouse, [valve.id], start, end).collect()
@@ -212,7 +222,8 @@ def _baseline_rows(valve: ValveSpec, params: MonitorParams, warehouse: Path, ver
                 f"valve {valve.id}: its baseline_window {start.isoformat()} – {end.isoformat()} holds no lake data; "
                 "ingest the commissioning exports first or remove baseline_window to use the nominal characteristic"
             )
-        fitted = commissioning_baseline(lake, params, nominal)
+        laws = {law: {e: nominal_characteristic(valve, e, params.x_hat_bound_m, law) for e in EDGES} for law in OTHER_EDGE_LAWS}
+        fitted = commissioning_baseline(lake, params, nominal, law=valve.design.area_law, laws=laws)
         for e in EDGES:
             b = fitted[e]
             if b.characteristic is None:
@@ -224,7 +235,7 @@ def _baseline_rows(valve: ValveSpec, params: MonitorParams, warehouse: Path, ver
                 )
             check = b.plausibility
             rows.append((e, "commissioning", b.characteristic, b.n_points, check.ok, "; ".join(check.reasons), b.alpha_vs_nominal,
-                         b.x_vs_nominal_m, b.leak_coefficients, b.leak_scale, b.leak_scale_se))  # fmt: skip
+                         b.x_vs_nominal_m, b.leak_coefficients, b.leak_scale, b.leak_scale_se, b.edge_law, b.edge_law_note))  # fmt: skip
     return pl.DataFrame(
         {
             "valve_id": [valve.id] * len(rows),
@@ -245,6 +256,8 @@ def _baseline_rows(valve: ValveSpec, params: MonitorParams, warehouse: Path, ver
             "leak_scale": [r[9] for r in rows],
             "leak_scale_ci_low": [max(r[9] - LEAK_Z95 * r[10], 0.0) if np.isfinite(r[10]) else None for r in rows],
             "leak_scale_ci_high": [r[9] + LEAK_Z95 * r[10] if np.isfinite(r[10]) else None for r in rows],
+            "edge_law": [r[11] for r in rows],
+            "edge_law_note": [r[12] for r in rows],
         },
         schema=polars_schema(BASELINE_FIELDS),
     )
@@ -539,6 +552,8 @@ class ValveReport:
     rows_read: int = 0
     baseline_source: str = ""
     baseline_plausible: bool = True
+    edge_law_note: str = ""
+    """The baselines' note when the commissioning window shows another edge law than the configured one."""
     status_counts: dict[str, int] = field(default_factory=dict)
 
 
@@ -550,7 +565,8 @@ def monitor_valve(
     valve = config.valve(valve_id)
     params = monitor_params(valve, config.export.sample_rate_hz, config.monitor.window_s)
     baselines = ensure_baselines(valve, params, warehouse)
-    report = ValveReport(valve_id, baseline_source=baselines["s1"].source, baseline_plausible=all(b.plausible for b in baselines.values()))
+    report = ValveReport(valve_id, baseline_source=baselines["s1"].source, baseline_plausible=all(b.plausible for b in baselines.values()),
+                         edge_law_note=baselines["s1"].edge_law_note)  # fmt: skip
     gap_s = params.gap_limit_periods * params.sample_period_s
     spans: WriteBatch[Span] = WriteBatch(lambda batch: store_spans(warehouse, batch))
     for rows in lake_chunks(warehouse, valve.id, gap_s, start, end, chunk_days, LAKE_COLUMNS, params.window_s):

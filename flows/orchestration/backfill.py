@@ -73,7 +73,8 @@ from flows.common.locks import file_lock, partition_lock
 from flows.common.prefect_run import flow, in_flow_run, task
 from flows.common.warehouse_db import connect, ensure_ingest_tables, insert_frame, migrate_hash_column, query_frame
 from flows.ingest.flow import FileReport, ingest_lock, merge_export, record_file, rekey_file
-from flows.ingest.read import LEGACY_HASH_PREFIX, discover_files, legacy_hash, read_export
+from flows.ingest.formats import discover_files, open_export
+from flows.ingest.hashing import LEGACY_HASH_PREFIX, legacy_hash
 from flows.monitor.flow import (
     Baseline,
     _baseline_rows,
@@ -251,7 +252,7 @@ class IngestOutcome:
 
 
 def ingest_export(path: str | Path, config: PlantConfig, warehouse: str | Path, known: KnownFiles, run_id: str) -> IngestOutcome:
-    """Read one export, skip it if its content is ``known``, else merge it into the lake.
+    """Open one export, skip it if its content is ``known``, else merge it into the lake batch by batch.
 
     Like :func:`flows.ingest.flow.ingest_file`, but the partitions are locked while merged (other
     files are being ingested at the same time) and the database rows are returned, not written.
@@ -260,15 +261,15 @@ def ingest_export(path: str | Path, config: PlantConfig, warehouse: str | Path, 
     retain_freed_memory()  # the next file's arrays reuse this one's heap (flows/common/allocator.py)
     st = path.stat()
     tags = TagTable.from_config(config)
-    ef = read_export(path, config.export, tags)
-    if ef.file_hash in known:
-        return IngestOutcome(str(path), st.st_size, st.st_mtime_ns, FileReport(str(path), ef.file_hash, skipped=True))
-    if ef.size_bytes in known.legacy_sizes:
+    src = open_export(path, config.export, config.timezone)
+    if src.file_hash in known:
+        return IngestOutcome(str(path), st.st_size, st.st_mtime_ns, FileReport(str(path), src.file_hash))
+    if src.size_bytes in known.legacy_sizes:
         old = legacy_hash(path)
         if old in known:
-            report = FileReport(str(path), ef.file_hash, skipped=True)
-            return IngestOutcome(str(path), st.st_size, st.st_mtime_ns, report, rekey=(old, ef.file_hash))
-    report, records = merge_export(path, ef, config, warehouse, run_id, tags, lock=lambda target: partition_lock(warehouse, target))
+            report = FileReport(str(path), src.file_hash)
+            return IngestOutcome(str(path), st.st_size, st.st_mtime_ns, report, rekey=(old, src.file_hash))
+    report, records = merge_export(src, config, warehouse, run_id, tags, lock=lambda target: partition_lock(warehouse, target))
     return IngestOutcome(str(path), st.st_size, st.st_mtime_ns, report, records)
 
 
@@ -665,9 +666,9 @@ def _ingest_phase(config, warehouse, files, summary, concurrency, opts, force, f
             record_file(warehouse, *out.records)
             manifest = out.records[0]
             summary.files_ingested += 1
-            summary.lake_rows_added += out.report.rows_added
+            summary.lake_rows_added += out.report.counts.rows_added
             if manifest["time_start"] is not None:
-                for v in out.report.valves:
+                for v in out.report.counts.valves:
                     summary.new_spans.append((v, manifest["time_start"], manifest["time_end"]))
         else:
             summary.files_skipped += 1

@@ -15,6 +15,8 @@
 -- leak_scale: the edge's closed-edge leakage over Eq. 3's, median over its ok windows (a
 -- growing leakage is a wear signal; the trend picture shows it per window), leak_scale_baseline
 -- the commissioning value (1 for a nominal baseline: Eq. 3 assumed).
+-- edge_law: the edge law the baseline's shape follows; where the commissioning window shows
+-- another than the configured area_law, edge_law_note says so and is appended to the reason.
 -- The Eq. 9 standstill check (standstill_indicator) is a valve-wide quick indicator: its
 -- result is appended to the reason and given in eq9_ok, it does not change an edge's state.
 with
@@ -106,7 +108,12 @@ standstill as (
 
 baseline_leak as (
     -- the commissioning (or nominal: 1) leakage of each edge's current baseline version
-    select valve_id, edge, arg_max(leak_scale, version) as leak_scale from baselines group by valve_id, edge
+    select
+        valve_id, edge,
+        arg_max(leak_scale, version) as leak_scale,
+        arg_max(edge_law, version) as edge_law,
+        arg_max(edge_law_note, version) as edge_law_note
+    from baselines group by valve_id, edge
 ),
 
 judged as (
@@ -129,7 +136,9 @@ judged as (
         standstill.eq9_residual,
         standstill.eq9_expected,
         standstill.eq9_tolerance,
-        baseline_leak.leak_scale as leak_scale_baseline
+        baseline_leak.leak_scale as leak_scale_baseline,
+        baseline_leak.edge_law,
+        baseline_leak.edge_law_note
     from grid
     left join windows using (valve_id, edge)
     left join recent_alarms using (valve_id, edge)
@@ -168,7 +177,8 @@ final as (
             when eq9_ok = false then printf('; Eq. 9 standstill check fails (residual %.2f, expected %.2f ± %.2f)',
                                             eq9_residual, eq9_expected, eq9_tolerance)
             else ''
-        end as reason,
+        end
+        || case when coalesce(edge_law_note, '') <> '' then '; ' || edge_law_note else '' end as reason,
         case state when 'healthy' then remaining_hours when 'worn' then 0.0 end as remaining_hours,
         case state when 'healthy' then remaining_hours_low when 'worn' then 0.0 end as remaining_hours_low,
         case state when 'healthy' then remaining_hours_high when 'worn' then 0.0 end as remaining_hours_high,
@@ -189,7 +199,8 @@ final as (
         eq9_ok,
         edge_order,
         leak_scale,
-        leak_scale_baseline
+        leak_scale_baseline,
+        edge_law
     from judged
 )
 

@@ -12,7 +12,7 @@ import polars as pl
 import pytest
 from polars.testing import assert_frame_equal
 
-import flows.ingest.batches
+import flows.ingest.formats
 from tests.ingest.conftest import ingest, lake, table, write_plant
 from tests.ingest.test_row_faults import SECONDS, TAGS, WIDE, _iso, _value, long_lines, wide_lines, write
 
@@ -33,7 +33,7 @@ def stepped(lines: list[str], first: int, rows_per_second: int = 1) -> list[str]
 @pytest.mark.parametrize("blocks", [False, True], ids=["one-block", "small-blocks"])
 def test_a_clock_step_in_a_wide_export_quarantines_the_rows_after_it(tmp_path, monkeypatch, capsys, blocks):
     if blocks:
-        monkeypatch.setattr(flows.ingest.batches, "CSV_BLOCK_BYTES", 2048)  # the step in a later batch
+        monkeypatch.setattr(flows.ingest.formats, "CSV_BLOCK_BYTES", 2048)  # the step in a later batch
     cfg = write_plant(tmp_path, **WIDE)
     lines = stepped(wide_lines(), 1)
     wh, ref = tmp_path / "wh", tmp_path / "ref"

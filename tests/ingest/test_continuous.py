@@ -21,7 +21,7 @@ import polars as pl
 import pytest
 from polars.testing import assert_frame_equal
 
-import flows.ingest.batches
+import flows.ingest.formats
 import flows.ingest.staging
 from flows.common.config import load_plant_config
 from tests.ingest.conftest import ingest, lake, table, write_plant
@@ -59,6 +59,22 @@ def tdms_recording(path: Path, first_s: float, seconds: float, seed: int = 0, ra
     return path
 
 
+def comtrade_recording(path: Path, first_s: float, seconds: float, seed: int = 0, rate_hz: float = 10.0) -> Path:
+    """The same recording as :func:`recording`, as a 1999 COMTRADE ``.cfg`` + BINARY32 ``.dat``
+    (values × 1000 as raw integers, a = 0.001), the start in UTC (a plant in UTC would write it so;
+    here the plant is in Vienna: the start is written an hour later), with a digital channel."""
+    from datetime import datetime, timedelta, timezone
+
+    from tests.ingest.comtrade_files import Analog, Recording, write_comtrade
+
+    df = pl.read_parquet(recording(path.with_suffix(".parquet"), first_s, seconds, seed, rate_hz))
+    path.with_suffix(".parquet").unlink()
+    analogs = [Analog(tag, "mm" if tag[-2:] in ("XS", "XC") else "bar", np.rint(df[tag].to_numpy() * 1000).astype(np.int32), 0.001) for tag in df.columns[1:]]
+    local = datetime.fromtimestamp(START_US / 1e6 + first_s, timezone.utc) + timedelta(hours=1)
+    rec = Recording(analogs, [("PUMP ON", np.ones(df.height, dtype=np.int64))], rate_hz=rate_hz, start=local.strftime("%d/%m/%Y,%H:%M:%S.%f"))
+    return write_comtrade(path, rec, "BINARY32")
+
+
 @pytest.fixture
 def wide10(tmp_path):
     return write_plant(tmp_path, "wide10.toml", layout="wide", tag_column=None, value_column=None, quality_column=None, good_quality=None, sample_rate_hz=10.0, max_gap_s=0.25)
@@ -66,7 +82,7 @@ def wide10(tmp_path):
 
 @pytest.fixture
 def small(monkeypatch):
-    monkeypatch.setattr(flows.ingest.batches, "BATCH_SAMPLES", SMALL["BATCH_SAMPLES"])
+    monkeypatch.setattr(flows.ingest.formats, "BATCH_SAMPLES", SMALL["BATCH_SAMPLES"])
     monkeypatch.setattr(flows.ingest.staging, "DAY_FILE_MAX_ROWS", SMALL["DAY_FILE_MAX_ROWS"])
     monkeypatch.setattr(flows.ingest.staging, "BUFFER_ROWS", SMALL["BUFFER_ROWS"])
 
@@ -119,11 +135,11 @@ CHILD = textwrap.dedent(
     """
     import json, os, signal, sys
     sys.path.insert(0, {root!r})
-    import flows.common.lake, flows.ingest.batches, flows.ingest.staging
+    import flows.common.lake, flows.ingest.formats, flows.ingest.staging
     from flows.ingest.flow import run_ingest
     small, kill_at, warm = json.loads(sys.argv[1]), int(sys.argv[2]), sys.argv[3]
     for k, v in small.items():
-        setattr(flows.ingest.batches if k == "BATCH_SAMPLES" else flows.ingest.staging, k, v)
+        setattr(flows.ingest.formats if k == "BATCH_SAMPLES" else flows.ingest.staging, k, v)
     def hwm():  # VmHWM: ru_maxrss would carry pytest's own peak over fork + exec
         return next(int(l.split()[1]) for l in open("/proc/self/status") if l.startswith("VmHWM:"))
     run_ingest(sys.argv[4], [warm], sys.argv[6])  # imports, compiled kernels, first allocations
@@ -148,16 +164,19 @@ def _child(config: Path, path: Path, wh: Path, warm: Path, small: dict, kill_at:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("suffix", [".parquet", ".tdms"])
+@pytest.mark.parametrize("suffix", [".parquet", ".tdms", ".cfg"])
 def test_memory_does_not_grow_with_the_file(wide10, tmp_path, suffix):
-    """A file of 600,000 rows (3.6 M samples, ~100 MB as float64 columns, ~17 h at 10 Hz)
-    ingests in a few tens of MB above the interpreter; taken whole, the same file needs far more.
+    """A file of 600,000 rows (3.6 M samples, ~100 MB as float64 columns, ~17 h at 10 Hz; COMTRADE
+    200,000 rows in batches of 60,000 samples) ingests in a few tens of MB above the interpreter;
+    taken whole, the same file needs far more.
     Wide Parquet read by record batches; TDMS by slices of every channel (that its lake is the one
-    of the same data as CSV: ``tests/archive/test_recorder_formats.py``)."""
-    make = recording if suffix == ".parquet" else tdms_recording
+    of the same data as CSV: ``tests/archive/test_recorder_formats.py``); COMTRADE binary records
+    a batch at a time (``tests/ingest/test_comtrade.py``)."""
+    make = {".parquet": recording, ".tdms": tdms_recording, ".cfg": comtrade_recording}[suffix]
     warm = make(tmp_path / f"warm{suffix}", 0, 600)
-    big = make(tmp_path / f"big{suffix}", 86_400, 600_000 / 10)
-    streamed = _child(wide10, big, tmp_path / "wh_stream", warm, SMALL)
+    rows, small = (600_000, SMALL) if suffix != ".cfg" else (200_000, {**SMALL, "BATCH_SAMPLES": 60_000})  # COMTRADE: 27 batches, a fifth of the time
+    big = make(tmp_path / f"big{suffix}", 86_400, rows / 10)
+    streamed = _child(wide10, big, tmp_path / "wh_stream", warm, small)
     assert streamed.returncode == 0, streamed.stderr
     whole = _child(wide10, big, tmp_path / "wh_whole", warm, {**SMALL, "BATCH_SAMPLES": 10**9, "DAY_FILE_MAX_ROWS": 10**9, "BUFFER_ROWS": 10**9})
     assert whole.returncode == 0, whole.stderr

@@ -18,7 +18,7 @@ import pytest
 import tomli_w
 from polars.testing import assert_frame_equal
 
-import flows.ingest.batches
+import flows.ingest.formats
 from flows.common.errors import ValvemonError
 from flows.ingest.flow import ingest_lock
 from tests.ingest.conftest import BASE, DATA, FACTOR, base_lake, ingest, lake, run_cli, table
@@ -107,7 +107,7 @@ def file_row(wh: Path, path: Path) -> dict:
 
 def small_batches(monkeypatch, block_bytes: int = 4096) -> None:
     """Make the streamed ingest read CSV in blocks of ``block_bytes`` (~80 long rows)."""
-    monkeypatch.setattr(flows.ingest.batches, "CSV_BLOCK_BYTES", block_bytes)
+    monkeypatch.setattr(flows.ingest.formats, "CSV_BLOCK_BYTES", block_bytes)
 
 
 # --- one sample faulted in 2,000 rows: quarantined, the rest ingested --------------------------

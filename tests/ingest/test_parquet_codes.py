@@ -1,5 +1,5 @@
 """Parquet exports: text tag and quality columns are read by their dictionary codes
-(``flows.ingest.read.enum_column``), and the result is the same as reading the text."""
+(``flows.ingest.formats.parquet.enum_column``), and the result is the same as reading the text."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import pytest
 from polars.testing import assert_frame_equal
 
 from flows.common.errors import ValvemonError
-from flows.ingest.read import enum_column
+from flows.ingest.formats.parquet import enum_column
 from tests.ingest.conftest import DATA, ingest, lake, table
 
 

@@ -16,7 +16,7 @@ import tomli_w
 from nptdms import ChannelObject, GroupObject, TdmsWriter
 from polars.testing import assert_frame_equal
 
-import flows.ingest.batches
+import flows.ingest.formats
 from flows.common.errors import ValvemonError
 from schemas.units import PSI_PA
 from tests.ingest.conftest import BASE, EXAMPLE, T0, base_lake, expected_lake, ingest, lake, table
@@ -74,7 +74,7 @@ def test_iba_ascii_with_id_tag_name_and_unit_lines(tmp_path):
 def test_header_rows_streamed_in_blocks_give_the_whole_files_lake_and_lines(tmp_path, monkeypatch):
     """Blocks of a few lines each: the header rows stay in front, line numbers run on (a bad value
     on the file's line 7 is quarantined as line 7)."""
-    monkeypatch.setattr(flows.ingest.batches, "CSV_BLOCK_BYTES", 64)
+    monkeypatch.setattr(flows.ingest.formats, "CSV_BLOCK_BYTES", 64)
     cfg = plant_file(tmp_path, header_rows=["skip", "tag", "name", "unit"])
     path = ascii_export(tmp_path / "iba.txt")
     text = path.read_text().splitlines()
@@ -186,7 +186,7 @@ def test_tdms_waveform_or_time_channel(tmp_path, time_channel):
 def test_tdms_in_many_segments_read_in_small_batches_gives_the_whole_files_lake(tmp_path, monkeypatch):
     """3,000 samples at 10 Hz written 7 per segment, read 1,024 rows per batch (the least): the lake
     equals the one of the same data as a wide text file."""
-    monkeypatch.setattr(flows.ingest.batches, "BATCH_SAMPLES", 6)
+    monkeypatch.setattr(flows.ingest.formats, "BATCH_SAMPLES", 6)
     cfg = plant_file(tmp_path, timestamp_format="iso8601", sample_rate_hz=10.0, max_gap_s=0.25)
     rng = np.random.default_rng(3)
     n = 3000
@@ -256,22 +256,24 @@ def test_tdms_files_need_the_wide_layout_and_a_time(tmp_path):
 
 
 @pytest.mark.parametrize("fmt", ["ascii", "tdms"])
-def test_the_whole_file_read_of_backfill_gives_the_same_lake(tmp_path, fmt):
-    """``read_export`` (the backfill's read, and the fallback for exports that cannot be streamed)
-    reads both formats whole, with the file's units (p1 in psi, left out of the configuration)."""
+def test_the_read_as_one_batch_gives_the_same_lake(tmp_path, fmt):
+    """The reader taken whole (one batch: what an export that cannot be streamed is read as)
+    reads both formats with the file's units (p1 in psi, left out of the configuration)."""
     from flows.common.config import load_plant_config
-    from flows.ingest.flow import merge_export
-    from flows.ingest.read import read_export
+    from flows.ingest.flow import merge_batches
+    from flows.ingest.formats import iload, open_export
     from transforms.ingest import TagTable
 
     config = load_plant_config(plant_file(tmp_path, header_rows=["skip", "tag", "name", "unit"], drop_units=["p1"]))
     psi = dict(BASE, p1=[v / (PSI_PA / 1e5) for v in BASE["p1"]])
     make = ascii_export if fmt == "ascii" else tdms_export
     path = make(tmp_path / f"rec.{'txt' if fmt == 'ascii' else 'tdms'}", units={"p1": "psi"}, values=psi)
-    ef = read_export(path, config.export, TagTable.from_config(config))
-    assert ef.first_line == (5 if fmt == "ascii" else 1) and ef.units[TAG["p1"]][0] == "psi"
-    report, _ = merge_export(path, ef, config, tmp_path / "wh", "run", TagTable.from_config(config))
-    assert report.rows_out == 5
+    src = open_export(path, config.export, config.timezone)
+    tags = TagTable.from_config(config)
+    batches = list(iload(src, config.export, tags, whole=True))
+    assert [(b.first_line, b.final) for b in batches] == [(5 if fmt == "ascii" else 1, True)] and src.units[TAG["p1"]][0] == "psi"
+    report, _ = merge_batches(src, batches, config, tmp_path / "wh", "run", tags)
+    assert report.counts.rows_out == 5
     assert_frame_equal(lake(tmp_path / "wh"), base_lake(), check_exact=False, rel_tol=1e-6)
 
 

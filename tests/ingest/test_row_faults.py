@@ -16,7 +16,7 @@ import polars as pl
 import pytest
 from polars.testing import assert_frame_equal
 
-import flows.ingest.batches
+import flows.ingest.formats
 from tests.ingest.conftest import BASE, ingest, lake, table, write_plant
 
 T = datetime(2025, 3, 2, 0, 0, 0, tzinfo=timezone.utc)
@@ -84,7 +84,7 @@ def test_a_line_with_a_field_missing_in_the_middle_is_quarantined_whole(tmp_path
     """The issue's line 20010: 15 fields in the header, 14 on the line; today the values after the
     gap move one column left into the lake."""
     if blocks:
-        monkeypatch.setattr(flows.ingest.batches, "CSV_BLOCK_BYTES", 2048)
+        monkeypatch.setattr(flows.ingest.formats, "CSV_BLOCK_BYTES", 2048)
     cfg = plant_of(tmp_path, layout)
     lines = lines_of(layout)
     sep = "\t" if layout == "ascii" else ","
@@ -134,7 +134,7 @@ def test_a_quoted_separator_is_no_field(tmp_path):
 def test_a_file_cut_inside_its_last_line_is_reported_truncated(tmp_path, monkeypatch, layout, cut):
     """The issue's x_cyl 0.009 m next to 0.094 m: the last line's last value cut short (the field
     count is right) or cut after a separator (too few fields); no line end."""
-    monkeypatch.setattr(flows.ingest.batches, "CSV_BLOCK_BYTES", 2048)
+    monkeypatch.setattr(flows.ingest.formats, "CSV_BLOCK_BYTES", 2048)
     cfg = plant_of(tmp_path, layout)
     lines = lines_of(layout)
     sep = "\t" if layout == "ascii" else ","
@@ -152,12 +152,12 @@ def test_a_file_cut_inside_its_last_line_is_reported_truncated(tmp_path, monkeyp
 def test_a_complete_file_is_not_truncated_and_costs_no_scan(tmp_path, monkeypatch):
     """A file whose rows all have the header's width and whose last line ends is read as before:
     the text is not scanned (the last column holds no null) and nothing is quarantined."""
-    import flows.ingest.read
+    import flows.ingest.formats.text
 
     def no_scan(*a, **k):
         raise AssertionError("scanned")
 
-    monkeypatch.setattr(flows.ingest.read, "ragged_rows", no_scan)
+    monkeypatch.setattr(flows.ingest.formats.text, "ragged_rows", no_scan)
     cfg = plant_of(tmp_path, "wide")
     wh = tmp_path / "wh"
     ingest(cfg, write(tmp_path / "ok.csv", wide_lines()), wh)

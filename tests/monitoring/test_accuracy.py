@@ -58,18 +58,21 @@ QUIET = SensorParams(
 """Sensors without noise or quantisation (to tell bias from noise)."""
 
 
-def nominal() -> dict[str, Characteristic]:
-    """α_nominal·A(u) of Eq. 3 per edge, as flows.monitor.flow.nominal_characteristic builds it
-    (0.05 mm grid over [−x_max, x_max + x̂ bound])."""
+def nominal(area_law: str = "eq3") -> dict[str, Characteristic]:
+    """α_nominal·A(u) of Eq. 3 (or another edge law) per edge, as
+    flows.monitor.flow.nominal_characteristic builds it (0.05 mm grid over [−x_max, x_max + x̂ bound])."""
     g, c = TABLE1.geometry, TABLE1.nominal_condition
     u = np.arange(-X_MAX, X_MAX + PARAMS.x_hat_bound_m + 0.025e-3, 0.05e-3)
     return {
-        e: Characteristic.from_arrays(u, c.alpha[i] * edge_area(u, c.underlap_m[i], g.taper_angle(e), g.bore_radius_m, g.spool_radius_m))
+        e: Characteristic.from_arrays(
+            u, c.alpha[i] * edge_area(u, c.underlap_m[i], g.taper_angle(e), g.bore_radius_m, g.spool_radius_m, area_law=area_law))
         for i, e in enumerate(EDGES)
     }
 
 
 NOMINAL = nominal()
+LAWS = {"sharp": nominal("sharp")}
+"""The edge law the monitor may recognise besides the configured Eq. 3 (as the flows pass it)."""
 
 
 def _first_windows(lake: pl.DataFrame, n: int) -> pl.DataFrame:
@@ -87,7 +90,7 @@ def wear_study(seed: int, scatter_seed: int, trajectory=None, sensors=None, geom
     hours = np.concatenate([np.arange(commissioning, dtype=float), HOURS[1:]])
     xu, al = condition_arrays(scenario, hours)
     lake = simulated_lake(condition_at(scenario, hours), seed, trajectory=trajectory, sensors=sensors, geometry=geometry)
-    fitted = commissioning_baseline(_first_windows(lake, commissioning), params, NOMINAL)
+    fitted = commissioning_baseline(_first_windows(lake, commissioning), params, NOMINAL, laws=LAWS)
     res = monitor(
         lake, params, {"V1": {e: b.characteristic for e, b in fitted.items()}},
         leakage={"V1": {e: b.leakage for e, b in fitted.items()}},

@@ -123,6 +123,33 @@ def test_changed_baseline_definition_makes_new_version(archive, tmp_path):
     assert set(_table(wh, FITS).filter(pl.col("valve_id") == "V001")["baseline_version"]) == {3}
 
 
+def test_edge_law_not_the_configured_one_is_named(archive, tmp_path):
+    """The archive's V001 has Eq. 3 edges; configured as sharp-edged, its commissioning window
+    shows the curved Eq. 3 law instead: the baselines follow that law and say so, and so does
+    valve_condition's reason (what a linear-gradient valve configured as Eq. 3 gets the other way
+    round: tests/monitoring/test_shift_any_law.py)."""
+    from flows.report.publish import publish
+
+    wh = _warehouse(tmp_path, archive)
+    config = load_plant_config(archive / "plant.toml")
+    sharp = dataclasses.replace(config.valve("V001").design, area_law="sharp")
+    valves = tuple(dataclasses.replace(v, type="servo_sharp", design=sharp, baseline_window=(DAY0, DAY0 + timedelta(days=1)))
+                   if v.id == "V001" else v for v in config.valves)  # fmt: skip
+    config = dataclasses.replace(config, valve_types={**config.valve_types, "servo_sharp": sharp}, valves=valves)
+    cfg = tmp_path / "plant.toml"
+    cfg.write_bytes(tomli_w.dumps(plant_config_to_dict(config)).encode())
+    assert load_plant_config(cfg).valve("V001").design.area_law == "sharp"
+    run_monitor(cfg, wh, valve_ids=["V001"])
+    b = _table(wh, "SELECT edge, edge_law, edge_law_note FROM baselines WHERE valve_id = 'V001'")
+    assert set(b["edge_law"]) == {"eq3"}
+    note = b["edge_law_note"][0]
+    assert "not the configured straight" in note and 'area_law = "eq3"' in note and b["edge_law_note"].n_unique() == 1
+    publish(cfg, wh)
+    cond = _table(wh, "SELECT edge, reason, edge_law FROM valve_condition WHERE valve_id = 'V001'")
+    assert cond.height == 4 and set(cond["edge_law"]) == {"eq3"}
+    assert all(r.endswith("; " + note) for r in cond["reason"]), cond["reason"].to_list()
+
+
 def test_commissioning_window_without_data(archive, tmp_path):
     wh = _warehouse(tmp_path, archive)
     empty = (DAY0 + timedelta(days=30), DAY0 + timedelta(days=31))

@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 from model import TABLE1, edge_area
 from transforms.baseline import choose_knots, leak_scale_lstsq
 from transforms.characteristic import Characteristic
-from transforms.leakage import LEAK_REF_M, closed_leakage, effective_scale, leak_columns, leak_scale_step
+from transforms.leakage import LEAK_REF_M, WORN_FACTOR, closed_leakage, effective_scale, leak_columns, leak_scale_step, worn_branch
 
 G = TABLE1.geometry
 XU = 4e-5
@@ -22,7 +22,7 @@ EQ3 = {e: Characteristic.from_arrays(U, 0.675 * edge_area(U, XU, G.taper_angle(e
 
 
 def _points(n=20_000, seed=0, lam=(0.6, 0.3), noise=0.0):
-    """s2's points over u = 1–3 mm with 2r leaking λ₁ Eq. 3 + λ₂ gap, a pressure ratio that varies
+    """s2's points over u = 1–3 mm with 2r leaking λ₁ Eq. 3 + λ₂ worn lands, a pressure ratio that varies
     at every u (loads), and the Eq. 3 open area as truth."""
     rng = np.random.default_rng(seed)
     u = np.sort(rng.uniform(1.04e-3, 3.0e-3, n))
@@ -36,17 +36,22 @@ def _points(n=20_000, seed=0, lam=(0.6, 0.3), noise=0.0):
 @given(l1=st.floats(0.0, 4.0), l2=st.floats(0.0, 0.5))
 @settings(max_examples=25, deadline=None)
 def test_closed_leakage_is_the_two_term_family(l1, l2):
-    """Below the closing point λ₁·A(u) + λ₂·A(u_c), above it A itself; ≥ 0; effective scale at 1 mm."""
+    """Below the closing point λ₁·A(u) + λ₂·W(u) (W: the worn-lands branch of ``model.area`` with
+    factor 4, to 3 %: its closing-point value stands in for x_l's), above it A itself; ≥ 0; effective scale at 1 mm."""
     c = closed_leakage(EQ3["2r"], -XU, (l1, l2))
-    u = np.linspace(-3.5e-3, -XU - 0.05e-3, 300)  # below the last sample before the closing point
+    u = U[U < -XU - 0.05e-3]  # the samples below the last one before the closing point
     vc = float(EQ3["2r"].evaluate(-XU))
-    np.testing.assert_allclose(c.evaluate(u), l1 * EQ3["2r"].evaluate(u) + l2 * vc, rtol=1e-9, atol=1e-18)
+    worn = 0.675 * edge_area(u, XU, G.taper_angle("2r"), G.bore_radius_m, G.spool_radius_m, leakage_factor=WORN_FACTOR)
+    far = u < -XU - 0.2e-3
+    np.testing.assert_allclose(worn_branch(EQ3["2r"].evaluate(u[far]), vc), worn[far], rtol=0.03)
+    np.testing.assert_allclose(c.evaluate(u), l1 * EQ3["2r"].evaluate(u) + l2 * worn_branch(EQ3["2r"].evaluate(u), vc),
+                               rtol=1e-9, atol=1e-18)
     up = np.linspace(0.0, 3e-3, 50)
     np.testing.assert_allclose(c.evaluate(up), EQ3["2r"].evaluate(up), rtol=1e-12)
     assert (c.evaluate(u) >= 0).all()
     eff, se = effective_scale(EQ3["2r"], -XU, (l1, l2), np.zeros((2, 2)))
     ref = float(EQ3["2r"].evaluate(-XU - LEAK_REF_M))
-    assert eff == pytest.approx((l1 * ref + l2 * vc) / ref) and se == 0.0
+    assert eff == pytest.approx((l1 * ref + l2 * worn_branch(ref, vc)) / ref) and se == 0.0
 
 
 @pytest.mark.parametrize("lam", [(0.0, 0.0), (1.0, 0.0), (2.5, 0.2), (0.4, 0.05)])
@@ -87,15 +92,15 @@ def test_window_step_is_the_missing_leakage():
 
 
 def test_older_warehouse_gets_the_leakage_columns(tmp_path):
-    """A warehouse whose edge_fits and baselines predate the leak_* columns gets them (NULL in old
-    rows), after its own columns; a current one costs no DDL."""
+    """A warehouse whose edge_fits and baselines predate the leak_* (and edge_law*) columns gets them
+    (NULL in old rows), after its own columns; a current one costs no DDL."""
     from flows.common.warehouse_db import create_table_sql
     from flows.monitor.flow import ensure_monitor_tables
     from schemas.fields import BASELINE_FIELDS, EDGE_FIT_FIELDS
 
     con = duckdb.connect(str(tmp_path / "old.duckdb"))
     old_fits = tuple(f for f in EDGE_FIT_FIELDS if not f.name.startswith("leak_"))
-    old_base = tuple(f for f in BASELINE_FIELDS if not f.name.startswith("leak_"))
+    old_base = tuple(f for f in BASELINE_FIELDS if not f.name.startswith(("leak_", "edge_law")))
     con.execute(create_table_sql("edge_fits", old_fits))
     con.execute(create_table_sql("baselines", old_base))
     ensure_monitor_tables(con)

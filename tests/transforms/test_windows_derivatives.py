@@ -168,10 +168,10 @@ GAP_US = 3_000.0
 @st.composite
 def _recordings(draw):
     """Sorted time stamps (µs) of one valve: runs of 1 ms steps with the odd 2 ms or 3 ms step
-    (no gap), separated by gaps of 3.5 ms … an hour, starting anywhere on the clock; and a
+    or duplicate time stamp (no gap), separated by gaps of 3.5 ms … an hour, starting anywhere on the clock; and a
     window length of 0.05 … 2 s (so runs span several lengths)."""
     t0 = draw(st.integers(T0_US, T0_US + 10**9))
-    steps = draw(st.lists(st.sampled_from([1_000] * 30 + [2_000, 3_000, 3_001, 3_500, 250_000, 3_600_000_000]), min_size=1, max_size=3000))
+    steps = draw(st.lists(st.sampled_from([1_000] * 30 + [0, 2_000, 3_000, 3_001, 3_500, 250_000, 3_600_000_000]), min_size=1, max_size=3000))
     length_s = draw(st.sampled_from([0.05, 0.1, 0.25, 0.6, 1.0, 1.7, 2.0]))
     return np.r_[t0, t0 + np.cumsum(steps)].astype(np.int64), length_s
 

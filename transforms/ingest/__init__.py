@@ -1,9 +1,10 @@
 """Pure parsing and normalisation of historian exports for the sensor lake (no I/O).
 
-The flows read a file into a polars frame and hand it to :func:`process_export`, which returns
-validated lake partitions, the quarantined samples, the gaps and the counts; the flows then
-merge each partition with the stored one (:func:`merge_partition`) and write it. Method and
-rules: ``docs/ingest.md``.
+The flows read a file batch by batch (``flows.ingest.formats``) and feed the batches to
+:class:`transforms.ingest.stream.ExportStream`, which gives validated lake rows, the quarantined
+samples, the gaps and the counts (:func:`process_export`: a frame as one batch); the flows then
+merge the rows with the stored ones (:func:`merge_partition`) and write them. Method and rules:
+``docs/ingest.md``.
 """
 
 from transforms.ingest.errors import IngestError

@@ -407,7 +407,7 @@ def _concat(frames: list[pl.DataFrame | None]) -> pl.DataFrame:
     return pl.concat(used) if used else empty_quarantine()
 
 
-def long_samples(df: pl.DataFrame, export: ExportSpec, timezone: str, tags: TagTable, *, first_line: int = 2, now_ns: int | None = None) -> Samples:
+def long_samples(df: pl.DataFrame, export: ExportSpec, timezone: str, tags: TagTable, *, first_line: int = 2, now_ns: int | None = None, origin_ns: int | None = None) -> Samples:
     """Samples of a long export: one row per tag and time.
 
     Parameters
@@ -425,6 +425,8 @@ def long_samples(df: pl.DataFrame, export: ExportSpec, timezone: str, tags: TagT
         Line number of the frame's first row (2 below a CSV header, 1 for Parquet rows).
     now_ns : int, optional
         The ingest's time (UTC ns) for ``implausible_time``; default: now.
+    origin_ns : int, optional
+        The file's start time (UTC ns), which a relative ``timestamp_format`` counts from.
     """
     wanted = {"timestamp_column": export.timestamp_column, "tag_column": export.tag_column, "value_column": export.value_column}
     if export.quality_column:
@@ -457,7 +459,7 @@ def long_samples(df: pl.DataFrame, export: ExportSpec, timezone: str, tags: TagT
     tag_id = tag.to_physical()
     faults = _Faults(tags, time.time_ns() if now_ns is None else now_ns)
     ts_raw = df[export.timestamp_column]
-    ts = parse_timestamps(ts_raw, export.timestamp_format, timezone, groups=tag_id, lines=lines, tags=tag, unreadable="null")
+    ts = parse_timestamps(ts_raw, export.timestamp_format, timezone, groups=tag_id, lines=lines, tags=tag, unreadable="null", origin_ns=origin_ns)
     bad_ts = None
     if ts.null_count():
         bad_ts = ts.is_null() if missing_tag is None else ts.is_null() & ~missing_tag
@@ -497,7 +499,15 @@ def _is_placeholder(df: pl.DataFrame, name: str) -> bool:
 
 
 def wide_samples(
-    df: pl.DataFrame, export: ExportSpec, timezone: str, tags: TagTable, *, first_line: int = 2, now_ns: int | None = None, clock: ClockSteps | None = None
+    df: pl.DataFrame,
+    export: ExportSpec,
+    timezone: str,
+    tags: TagTable,
+    *,
+    first_line: int = 2,
+    now_ns: int | None = None,
+    clock: ClockSteps | None = None,
+    origin_ns: int | None = None,
 ) -> Samples:
     """Samples of a wide export: a time column (and optionally a quality column) and a column per tag.
 
@@ -524,7 +534,7 @@ def wide_samples(
     df, lines, broken, broken_lines = _take_broken(df, lines)
     n = df.height
     ts_raw = df[export.timestamp_column]
-    ts = parse_timestamps(ts_raw, export.timestamp_format, timezone, lines=lines, unreadable="null")
+    ts = parse_timestamps(ts_raw, export.timestamp_format, timezone, lines=lines, unreadable="null", origin_ns=origin_ns)
     bad_ts = ts.is_null() if ts.null_count() else None
     after_step = None if clock is None else clock.after_step(ts.cast(UTC_NS).to_physical(), lines)
     faults = _Faults(tags, time.time_ns() if now_ns is None else now_ns)
@@ -588,14 +598,22 @@ def wide_samples(
 
 
 def samples_of(
-    df: pl.DataFrame, config: PlantConfig, tags: TagTable | None = None, *, first_line: int = 2, now_ns: int | None = None, clock: ClockSteps | None = None
+    df: pl.DataFrame,
+    config: PlantConfig,
+    tags: TagTable | None = None,
+    *,
+    first_line: int = 2,
+    now_ns: int | None = None,
+    clock: ClockSteps | None = None,
+    origin_ns: int | None = None,
 ) -> Samples:
     """Samples of an export in the configured layout (``export.layout``); ``clock``: the wide
-    layout's clock-step check (:func:`wide_samples`)."""
+    layout's clock-step check (:func:`wide_samples`); ``origin_ns``: the file's start time (UTC ns)
+    for a relative ``timestamp_format``."""
     tags = tags or TagTable.from_config(config)
     if config.export.layout == "long":
-        return long_samples(df, config.export, config.timezone, tags, first_line=first_line, now_ns=now_ns)
-    return wide_samples(df, config.export, config.timezone, tags, first_line=first_line, now_ns=now_ns, clock=clock)
+        return long_samples(df, config.export, config.timezone, tags, first_line=first_line, now_ns=now_ns, origin_ns=origin_ns)
+    return wide_samples(df, config.export, config.timezone, tags, first_line=first_line, now_ns=now_ns, clock=clock, origin_ns=origin_ns)
 
 
 def check_required_signals(tags_present: frozenset[str], config: PlantConfig) -> list[str]:

@@ -85,6 +85,12 @@ class ExportCounts:
     """Of ``quarantined``: samples of a wide export's rows at and after a step of its clock."""
     clock_step_message: str | None = None
     """Where the clock stepped back, by how much, and what became of the rows after it."""
+    rows_added: int = 0
+    lake_conflicts: int = 0
+    partitions: int = 0
+    partitions_written: int = 0
+    """What merging with the lake did (the flows fill these): rows the lake did not have, rows that
+    differed from the lake's, valve-days touched and written."""
 
 
 @dataclass
@@ -160,10 +166,13 @@ class ExportStream:
         The plant.
     tags : TagTable, optional
         ``TagTable.from_config(config)``, when the caller already has it.
+    origin_ns : int, optional
+        The file's start time (UTC ns), which a relative ``export.timestamp_format`` counts from.
     """
 
-    def __init__(self, config: PlantConfig, tags: TagTable | None = None, *, now: datetime | None = None):
+    def __init__(self, config: PlantConfig, tags: TagTable | None = None, *, now: datetime | None = None, origin_ns: int | None = None):
         self.config = config
+        self.origin_ns = origin_ns
         self.tags = tags or TagTable.from_config(config)
         self.grid = Grid.from_export(config.export.sample_rate_hz, config.export.max_gap_s)
         self.now_ns = time.time_ns() if now is None else round(now.timestamp() * 1e6) * 1000
@@ -205,7 +214,7 @@ class ExportStream:
         """
         self._batches += 1
         export, tags = self.config.export, self.tags
-        samples = samples_of(df, self.config, tags, first_line=first_line, now_ns=self.now_ns, clock=self.clock)
+        samples = samples_of(df, self.config, tags, first_line=first_line, now_ns=self.now_ns, clock=self.clock, origin_ns=self.origin_ns)
         c = self.counts
         c.rows_in += samples.rows_in
         c.samples_in += samples.samples_in
@@ -237,7 +246,8 @@ class ExportStream:
         t_all = acc["timestamp_utc"].to_physical().to_numpy()
         v_all = acc["value_si"].to_numpy()
         line_all = acc["line"].to_numpy()
-        if not (final and self._batches == 1) and len(t_all) and near_clock_change(int(t_all.min()), int(t_all.max()), self.config.timezone):
+        local = not export.relative_time  # relative times are counted from a start in UTC: never ambiguous
+        if local and not (final and self._batches == 1) and len(t_all) and near_clock_change(int(t_all.min()), int(t_all.max()), self.config.timezone):
             raise NotStreamable("local times near a change of the clocks")
         seen = set()
         for tid, t, v, sel in split_by_tag(tag_id, t_all, v_all):

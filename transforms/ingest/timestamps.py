@@ -8,6 +8,9 @@
 - ``"epoch_ms"``: milliseconds since 1970-01-01 UTC (integer or decimal).
 - any other string is a chrono/strftime pattern such as ``"%d.%m.%Y %H:%M:%S%.f"``; with
   ``%z``/``%#z``/``%:z`` it carries its offset, otherwise it is local time.
+- ``"seconds"`` / ``"milliseconds"``: time since the file's start (``origin_ns``, the start time of
+  the file, :func:`parse_start_time`), numbers or text with a decimal point or comma. The elapsed
+  time is added to the start in UTC, so a recording across a change of the clocks stays continuous.
 
 Parquet exports may also hold typed timestamps: zoned ones are converted to UTC, naive ones are
 local time.
@@ -48,7 +51,73 @@ def _iso_formats(sample: str) -> list[tuple[str, bool]]:
     return zoned + naive if zoned_first else naive + zoned
 
 
+RELATIVE_UNIT_NS = {"seconds": 10**9, "milliseconds": 10**6}
+"""Nanoseconds per unit of a relative ``timestamp_format`` (``schemas.plant_config.RELATIVE_TIME_FORMATS``)."""
+
+_NAME_DIRECTIVES = {
+    "Y": r"\d{4}", "y": r"\d{2}", "m": r"\d{2}", "d": r"\d{2}", "H": r"\d{2}", "M": r"\d{2}", "S": r"\d{2}",
+    "j": r"\d{3}", "b": r"[A-Za-z]{3}", "f": r"\d{1,9}", "3f": r"\d{3}", "6f": r"\d{6}", "9f": r"\d{9}",
+    ".f": r"(?:\.\d{1,9})?", ".3f": r"\.\d{3}", ".6f": r"\.\d{6}", ".9f": r"\.\d{9}",
+    "z": r"[+-]\d{4}", ":z": r"[+-]\d\d:\d\d", "#z": r"(?:Z|[+-]\d\d(?::?\d\d)?)", "%": "%",
+}  # fmt: skip
+"""strftime directives a start time in a file's name may use, and the text each matches."""
+_DIRECTIVE = re.compile(r"%(\.?\d?f|[:#]?z|[A-Za-z%])")
+
+
+def name_pattern(fmt: str) -> re.Pattern:
+    """The regular expression of the text a strftime pattern writes (``"%Y%m%dT%H%M%S"`` →
+    ``\\d{4}\\d{2}\\d{2}T…``), to find a start time inside a file's name.
+
+    Raises
+    ------
+    IngestError
+        A directive a name cannot be searched for (only those of :data:`_NAME_DIRECTIVES`).
+    """
+    out, at = [], 0
+    for m in _DIRECTIVE.finditer(fmt):
+        out.append(re.escape(fmt[at : m.start()]))
+        key = m.group(1)
+        if key not in _NAME_DIRECTIVES:
+            raise IngestError(f"export.start_time_format {fmt!r}: %{key} cannot be searched for in a file's name (use {', '.join('%' + k for k in _NAME_DIRECTIVES if k != '%')})")
+        out.append(_NAME_DIRECTIVES[key])
+        at = m.end()
+    out.append(re.escape(fmt[at:]))
+    return re.compile("".join(out))
+
+
+def start_in_name(name: str, fmt: str) -> str | None:
+    """The first part of a file's name written in the strftime pattern ``fmt``; None if none."""
+    m = name_pattern(fmt).search(name)
+    return None if m is None else m.group(0)
+
+
+def parse_start_time(text: str, fmt: str, timezone: str) -> int:
+    """A file's start time (``export.start_time_format``; local time in ``timezone`` unless the
+    pattern has an offset) → UTC ns.
+
+    Raises
+    ------
+    IngestError
+        Text that does not match the pattern, or a local time that does not exist.
+    """
+    raw = pl.Series([text.strip()])
+    try:
+        parsed = raw.str.to_datetime(fmt, time_unit="ns", strict=False)
+    except pl.exceptions.PolarsError:
+        parsed = pl.Series([None], dtype=pl.Datetime("ns"))
+    if parsed[0] is None:
+        raise IngestError(f"start time {text.strip()!r} does not match export.start_time_format {fmt!r}")
+    if parsed.dtype.time_zone:
+        return int(parsed.dt.convert_time_zone("UTC").to_physical()[0])
+    try:
+        return int(localize(parsed, timezone).to_physical()[0])
+    except IngestError as exc:
+        raise IngestError(exc.detail) from None  # the caller names the line
+
+
 def _example(fmt: str) -> str:
+    if fmt in RELATIVE_UNIT_NS:
+        return f"{fmt} since the file's start time, e.g. 0.001" if fmt == "seconds" else f"{fmt} since the file's start time, e.g. 1.5"
     if fmt == "iso8601":
         return "e.g. 2025-03-01T12:00:00.123Z or 2025-03-01 13:00:00.123+01:00"
     if fmt == "epoch_ms":
@@ -147,6 +216,7 @@ def parse_timestamps(
     lines: pl.Series | None = None,
     tags: pl.Series | None = None,
     unreadable: str = "raise",
+    origin_ns: int | None = None,
 ) -> pl.Series:
     """Timestamps of an export (text, epoch numbers or typed) → Datetime(ns, UTC).
 
@@ -166,6 +236,8 @@ def parse_timestamps(
         See :func:`localize`.
     unreadable : str
         ``"raise"`` or ``"null"`` (above).
+    origin_ns : int, optional
+        The file's start time (UTC ns) that relative timestamps count from.
 
     Raises
     ------
@@ -173,6 +245,8 @@ def parse_timestamps(
         Naming the first line whose timestamp cannot be read, or a local time that does not exist.
     """
     dtype = raw.dtype
+    if fmt in RELATIVE_UNIT_NS:
+        return _relative(raw, fmt, origin_ns, lines=lines, tags=tags, strict=unreadable == "raise")
     if isinstance(dtype, pl.Datetime):
         if dtype.time_zone is not None:
             return raw.dt.convert_time_zone("UTC").cast(UTC_NS)
@@ -227,6 +301,25 @@ def _arrow_iso(text: pl.Series, *, zoned: bool) -> pl.Series | None:
             return None
     out = pl.from_arrow(parsed)
     return out.alias(text.name) if isinstance(out, pl.Series) else None
+
+
+def _relative(raw: pl.Series, fmt: str, origin_ns: int | None, *, lines: pl.Series | None, tags: pl.Series | None, strict: bool) -> pl.Series:
+    """Time since the file's start (numbers, or text with a decimal point or comma) → UTC."""
+    if origin_ns is None:
+        raise IngestError(f"export.timestamp_format {fmt!r} counts from the file's start, and no start time was given")
+    if raw.dtype.is_numeric():
+        elapsed = raw.cast(pl.Float64)
+        present = raw.is_not_null()
+    else:
+        text = raw.cast(pl.String).str.strip_chars()
+        present = text.is_not_null() & (text.str.len_bytes() > 0)
+        elapsed = text.str.replace(",", ".", literal=True).cast(pl.Float64, strict=False)
+    ok = elapsed.is_not_null() & elapsed.is_finite().fill_null(False)
+    if strict and not (ok | ~present).all():
+        raise _first_failure(raw.cast(pl.String), ok | ~present, lines, fmt, tags)
+    ns = (elapsed * RELATIVE_UNIT_NS[fmt]).round(0)
+    out = pl.when(ok).then(ns).otherwise(None)
+    return pl.select(out.cast(pl.Int64) + origin_ns).to_series().cast(UTC_NS).alias(raw.name)
 
 
 def _epoch_ms(values: pl.Series) -> pl.Series:

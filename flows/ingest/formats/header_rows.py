@@ -2,6 +2,7 @@
 
 ``export.header_rows`` says what each header line holds, in file order (``schemas.plant_config``:
 ``"tag"`` — the column names, matched to the configured tags —, ``"name"``, ``"unit"``,
+``"start_time"`` — the recording's start in the second cell, for a relative time column —,
 ``"skip"``). :func:`read_header_rows` reads those lines from the start of a file and gives the
 ``tag`` line (the one header line the CSV decoder is given in front of every block), the number of
 header lines (the first data line is the next) and the unit of every configured tag's column,
@@ -12,9 +13,7 @@ given too and not looked at.
 from __future__ import annotations
 
 import csv
-import io
 from dataclasses import dataclass
-from pathlib import Path
 from typing import IO
 
 from flows.common.errors import ValvemonError
@@ -32,6 +31,8 @@ class HeaderRows:
     """Header lines read: the first data line is ``lines + 1``."""
     units: FileUnits | None
     """Column (tag) → (unit as written, ``column N 'name'``); None without a ``unit`` line."""
+    start: tuple[str, int] | None = None
+    """The ``start_time`` line's second cell and the line's number; None without such a line."""
 
 
 def _fields(line: bytes, separator: str) -> list[str]:
@@ -87,8 +88,14 @@ def read_header_rows(fh: IO[bytes], export: ExportSpec, where: str) -> HeaderRow
             f"{where}: line {t + 1}: expected the header line 'tag' ({expected}) with the time column {export.timestamp_column!r} "
             f"(export.timestamp_column), found {found}{', …' if len(names) > 4 else ''}"
         )
+    start = None
     for i, (kind, row) in enumerate(zip(kinds, fields)):
-        if kind == "skip":
+        if kind == "start_time":
+            if len(row) < 2 or not row[1].strip():
+                text = raw[i].decode("utf-8", errors="replace").rstrip("\r\n")
+                raise ValvemonError(f"{where}: line {i + 1}: expected the recording's start time in the second cell of the 'start_time' line ({expected}), found {text!r}")
+            start = (row[1].strip(), i + 1)
+        if kind in ("skip", "start_time"):
             continue
         cells = [c.strip() for j, c in enumerate(row) if j < len(names) and names[j] != export.timestamp_column and c.strip()]
         if cells and all(_is_number(c, export.decimal) for c in cells):
@@ -105,13 +112,5 @@ def read_header_rows(fh: IO[bytes], export: ExportSpec, where: str) -> HeaderRow
             if name != export.timestamp_column:
                 desc = f" {label[j].strip()!r}" if j < len(label) and label[j].strip() else ""
                 units[name] = (row[j] if j < len(row) else "", f"column {j + 1}{desc}")
-    return HeaderRows(raw[t], len(kinds), units)
+    return HeaderRows(raw[t], len(kinds), units, start)
 
-
-def without_header_rows(data: bytes | Path, export: ExportSpec, where: str) -> tuple[bytes, HeaderRows]:
-    """A whole file's text with only its ``tag`` header line (what ``read_csv_export`` reads), and
-    its header rows."""
-    raw = data if isinstance(data, bytes) else Path(data).read_bytes()
-    fh = io.BytesIO(raw)
-    header = read_header_rows(fh, export, where)
-    return header.tag_line + raw[fh.tell() :], header

@@ -12,7 +12,7 @@ or from ``export.tdms_group`` only. The time of sample ``i`` comes from
 All channels read share that one time base (the same length; the same waveform properties), so
 row ``i`` of the frame is sample ``i`` of every channel; the frame's "line" of a sample is
 ``i + 1``. A channel's ``unit_string`` property (NI's convention), when set, is its unit
-(``transforms.ingest.units``). :func:`tdms_batches` reads rows ``[a, b)`` of each channel with
+(``transforms.ingest.units``). :func:`iload` reads rows ``[a, b)`` of each channel with
 ``TdmsChannel.read_data(offset, length)`` (npTDMS finds the segments by a binary search), so memory
 is bounded by the batch, not by the file.
 """
@@ -26,13 +26,16 @@ from typing import Iterator
 
 import numpy as np
 import polars as pl
-from nptdms import TdmsFile
-from nptdms.timestamp import TdmsTimestamp, TimestampArray
 
 from flows.common.errors import ValvemonError
 from schemas.plant_config import ExportSpec
 from transforms.ingest.units import FileUnits
 
+SUFFIXES = (".tdms",)
+FILE_FORMATS = ("tdms",)
+"""The manifest's ``file_format`` of the files this module reads."""
+_MAGIC = b"TDSm"
+"""A TDMS file's first bytes (its first segment's lead-in)."""
 TDMS_EPOCH_S = -2_082_844_800
 """1904-01-01T00:00:00Z, the TDMS epoch, in Unix seconds."""
 
@@ -68,6 +71,8 @@ def _path(ch) -> str:
 
 
 def _waveform(ch, where: str, time_name: str) -> tuple[int, float]:
+    from nptdms.timestamp import TdmsTimestamp
+
     p = ch.properties
     if "wf_start_time" not in p or "wf_increment" not in p:
         raise ValvemonError(
@@ -84,7 +89,7 @@ def _waveform(ch, where: str, time_name: str) -> tuple[int, float]:
     return _ns(start.seconds, start.second_fractions) + offset_ns, increment * 1e9
 
 
-def tdms_layout(tdms: TdmsFile, export: ExportSpec, where: str) -> TdmsLayout:
+def tdms_layout(tdms, export: ExportSpec, where: str) -> TdmsLayout:
     """The channels to read and their time base (module doc).
 
     Raises
@@ -133,7 +138,7 @@ def tdms_layout(tdms: TdmsFile, export: ExportSpec, where: str) -> TdmsLayout:
 
 
 @contextmanager
-def open_tdms(path: Path) -> Iterator[TdmsFile]:
+def open_tdms(path: Path) -> Iterator:
     """The file's metadata (no data read), open for reading slices; refuses a file whose last
     segment was cut off.
 
@@ -146,6 +151,8 @@ def open_tdms(path: Path) -> Iterator[TdmsFile]:
     ValvemonError
         Not a TDMS file, or truncated (npTDMS itself only warns and reads what is there).
     """
+    from nptdms import TdmsFile  # imported when a TDMS file is read
+
     with open(path, "rb") as fh:
         try:
             tdms = TdmsFile.open(fh, raw_timestamps=True)
@@ -162,13 +169,19 @@ def open_tdms(path: Path) -> Iterator[TdmsFile]:
             yield tdms
 
 
-def tdms_units(path: Path, export: ExportSpec) -> FileUnits:
-    """The ``unit_string`` of every data channel (:func:`tdms_layout`)."""
-    with open_tdms(path) as tdms:
-        return tdms_layout(tdms, export, str(path)).units
+def detect(head: bytes, name: str) -> str | None:
+    return "tdms" if head.startswith(_MAGIC) else None
+
+
+def describe(src, export: ExportSpec, timezone: str) -> None:
+    """The ``unit_string`` of every data channel (:func:`tdms_layout`); refuses a truncated file."""
+    with open_tdms(src.path) as tdms:
+        src.units = tdms_layout(tdms, export, str(src.path)).units
 
 
 def _times(layout: TdmsLayout, a: int, b: int) -> pl.Series:
+    from nptdms.timestamp import TimestampArray
+
     if layout.time is None:
         step = layout.step_ns
         i = np.arange(a, b, dtype=np.int64)
@@ -180,11 +193,11 @@ def _times(layout: TdmsLayout, a: int, b: int) -> pl.Series:
     return pl.Series(raw)
 
 
-def tdms_batches(path: Path, export: ExportSpec, batch_samples: int) -> Iterator[tuple[pl.DataFrame, int, bool]]:
+def iload(src, export: ExportSpec, tags, batch_samples: int, block_bytes: int) -> Iterator[tuple[pl.DataFrame, int, bool]]:
     """The recording as wide frames of about ``batch_samples`` samples: ``(frame, first line, last)``,
     columns ``export.timestamp_column`` and one Float64 column per channel (tag)."""
-    with open_tdms(path) as tdms:
-        layout = tdms_layout(tdms, export, str(path))
+    with open_tdms(src.path) as tdms:
+        layout = tdms_layout(tdms, export, str(src.path))
         rows = max(batch_samples // len(layout.channels), 1024)
         for a in range(0, layout.length, rows):
             b = min(a + rows, layout.length)

@@ -1,0 +1,192 @@
+"""The nightly path on one simulated valve-day of continuous recording, step by step, on one core.
+
+Runs what a plant runs every night — ``valvemon ingest`` of the day's exports, ``monitor``,
+``report``, ``retention`` — each step as its own command (start-up included) pinned to one CPU
+(``taskset -c``), and prints per step the CPU seconds (user + system of the command, from
+``wait4``), wall seconds, peak RSS, lake rows per CPU second, and the extrapolation to a plant of
+500 continuously recorded valves (core-hours a day: 500 × the valve-day's CPU; the goal is ≤ 3).
+
+    # the valve-day (once; ~24 files of an hour, 86.4 M lake rows)
+    valvemon simulate --out DAY --n-valves 1 --recording continuous --days 1 --format parquet \\
+        --layout wide --scenario wear --quiet --workers 0
+    # the path on it, with this tree's code and, for a before/after in one run, another tree
+    .venv/bin/python bench/plant_day.py --day DAY --work DIR [--code before=TREE] [--code after=.]
+
+``--code LABEL=TREE`` (repeat; default: this tree) runs the commands with ``PYTHONPATH=TREE`` (a
+``git archive`` of another commit, say), so two versions of the code are measured on the same
+files in one run, one whole path after the other (``--rounds`` N: N times, alternating;
+``--ingest-once``: the later codes get a copy of the first one's ingested warehouse, for codes
+whose ingest is the same). Before the measured runs each code runs the whole path once on the
+first 45 minutes of the same recording (``--warm-minutes``, 0: no warm-up; more than the monitor
+reads at once, so that its chunked reads compile the same kernel signatures), so that the numba
+kernels are in that tree's cache, as a nightly run finds them. ``--hours N`` takes the first N
+files and scales the sum to a day (linearly, start-up counted each time: an upper bound).
+The retention step thins the valve-day (``[retention] keep_days = 1``, ``mode = "thin"``,
+``--as-of`` two days after it), as it would once the day is older than the plant's ``keep_days``.
+
+The machine is shared: read CPU seconds, not wall seconds.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import subprocess
+import sys
+import time
+import tomllib
+from datetime import date, timedelta
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+STEPS = ("ingest", "monitor", "report", "retention")
+VALVES = 500
+GOAL_CORE_H = 3.0
+VALVE_DAY_ROWS = 86_400_000
+"""A valve-day at 1 kHz."""
+
+
+def run_step(code: Path, cpu: int, argv: list[str], log: Path) -> dict:
+    """One ``valvemon`` command with ``PYTHONPATH=code``, pinned to ``cpu``: wall, CPU, peak RSS."""
+    env = dict(os.environ, PYTHONPATH=str(code), POLARS_MAX_THREADS="1", NUMBA_NUM_THREADS="1")
+    cmd = ["taskset", "-c", str(cpu), sys.executable, "-c", "import sys; from flows.cli import main; sys.argv[0] = 'valvemon'; main()", *argv]
+    t0 = time.perf_counter()
+    with log.open("a") as out:
+        out.write("$ " + " ".join(argv) + "\n")
+        out.flush()
+        proc = subprocess.Popen(cmd, env=env, stdout=out, stderr=subprocess.STDOUT, cwd=code)
+        _, status, ru = os.wait4(proc.pid, 0)
+    wall = time.perf_counter() - t0
+    if status != 0:
+        raise SystemExit(f"{' '.join(argv[:1])} failed with status {status}; see {log}")
+    return {"cpu_s": ru.ru_utime + ru.ru_stime, "wall_s": wall, "rss_mb": ru.ru_maxrss / 1024}
+
+
+def plant_with_retention(config: Path, out: Path) -> Path:
+    """The plant configuration with ``[retention] keep_days = 1`` (thin)."""
+    text = config.read_text()
+    if "[retention]" not in text:
+        text += '\n[retention]\nkeep_days = 1\nmode = "thin"\nthin_keep_s_per_hour = 10\n'
+    out.write_text(text)
+    tomllib.loads(text)
+    return out
+
+
+def export_rows(files: list[Path]) -> int:
+    """Rows of the wide exports (one per instant: the lake rows they make)."""
+    import pyarrow.parquet as pq  # noqa: PLC0415
+
+    return sum(pq.ParquetFile(f).metadata.num_rows for f in files)
+
+
+def day_of(files: list[Path]) -> date:
+    stem = files[0].stem.split("_")[-1]
+    return date(int(stem[:4]), int(stem[4:6]), int(stem[6:8]))
+
+
+def path_once(code: Path, cpu: int, config: Path, files: list[Path], warehouse: Path, as_of: date, log: Path,
+              ingested: Path | None = None, keep: Path | None = None) -> dict:
+    """The nightly path into a fresh ``warehouse``: {step: measurement}. With ``ingested`` (a
+    warehouse the same exports were ingested into) its copy replaces the ingest step; with
+    ``keep`` the warehouse right after the ingest is copied there."""
+    if warehouse.exists():
+        shutil.rmtree(warehouse)
+    wh = ["--warehouse", str(warehouse)]
+    argv = {
+        "ingest": ["ingest", "--config", str(config), *wh, *map(str, files)],
+        "monitor": ["monitor", "--config", str(config), *wh],
+        "report": ["report", "--config", str(config), *wh],
+        "retention": ["retention", "--config", str(config), *wh, "--as-of", as_of.isoformat()],
+    }
+    out = {}
+    for step in STEPS:
+        if step == "ingest" and ingested is not None:
+            shutil.copytree(ingested, warehouse)
+            continue
+        out[step] = run_step(code, cpu, argv[step], log)
+        if step == "ingest" and keep is not None:
+            if keep.exists():
+                shutil.rmtree(keep)
+            shutil.copytree(warehouse, keep)
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--day", type=Path, required=True, help="a simulated valve-day: DAY/plant.toml, DAY/exports/*")
+    ap.add_argument("--work", type=Path, required=True, help="scratch folder (warehouses, logs); emptied first")
+    ap.add_argument("--code", action="append", default=None, help="LABEL=TREE (repeat); default this=<this tree>")
+    ap.add_argument("--cpu", type=int, default=1, help="the CPU each step is pinned to")
+    ap.add_argument("--rounds", type=int, default=1)
+    ap.add_argument("--warm-minutes", type=int, default=45, help="minutes of the first file for the warm-up (> 2 M rows: read in spans, as the day)")
+    ap.add_argument("--hours", type=int, default=None, help="only the first N hourly files")
+    ap.add_argument("--ingest-once", action="store_true",
+                    help="ingest with the first code only and give the others a copy of its warehouse (codes whose ingest is the same)")
+    args = ap.parse_args()
+
+    codes = [(c.split("=", 1)[0], Path(c.split("=", 1)[1]).resolve()) for c in (args.code or [f"this={ROOT}"])]
+    files = sorted((args.day / "exports").glob("*.parquet"))
+    if args.hours:
+        files = files[: args.hours]
+    if not files:
+        raise SystemExit(f"no exports in {args.day / 'exports'}")
+    if args.work.exists():
+        shutil.rmtree(args.work)
+    args.work.mkdir(parents=True)
+    config = plant_with_retention(args.day / "plant.toml", args.work / "plant.toml")
+    as_of = day_of(files) + timedelta(days=2)
+    log = args.work / "commands.log"
+
+    # warm-up: the whole path on the first minutes (compiles each tree's numba cache once; 0: skip)
+    if args.warm_minutes > 0:
+        warm = args.work / "warm_exports"
+        warm.mkdir()
+        import pyarrow.parquet as pq  # noqa: PLC0415 - only the warm-up's cut needs it
+
+        table = pq.read_table(files[0])
+        pq.write_table(table.slice(0, args.warm_minutes * 60_000), warm / files[0].name)
+        del table
+        for label, code in codes:
+            path_once(code, args.cpu, config, [warm / files[0].name], args.work / f"wh_warm_{label}", as_of, log)
+    ingested = args.work / "wh_ingested"
+
+    results: dict[str, list[dict]] = {label: [] for label, _ in codes}
+    rows = export_rows(files)
+    for r in range(args.rounds):
+        for label, code in codes:
+            first = label == codes[0][0]
+            once = args.ingest_once
+            res = path_once(code, args.cpu, config, files, args.work / f"wh_{label}", as_of, log,
+                            ingested if once and not first else None, ingested if once and first else None)
+            if "ingest" not in res:
+                res["ingest"] = results[codes[0][0]][-1]["ingest"]
+            results[label].append(res)
+            print(json.dumps({"round": r + 1, "code": label, **res}), flush=True)
+
+    print(f"\n{len(files)} file(s), {rows:,} lake rows; CPU s per step (user + system, pinned to CPU {args.cpu}), "
+          f"least of {args.rounds} round(s)\n")
+    head = "| step | " + " | ".join(f"{label}: CPU s | wall s | peak RSS | M rows / CPU s" for label, _ in codes) + " |"
+    print(head)
+    print("|---|" + "---:|" * (4 * len(codes)))
+    best = {label: {s: min(rr[s]["cpu_s"] for rr in results[label]) for s in STEPS} for label, _ in codes}
+    for step in STEPS:
+        cells = []
+        for label, _ in codes:
+            rr = min(results[label], key=lambda x: x[step]["cpu_s"])[step]
+            cells += [f"{rr['cpu_s']:.1f}", f"{rr['wall_s']:.1f}", f"{rr['rss_mb'] / 1024:.2f} GB", f"{rows / rr['cpu_s'] / 1e6:.2f}"]
+        print(f"| {step} | " + " | ".join(cells) + " |")
+    day = VALVE_DAY_ROWS / rows  # a part of a day (--hours): scaled up linearly, start-up included each time
+    scaled = "" if day == 1 else f" (measured on {rows:,} rows, scaled x{day:.2f} to a valve-day: an upper bound, start-up counted each time)"
+    print()
+    for label, _ in codes:
+        total = sum(best[label].values()) * day
+        per = ", ".join(f"{s} {best[label][s] * day * VALVES / 3600:.2f}" for s in STEPS)
+        verdict = "within" if total * VALVES / 3600 <= GOAL_CORE_H else "over"
+        print(f"{label}: {total:.1f} CPU s per valve-day{scaled} -> {total * VALVES / 3600:.2f} core-hours per {VALVES}-valve "
+              f"plant-day ({per}); {verdict} the goal of {GOAL_CORE_H:g}")
+
+
+if __name__ == "__main__":
+    main()
