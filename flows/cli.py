@@ -1,4 +1,4 @@
-"""The ``valvemon`` command line (``../shared/spec/interfaces.md``).
+"""The ``valvemon`` command line (``docs/interfaces.md``).
 
 Every command takes ``--warehouse DIR`` (or ``$VALVEMON_WAREHOUSE``; default ``warehouse/``).
 Exit status 0 on success; otherwise non-zero with a one-line reason on stderr (:func:`main`).
@@ -71,17 +71,18 @@ def demo(warehouse: Warehouse = None) -> None:
 
     import flows.demo as demo_flows
     from flows.common.prefect_run import run_flow
+    from flows.report.remaining import remaining_text
 
     wh = warehouse_dir(warehouse)
     result = run_flow(demo_flows.demo_flow, warehouse=str(wh))
     report = result["report"]
     ranking = report.ranking if report.ranking is not None else None
     table = Table(title=f"Fleet condition, most urgent first ({result['config']})")
-    columns = [c for c in ("urgency_rank", "valve_id", "state", "worst_edge", "remaining_hours", "reason") if ranking is not None and c in ranking.columns]
+    columns = ("urgency_rank", "valve_id", "state", "worst_edge", "remaining life", "reason")
     for c in columns:
         table.add_column(c, overflow="fold")
-    for row in ranking.select(columns).iter_rows() if ranking is not None else []:
-        table.add_row(*("" if v is None else (f"{v:,.0f}" if isinstance(v, float) else str(v)) for v in row))
+    for row in ranking.iter_rows(named=True) if ranking is not None else []:
+        table.add_row(str(row["urgency_rank"]), row["valve_id"], row["state"], row["worst_edge"], remaining_text(row), row["reason"])
     Console(width=max(Console().width, 160)).print(table)
     typer.echo(f"report: {report.html.resolve()}")
 

@@ -3,7 +3,7 @@ the closed-loop plant, a fast batch simulator, sensor models and valve-condition
 
 Pure functions over numpy arrays (numba kernels inside), SI units throughout, no I/O, no
 imports from the project's other packages. The equations with their recovered signs are in
-``shared/spec/model.md``.
+``docs/model.md``.
 """
 
 from .area import edge_area, opening_coordinate, valve_areas

@@ -1,5 +1,5 @@
 """Opening area of a control edge, Eq. 3 of Steinboeck et al. (2013), with the signs of
-``shared/spec/model.md``.
+``docs/model.md``.
 
 Every edge is described in its own opening coordinate u (u = +x for s1 and 2r, u = -x for
 1r and s2), in which the area is the same increasing function of u for all four edges, with

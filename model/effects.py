@@ -1,9 +1,9 @@
 """Candidate physical effects the base model of Steinboeck et al. (2013) leaves out: the library
 the model-discrepancy workflow tests, each a switchable term of the simulator.
 
-Every effect has a name (``shared/spec/interfaces.md``), a term in the equations and one
+Every effect has a name (``docs/interfaces.md``), a term in the equations and one
 parameter with a unit. With every parameter at its neutral value (:class:`Effects` defaults)
-the model is exactly the base model of ``shared/spec/model.md``.
+the model is exactly the base model of ``docs/model.md``.
 
 | effect (variant)            | parameter           | unit           | term                                                      |
 |-----------------------------|---------------------|----------------|-----------------------------------------------------------|
@@ -71,7 +71,7 @@ EFFECT_NAMES: tuple[str, ...] = (
     "pressure_sensor_offset", "pressure_sensor_gain", "supply_line_resistance",
     "friction_change", "load_mass_change",
 )
-"""The effect names of ``shared/spec/interfaces.md``, in library order."""
+"""The effect names of ``docs/interfaces.md``, in library order."""
 
 
 @dataclass(frozen=True)

@@ -3,7 +3,7 @@
 Every parameter set is a frozen dataclass, so a parameter set is a value: it can be
 hashed, compared and used as a cache key. :data:`TABLE1` is the preset of the paper's
 Table 1 (Steinboeck et al. 2013) completed by documented choices for every value the paper
-leaves open (``shared/spec/model.md``, section "Parameters").
+leaves open (``docs/model.md``, section "Parameters").
 
 Conventions: edges are ordered :data:`EDGES`; each edge has its opening coordinate
 u = +x (s1, 2r) or u = -x (1r, s2), in which a positive underlap change means "more open".

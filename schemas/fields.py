@@ -403,16 +403,28 @@ STANDSTILL_FIELDS: tuple[Field, ...] = (
 )
 """Eq. 9 at standstill per window (table ``standstill_checks``, filled incrementally from the lake)."""
 
+REMAINING_BASES: tuple[str, ...] = ("faulty", "worn", "forecast", "beyond_horizon", "no_trend", "too_little_data")
+"""What a remaining life rests on (view ``valve_condition``, docs/monitoring.md "Remaining life")."""
+
+_REMAINING_BASIS = Field(
+    "remaining_basis", pl.Utf8, "", "What remaining_hours rests on: faulty or worn (0), forecast (a trend's crossing "
+    "within the horizon), beyond_horizon, no_trend or too_little_data (null).", isin=REMAINING_BASES,
+)
+_REMAINING_HORIZON = Field(
+    "remaining_horizon_hours", pl.Float64, "h", "The forecast horizon of a healthy edge: 3 × the span of operating "
+    "hours its trend was fitted on; no forecast reaches beyond it.", nullable=True,
+)
+
 VALVE_CONDITION_FIELDS: tuple[Field, ...] = (
     _VALVE_ID,
     _EDGE,
     Field("state", pl.Utf8, "", "healthy, worn, faulty or unknown.", isin=STATES),
     Field("reason", pl.Utf8, "", "Why, in words, with the numbers."),
-    Field("remaining_hours", pl.Float64, "h", "Operating hours until a parameter's trend reaches its wear bound (0 when worn).", nullable=True),
+    Field("remaining_hours", pl.Float64, "h", "Operating hours until a parameter's trend reaches its wear bound, within the forecast horizon; 0 when faulty or worn; null otherwise (remaining_basis says why).", nullable=True),
     Field("remaining_hours_low", pl.Float64, "h", "Lower end of its 95 % interval.", nullable=True),
-    Field("remaining_hours_high", pl.Float64, "h", "Upper end of its 95 % interval.", nullable=True),
+    Field("remaining_hours_high", pl.Float64, "h", "Upper end of its 95 % interval (null where it lies beyond the horizon).", nullable=True),
     Field("limiting_parameter", pl.Utf8, "", "The parameter whose trend reaches its bound first.", nullable=True),
-    Field("end_of_life_hours", pl.Float64, "h", "Operating hours at which that happens.", nullable=True),
+    Field("end_of_life_hours", pl.Float64, "h", "Operating hours at which that happens (forecasts within the horizon).", nullable=True),
     Field("operating_hours", pl.Float64, "h", "Operating hours of the latest ok window.", nullable=True),
     Field("last_window_start", UTC_US, "", "Latest monitoring window of the edge (any status).", nullable=True),
     Field("last_ok_window_start", UTC_US, "", "Latest window with an estimate.", nullable=True),
@@ -430,6 +442,8 @@ VALVE_CONDITION_FIELDS: tuple[Field, ...] = (
     Field("leak_scale", pl.Float64, "", "Closed-edge leakage over Eq. 3's (0 = none), median of the ok windows.", nullable=True),
     Field("leak_scale_baseline", pl.Float64, "", "The same at commissioning (1 for a nominal baseline: Eq. 3 assumed).", nullable=True),
     Field("edge_law", pl.Utf8, "", "Edge law of the current baseline's shape (eq3, sharp; a note in reason when not the configured one).", nullable=True),
+    _REMAINING_BASIS,
+    _REMAINING_HORIZON,
 )
 """View ``valve_condition`` (interfaces.md), as exported to ``export/valve_condition.parquet``."""
 
@@ -443,14 +457,16 @@ FLEET_RANKING_FIELDS: tuple[Field, ...] = (
     Field("edges_unknown", pl.Int64, "", "Edges without enough data.", ge=0),
     Field("worst_edge", pl.Utf8, "", "The edge that decides the state.", isin=EDGES),
     Field("reason", pl.Utf8, "", "Its reason."),
-    Field("remaining_hours", pl.Float64, "h", "Soonest remaining life over the edges.", nullable=True),
+    Field("remaining_hours", pl.Float64, "h", "The worst edge's remaining life (valve_condition): 0 when faulty or worn, the soonest forecast within the horizon, else null.", nullable=True),
     Field("remaining_hours_low", pl.Float64, "h", "Lower end of its 95 % interval.", nullable=True),
-    Field("remaining_hours_high", pl.Float64, "h", "Upper end of its 95 % interval.", nullable=True),
-    Field("limiting_edge", pl.Utf8, "", "The edge with the soonest remaining life.", nullable=True),
+    Field("remaining_hours_high", pl.Float64, "h", "Upper end of its 95 % interval (null where beyond the horizon).", nullable=True),
+    Field("limiting_edge", pl.Utf8, "", "The edge the remaining life is of (null when there is none).", nullable=True),
     Field("eq9_ok", pl.Boolean, "", "Latest Eq. 9 standstill check passed.", nullable=True),
     Field("eq9_residual", pl.Float64, "", "Its residual.", nullable=True),
     Field("operating_hours", pl.Float64, "h", "Operating hours of the latest ok window.", nullable=True),
     Field("last_window_start", UTC_US, "", "Latest monitoring window.", nullable=True),
+    _REMAINING_BASIS,
+    _REMAINING_HORIZON,
 )
 """View ``fleet_ranking``, as exported to ``export/fleet_ranking.parquet``."""
 

@@ -1,4 +1,4 @@
-"""The plant configuration (``../shared/spec/plant-config.md``): parsed, validated, in SI.
+"""The plant configuration (``docs/configuration.md``): parsed, validated, in SI.
 
 :func:`parse_plant_config` takes the dictionary a TOML parser returns and gives a frozen
 :class:`PlantConfig`; every problem raises :class:`ConfigError` naming the key

@@ -6,11 +6,13 @@
   current − baseline underneath, where wear of a few per cent becomes visible.
 * :func:`trends_figure`: per valve, α̂, x̂ and e over operating hours for each edge, a point a
   UTC day (``trend_daily``: the day's median, and its windows' minimum to maximum as a band), with
-  the wear and fault bounds, the fitted trend extrapolated to its bound and the predicted end of
-  life with its 95 % interval (the paper's Fig. 6); days with an alarm marked in red. A
-  continuous recording's 1,440 windows a day are its day's point and band, not 1,440 points.
+  the wear and fault bounds, the fitted trend and, where the edge has a forecast within the
+  horizon (``valve_condition``), the end of life with its 95 % interval (the paper's Fig. 6);
+  days with an alarm marked in red. A continuous recording's 1,440 windows a day are its day's
+  point and band, not 1,440 points.
 * :func:`fleet_figure`: the fleet at a glance: the state of every edge of the most urgent
-  valves, the remaining life of those with a forecast, and the count of valves per state.
+  valves, their remaining life (bars where there is a figure, the report's words beside), and the
+  count of valves per state.
 """
 
 from __future__ import annotations
@@ -30,6 +32,7 @@ import polars as pl  # noqa: E402
 from matplotlib.colors import ListedColormap  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 
+from flows.report.remaining import remaining_text  # noqa: E402
 from schemas.fields import EDGES, STATES  # noqa: E402
 
 STATE_COLOURS = {"healthy": "#4caf50", "worn": "#ff9800", "faulty": "#d32f2f", "unknown": "#9e9e9e"}
@@ -129,7 +132,8 @@ def characteristics_figure(valve_id: str, curves: dict[str, dict[str, np.ndarray
     return _save(fig, path)
 
 
-def trends_figure(valve_id: str, daily: pl.DataFrame, lines: pl.DataFrame, bounds: pl.DataFrame, path: Path, leak: pl.DataFrame | None = None) -> Path:
+def trends_figure(valve_id: str, daily: pl.DataFrame, lines: pl.DataFrame, bounds: pl.DataFrame, life: dict[str, dict],
+                  path: Path, leak: pl.DataFrame | None = None) -> Path:
     """α̂, x̂, e and the closed-edge leakage over operating hours for the four edges of one valve,
     a point a UTC day (a continuous recording gives 1,440 windows a day: its picture is its days).
 
@@ -139,9 +143,12 @@ def trends_figure(valve_id: str, daily: pl.DataFrame, lines: pl.DataFrame, bound
         Rows of view ``trend_daily`` for the valve (per edge, day and parameter: median, min, max,
         n_alarms, operating_hours at the day's last window).
     lines : DataFrame
-        Rows of view ``parameter_trends`` for the valve (slope, intercept, bounds, end of life).
+        Rows of view ``parameter_trends`` for the valve (slope, intercept).
     bounds : DataFrame
         Rows of view ``stg_condition_bounds`` for the valve (fault and wear bounds per parameter).
+    life : dict
+        edge → its ``valve_condition`` row: the end of life is drawn where that row has a
+        forecast (``remaining_basis`` forecast, on its ``limiting_parameter``), nowhere else.
     leak : DataFrame, optional
         Per edge and day: operating_hours, median_leak_scale, min_leak_scale, max_leak_scale of
         the ok windows, and leak_scale_baseline: the bottom row.
@@ -170,13 +177,13 @@ def trends_figure(valve_id: str, daily: pl.DataFrame, lines: pl.DataFrame, bound
                 ax.plot(h[alarm], hi_v[alarm], "x", color=STATE_COLOURS["faulty"], ms=7, mew=2, label="day with an alarm")
             x_end = h.max()
             lp = lines.filter((pl.col("edge") == edge) & (pl.col("parameter") == p))
-            predicted = lp.filter(pl.col("crossing_status") == "predicted").sort("end_of_life_hours")
-            if predicted.height:
-                eol = predicted.row(0, named=True)
-                x_end = max(x_end, min(eol["end_of_life_hours"], h.max() + 20 * max(h.max() - h.min(), 1.0)))
-                ax.axvline(eol["end_of_life_hours"], color=STATE_COLOURS["worn"], lw=1.2)
-                lo, hi = eol["end_of_life_hours_low"], eol["end_of_life_hours_high"]
-                ax.axvspan(lo, min(hi, x_end * 1.05), color=STATE_COLOURS["worn"], alpha=0.15, label="end of life (95 %)")
+            c = life.get(edge, {})
+            if c.get("remaining_basis") == "forecast" and c.get("limiting_parameter") == p:
+                now = c["operating_hours"]
+                x_end = max(x_end, c["end_of_life_hours"])
+                ax.axvline(c["end_of_life_hours"], color=STATE_COLOURS["worn"], lw=1.2)
+                hi = c["remaining_hours_high"] if c["remaining_hours_high"] is not None else c["remaining_horizon_hours"]
+                ax.axvspan(now + c["remaining_hours_low"], now + hi, color=STATE_COLOURS["worn"], alpha=0.15, label="end of life (95 %)")
             if lp.height and lp["slope_per_hour"][0] is not None and lp["n_fits"][0] >= 3:
                 xs = np.array([h.min(), x_end])
                 ax.plot(xs, lp["intercept"][0] + lp["slope_per_hour"][0] * xs, "--", color="#ef6c00", lw=1.2, label="trend (OLS)")
@@ -227,11 +234,17 @@ def fleet_figure(ranking: pl.DataFrame, conditions: pl.DataFrame, path: Path, ma
         ax_life.barh(y[has], rem[has], color=[c for c, k in zip(colours, has) if k], alpha=0.85)
         err = np.vstack([rem[has] - lo[has], np.where(np.isfinite(hi[has]), hi[has] - rem[has], 0)])
         ax_life.errorbar(rem[has], y[has], xerr=np.clip(err, 0, None), fmt="none", ecolor="black", capsize=3, lw=1)
-    for k in np.flatnonzero(~has):
-        ax_life.text(0, y[k], "  no forecast", va="center", fontsize=8, color="#616161")
+    for k, row in enumerate(top.iter_rows(named=True)):  # the words of the table (now, > horizon, ...)
+        ax_life.text(0 if not has[k] else rem[k], y[k], "  " + remaining_text(row), va="center", fontsize=8, color="#616161")
+    reach = np.nanmax(np.concatenate([rem[has], hi[has], [0.0]]))
+    if reach > 0:
+        ax_life.set_xlim(0, 1.3 * reach)  # room for the words beside the bars
+    else:  # nothing but "now" and words: no hour axis to read
+        ax_life.set_xlim(0, 1)
+        ax_life.set_xticks([])
     ax_life.set_yticks(y, [str(v) for v in ids], fontsize=8)
     ax_life.set_ylim(len(ids) - 0.5, -0.5)
-    ax_life.set_xlabel("remaining operating hours to a wear bound (bar) with 95 % interval")
+    ax_life.set_xlabel("remaining operating hours to a wear bound (bar) with 95 % interval, within the forecast horizon")
     ax_life.set_title("remaining service life")
     ax_life.grid(axis="x", alpha=0.3)
     counts = {s: int((ranking["state"] == s).sum()) for s in STATES}

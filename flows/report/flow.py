@@ -207,7 +207,7 @@ def run_report(config_path: str | Path, warehouse: str | Path, *, detail: int = 
             )
             mine = [f.filter(pl.col("valve_id") == vid) for f in (daily, lines, bounds, leak)]
             jobs += [(characteristics_figure, (vid, _edge_curves(config, vid, baselines, latest), latest, out_dir / f"characteristics_{vid}.png")),
-                     (trends_figure, (vid, *mine[:3], out_dir / f"trends_{vid}.png", mine[3]))]  # fmt: skip
+                     (trends_figure, (vid, *mine[:3], latest, out_dir / f"trends_{vid}.png", mine[3]))]  # fmt: skip
         discrepancy = discrepancy_results(con, warehouse)
         quality = data_quality(con)
     finally:

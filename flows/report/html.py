@@ -12,6 +12,7 @@ import polars as pl
 
 from flows.report.figures import STATE_COLOURS
 from flows.report.quality import DataQuality, quality_section
+from flows.report.remaining import remaining_text
 
 CSS = """
 body { font-family: -apple-system, 'Segoe UI', Helvetica, Arial, sans-serif; margin: 24px; color: #212121; background: #fff; }
@@ -44,10 +45,6 @@ def _num(v, fmt: str = "{:,.0f}") -> str:
         return html.escape(str(v))
 
 
-def _life(r: dict) -> str:
-    if r.get("remaining_hours") is None:
-        return "—"
-    return f"{_num(r['remaining_hours'])} ({_num(r.get('remaining_hours_low'))}–{_num(r.get('remaining_hours_high'))})"
 
 
 def _img(path: Path, alt: str) -> str:
@@ -147,14 +144,14 @@ def render_report(
         "<h2>Fleet, most urgent first</h2>",
         _img(fleet_png, "fleet overview"),
         "<table><tr><th>#</th><th>valve</th><th>state</th><th>edge</th><th>reason</th>"
-        "<th>remaining h (95 %)</th><th>Eq. 9</th><th>operating h</th><th>last window (UTC)</th></tr>",
+        "<th>remaining life</th><th>Eq. 9</th><th>operating h</th><th>last window (UTC)</th></tr>",
     ]
     for r in ranking.sort("urgency_rank").iter_rows(named=True):
         last = r["last_window_start"].strftime("%Y-%m-%d %H:%M") if r["last_window_start"] else "—"
         parts.append(
             f"<tr><td class='num'>{r['urgency_rank']}</td><td><a href='#valve-{html.escape(r['valve_id'])}'>"
             f"{html.escape(r['valve_id'])}</a></td><td>{_state(r['state'])}</td><td>{html.escape(r['worst_edge'] or '')}</td>"
-            f"<td>{html.escape(r['reason'] or '')}</td><td class='num'>{_life(r)}</td><td>{_eq9(r['eq9_ok'])}</td>"
+            f"<td>{html.escape(r['reason'] or '')}</td><td class='num'>{html.escape(remaining_text(r))}</td><td>{_eq9(r['eq9_ok'])}</td>"
             f"<td class='num'>{_num(r['operating_hours'])}</td><td>{last}</td></tr>"
         )
     parts.append("</table>")
@@ -162,8 +159,10 @@ def render_report(
         '<p class="note">State per edge: <b>faulty</b> = a window beyond a fault bound or a significant departure '
         "(robust z-score) from the edge's recent trend within the hold time; <b>worn</b> = the long-term level of "
         "α̂, x̂ or e beyond a wear bound; <b>unknown</b> = too few ok windows to judge; otherwise <b>healthy</b>. "
-        "Remaining hours: the least-squares trend over operating hours extrapolated to the wear bound, with the "
-        "95 % interval of the crossing (Fieller). Eq. 9: the standstill pressure check, an indicator independent "
+        "Remaining life: now for a faulty or worn edge; otherwise the least-squares trend over operating hours "
+        "extrapolated to the wear bound, with the 95 % interval of the crossing (Fieller), shown only within the "
+        "forecast horizon, a multiple of the span of operating hours the trend rests on (beyond it a linear "
+        "extrapolation is no forecast), in two significant figures. Eq. 9: the standstill pressure check, an indicator independent "
         "of the fits. Leakage: the closed edge's leakage over Eq. 3's 1 mm inside the edge (0 = none), median of the "
         "ok windows and at commissioning; a growing leakage is wear of the lands (trend picture, bottom row). "
         "Bounds: the plant configuration's [valve_types.NAME.bounds].</p>"
@@ -172,7 +171,7 @@ def render_report(
         parts.append(f"<h2 id='valve-{html.escape(vid)}'>Valve {html.escape(vid)}</h2>")
         parts.append(
             "<table><tr><th>edge</th><th>state</th><th>reason</th><th>α̂</th><th>x̂ (% x_max)</th><th>e (mm²)</th>"
-            "<th>leakage (× Eq. 3; commissioning)</th><th>remaining h (95 %)</th><th>ok windows</th></tr>"
+            "<th>leakage (× Eq. 3; commissioning)</th><th>remaining life</th><th>ok windows</th></tr>"
         )
         for r in conditions.filter(pl.col("valve_id") == vid).sort("edge_order").iter_rows(named=True):
             parts.append(
@@ -180,7 +179,7 @@ def render_report(
                 f"<td class='num'>{_num(r['alpha_hat'], '{:.3f}')}</td><td class='num'>{_num(r['x_hat_pct'], '{:+.2f}')}</td>"
                 f"<td class='num'>{_num(r['e_mm2'], '{:.3f}')}</td>"
                 f"<td class='num'>{_num(r.get('leak_scale'), '{:.2f}')}; {_num(r.get('leak_scale_baseline'), '{:.2f}')}</td>"
-                f"<td class='num'>{_life(r)}</td>"
+                f"<td class='num'>{html.escape(remaining_text(r))}</td>"
                 f"<td class='num'>{r['n_ok_windows']} / {r['n_windows']}</td></tr>"
             )
         parts.append("</table>")

@@ -3,9 +3,12 @@
 --   1 faulty (an edge is faulty; more faulty edges first),
 --   2 worn (an edge is worn),
 --   3 Eq. 9 standstill check fails although no edge is faulty or worn,
---   4 healthy with a predicted end of life (soonest remaining_hours_low first),
+--   4 healthy with a forecast within the horizon (soonest remaining_hours_low first),
 --   5 unknown (too little data to judge an edge),
---   6 healthy without any trend toward a wear bound.
+--   6 healthy without a forecast within the horizon.
+-- The remaining life is that of the worst edge, its valve_condition row as it is (the rule is
+-- written there once): 0 with the faulty or worn edge named, the soonest forecast within the
+-- horizon, or null with remaining_basis saying why. limiting_edge: the edge the figures are of.
 with
 
 conditions as (
@@ -22,18 +25,14 @@ per_valve as (
         count(*) filter (where state = 'faulty') as edges_faulty,
         count(*) filter (where state = 'worn') as edges_worn,
         count(*) filter (where state = 'unknown') as edges_unknown,
-        count(*) filter (where state = 'healthy') as edges_healthy,
         coalesce(
-            arg_min(edge, edge_order) filter (where state = 'faulty'),
-            arg_min(edge, edge_order) filter (where state = 'worn'),
-            arg_min(edge, remaining_hours) filter (where state = 'healthy' and remaining_hours is not null),
-            arg_min(edge, edge_order) filter (where state = 'unknown'),
+            arg_min(edge, edge_order) filter (where remaining_basis = 'faulty'),
+            arg_min(edge, edge_order) filter (where remaining_basis = 'worn'),
+            arg_min(edge, remaining_hours) filter (where remaining_basis = 'forecast'),
+            arg_min(edge, edge_order) filter (where remaining_basis = 'too_little_data'),
+            arg_min(edge, edge_order) filter (where remaining_basis = 'beyond_horizon'),
             arg_min(edge, edge_order)
         ) as worst_edge,
-        min(remaining_hours) as remaining_hours,
-        arg_min(remaining_hours_low, remaining_hours) as remaining_hours_low,
-        arg_min(remaining_hours_high, remaining_hours) as remaining_hours_high,
-        arg_min(edge, remaining_hours) as limiting_edge,
         max(last_window_start) as last_window_start,
         max(operating_hours) as operating_hours
     from conditions
@@ -44,6 +43,12 @@ tiered as (
     select
         per_valve.*,
         conditions.reason,
+        conditions.remaining_hours,
+        conditions.remaining_hours_low,
+        conditions.remaining_hours_high,
+        case when conditions.remaining_hours is not null then per_valve.worst_edge end as limiting_edge,
+        conditions.remaining_basis,
+        conditions.remaining_horizon_hours,
         standstill.eq9_ok,
         standstill.eq9_residual,
         case
@@ -56,7 +61,7 @@ tiered as (
             when edges_faulty > 0 then 1
             when edges_worn > 0 then 2
             when standstill.eq9_ok = false then 3
-            when per_valve.remaining_hours is not null and edges_healthy > 0 then 4
+            when conditions.remaining_basis = 'forecast' then 4
             when edges_unknown > 0 then 5
             else 6
         end as urgency_tier
@@ -86,7 +91,9 @@ final as (
         eq9_ok,
         eq9_residual,
         operating_hours,
-        last_window_start
+        last_window_start,
+        remaining_basis,
+        remaining_horizon_hours
     from tiered
 )
 

@@ -9,9 +9,20 @@
 --   unknown  otherwise, fewer than trend_min_fits ok, alarm-free windows in the trend span
 --            (or no fits at all);
 --   healthy  otherwise.
--- remaining_hours (+ _low, _high, 95 % interval): for a healthy edge the soonest predicted
--- crossing of a wear bound by a parameter's trend (parameter_trends); 0 for a worn edge; null
--- for faulty and unknown edges and where no trend heads significantly toward a bound.
+-- Remaining life, the one rule every other view, picture and export reads (fleet_ranking takes
+-- its worst edge's row; docs/monitoring.md, "Remaining life"). remaining_basis says what the
+-- figures rest on:
+--   faulty          remaining_hours (and _low, _high) 0: replace now;
+--   worn            0 as well: the long-term level is beyond a wear bound;
+--   forecast        healthy, and the soonest predicted crossing of a wear bound by a parameter's
+--                   trend (parameter_trends: significant slope, bounded 95 % interval) lies
+--                   within the horizon, horizon_spans times the span of operating hours the trend
+--                   was fitted on (remaining_horizon_hours); _high is null where the interval
+--                   reaches beyond the horizon;
+--   beyond_horizon  healthy, a trend heads for a bound but reaches it only beyond the horizon:
+--                   no figure (a linear extrapolation that far is no forecast), null;
+--   no_trend        healthy, no trend heads significantly toward a bound: null;
+--   too_little_data unknown: null.
 -- leak_scale: the edge's closed-edge leakage over Eq. 3's, median over its ok windows (a
 -- growing leakage is a wear signal; the trend picture shows it per window), leak_scale_baseline
 -- the commissioning value (1 for a nominal baseline: Eq. 3 assumed).
@@ -20,6 +31,12 @@
 -- The Eq. 9 standstill check (standstill_indicator) is a valve-wide quick indicator: its
 -- result is appended to the reason and given in eq9_ok, it does not change an edge's state.
 with
+
+settings as (
+    -- the horizon of a forecast in spans of the data behind it (chosen from the wear study:
+    -- docs/monitoring.md, "Remaining life: the forecast horizon")
+    select 3.0 as horizon_spans
+),
 
 valves as (
     select distinct valve_id, fault_hold_hours, trend_min_fits from stg_condition_bounds
@@ -102,6 +119,13 @@ soonest as (
     group by valve_id, edge
 ),
 
+horizon as (
+    select valve_id, edge, settings.horizon_spans * max(span_hours) as remaining_horizon_hours
+    from trends cross join settings
+    where span_hours > 0
+    group by valve_id, edge, settings.horizon_spans
+),
+
 standstill as (
     select * from standstill_indicator
 ),
@@ -132,6 +156,7 @@ judged as (
         recent_alarms.* exclude (valve_id, edge),
         levels.* exclude (valve_id, edge),
         soonest.* exclude (valve_id, edge),
+        horizon.remaining_horizon_hours,
         standstill.eq9_ok,
         standstill.eq9_residual,
         standstill.eq9_expected,
@@ -144,8 +169,23 @@ judged as (
     left join recent_alarms using (valve_id, edge)
     left join levels using (valve_id, edge)
     left join soonest using (valve_id, edge)
+    left join horizon using (valve_id, edge)
     left join standstill using (valve_id)
     left join baseline_leak using (valve_id, edge)
+),
+
+life as (
+    select
+        *,
+        case
+            when state = 'faulty' then 'faulty'
+            when state = 'worn' then 'worn'
+            when state = 'unknown' then 'too_little_data'
+            when remaining_hours <= remaining_horizon_hours then 'forecast'
+            when remaining_hours is not null then 'beyond_horizon'
+            else 'no_trend'
+        end as remaining_basis
+    from judged
 ),
 
 final as (
@@ -165,11 +205,13 @@ final as (
                                 coalesce(n_trend_fits, 0), trend_min_fits)
                 end
             else
-                case
-                    when remaining_hours is not null then
-                        printf('healthy; %s trend reaches its %s wear bound %.3g in about %.0f h (95 %%: %.0f to %.0f h)',
-                               limiting_parameter, limiting_side, limiting_bound, remaining_hours,
-                               remaining_hours_low, remaining_hours_high)
+                case remaining_basis
+                    when 'forecast' then
+                        printf('healthy; %s trend reaches its %s wear bound %.3g within the horizon',
+                               limiting_parameter, limiting_side, limiting_bound)
+                    when 'beyond_horizon' then
+                        printf('healthy; %s trend reaches its %s wear bound %.3g only beyond the horizon (%g × the span of its data)',
+                               limiting_parameter, limiting_side, limiting_bound, (select horizon_spans from settings))
                     else 'healthy; no significant trend toward a wear bound'
                 end
         end
@@ -179,11 +221,14 @@ final as (
             else ''
         end
         || case when coalesce(edge_law_note, '') <> '' then '; ' || edge_law_note else '' end as reason,
-        case state when 'healthy' then remaining_hours when 'worn' then 0.0 end as remaining_hours,
-        case state when 'healthy' then remaining_hours_low when 'worn' then 0.0 end as remaining_hours_low,
-        case state when 'healthy' then remaining_hours_high when 'worn' then 0.0 end as remaining_hours_high,
-        case state when 'healthy' then limiting_parameter end as limiting_parameter,
-        case state when 'healthy' then end_of_life_hours end as end_of_life_hours,
+        case remaining_basis when 'forecast' then remaining_hours when 'faulty' then 0.0 when 'worn' then 0.0 end as remaining_hours,
+        case remaining_basis when 'forecast' then remaining_hours_low when 'faulty' then 0.0 when 'worn' then 0.0 end as remaining_hours_low,
+        case remaining_basis
+            when 'forecast' then case when remaining_hours_high <= remaining_horizon_hours then remaining_hours_high end
+            when 'faulty' then 0.0 when 'worn' then 0.0
+        end as remaining_hours_high,
+        case when remaining_basis in ('forecast', 'beyond_horizon') then limiting_parameter end as limiting_parameter,
+        case remaining_basis when 'forecast' then end_of_life_hours end as end_of_life_hours,
         operating_hours,
         last_window_start,
         last_ok_window_start,
@@ -200,8 +245,10 @@ final as (
         edge_order,
         leak_scale,
         leak_scale_baseline,
-        edge_law
-    from judged
+        edge_law,
+        remaining_basis,
+        case when state = 'healthy' then remaining_horizon_hours end as remaining_horizon_hours
+    from life
 )
 
 select * from final order by valve_id, edge_order

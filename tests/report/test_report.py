@@ -30,7 +30,7 @@ from flows.report.flow import run_report
 from flows.report.views import connect_snapshot, publish_snapshot, snapshot_path
 from schemas.fields import DISCREPANCY_FINDING_FIELDS, EDGE_FIT_FIELDS, FLEET_RANKING_FIELDS, VALVE_CONDITION_FIELDS, polars_schema
 
-from .conftest import COMMISSIONED, Warehouse
+from tests.report.viewdb import COMMISSIONED, Warehouse
 
 EXAMPLE = Path(__file__).parents[1] / "fixtures" / "plant_example.toml"
 VALVES = ("VA", "VB", "VC")

@@ -2,12 +2,19 @@
 
 from __future__ import annotations
 
+import html
+
 import numpy as np
+import polars as pl
 import pytest
 
 from flows.common.errors import ValvemonError
+from flows.report.export import export_bi
+from flows.report.html import render_report
+from flows.report.remaining import remaining_text, two_figures
 from flows.report.views import SQL_DIR, discover_views, materialise_views, ordered_views
 from schemas.fields import EDGES
+from tests.report.viewdb import COMMISSIONED
 
 HOURS = np.arange(0.0, 200.0, 1.0)  # one window per operating hour
 
@@ -68,10 +75,16 @@ def test_table3_wear_raises_no_alarm(wh):
     assert c["remaining_hours"] > 0 and c["limiting_parameter"] in ("x_hat_pct", "alpha_hat")
 
 
-def test_one_faulty_window_among_normal_ones_is_caught(wh):
-    # the paper's faulty edge 1r (Table 2: α̂ 2.53, x̂ 11.8 %, e 1.13 mm²) in the latest window
+def test_one_faulty_window_among_normal_ones_is_caught(wh, tmp_path):
+    # the paper's faulty edge 1r (Table 2: α̂ 2.53, x̂ 11.8 %, e 1.13 mm²) in the latest window; its
+    # edge s1 wears toward its bound within the horizon (as the demo's V012, whose fleet row once
+    # took its remaining life from a healthy edge), and valve D wears faster than that s1
     wh.add_valve("F1")
-    wh.add_healthy_edges("F1", HOURS, seed=2, skip=("1r",))
+    wh.add_healthy_edges("F1", HOURS, seed=2, skip=("1r", "s1"))
+    wh.add_fits("F1", "s1", HOURS, 1.0 + 0.0005 * HOURS, 0.2, 0.1)  # 1.30 at 600 h
+    wh.add_valve("D")
+    wh.add_healthy_edges("D", HOURS, seed=3, skip=("s2",))
+    wh.add_fits("D", "s2", HOURS, 1.0 + 0.001 * HOURS, 0.2, 0.1)  # 1.30 at 300 h
     a, x, e = np.full(HOURS.size, 0.98), np.full(HOURS.size, 0.23), np.full(HOURS.size, 0.10)
     a[-1], x[-1], e[-1] = 2.53, 11.8, 1.13
     wh.add_fits("F1", "1r", HOURS, a, x, e)
@@ -79,12 +92,21 @@ def test_one_faulty_window_among_normal_ones_is_caught(wh):
     assert alarms.height == 1 and alarms["edge"][0] == "1r" and alarms["operating_hours"][0] == HOURS[-1]
     assert alarms["beyond_fault_bound"][0] and alarms["change_alarm"][0]
     c = wh.condition("F1", "1r")
-    assert c["state"] == "faulty" and "alpha_hat 2.53" in c["reason"] and c["remaining_hours"] is None
+    assert c["state"] == "faulty" and "alpha_hat 2.53" in c["reason"] and c["remaining_basis"] == "faulty"
+    assert (c["remaining_hours"], c["remaining_hours_low"], c["remaining_hours_high"]) == (0.0, 0.0, 0.0)
+    assert remaining_text(c) == "now (faulty)"
     assert [wh.condition("F1", e)["state"] for e in ("s1", "s2", "2r")] == ["healthy"] * 3
-    breaches = wh.q("SELECT parameter, bound_kind FROM threshold_breaches WHERE bound_kind = 'fault' ORDER BY parameter")
+    assert wh.condition("F1", "s1")["remaining_hours"] == pytest.approx(401.0, abs=1.0)
+    breaches = wh.q("SELECT parameter, bound_kind FROM threshold_breaches WHERE bound_kind = 'fault' AND valve_id = 'F1' ORDER BY parameter")
     assert breaches["parameter"].to_list() == ["alpha_hat", "e_mm2", "x_hat_pct"]
-    rank = wh.q("SELECT * FROM fleet_ranking")
-    assert rank["valve_id"][0] == "F1" and rank["state"][0] == "faulty" and rank["worst_edge"][0] == "1r"
+    # the fleet row, in the view and in the BI export: first, no life left, the faulty edge named
+    exported = pl.read_parquet(export_bi(wh.con, tmp_path)["fleet_ranking"])
+    for rank in (wh.q("SELECT * FROM fleet_ranking ORDER BY urgency_rank"), exported):
+        first = rank.row(0, named=True)
+        assert (first["valve_id"], first["state"], first["worst_edge"], first["limiting_edge"]) == ("F1", "faulty", "1r", "1r")
+        assert (first["remaining_hours"], first["remaining_hours_low"], first["remaining_hours_high"]) == (0.0, 0.0, 0.0)
+        assert first["remaining_basis"] == "faulty" and first["reason"].startswith("fault: ")
+        assert rank["valve_id"].to_list() == ["F1", "D"] and rank["remaining_hours"][1] == pytest.approx(100.0, abs=1.0)
 
 
 def test_a_departure_inside_the_bounds_is_caught_by_the_change_detector(wh):
@@ -124,6 +146,54 @@ def test_remaining_life_of_an_exactly_linear_trend_is_its_crossing(wh):
     assert c["remaining_hours"] == pytest.approx(391.0, abs=1e-6)
     assert c["remaining_hours_low"] <= c["remaining_hours"] <= c["remaining_hours_high"]
     assert c["remaining_hours_high"] - c["remaining_hours_low"] < 1e-3
+
+
+def test_a_crossing_beyond_the_horizon_is_no_forecast(wh, tmp_path):
+    # α̂ = 1 + 0.0001 h on every edge: a significant trend that reaches 1.30 at 3000 h, 2801 h after
+    # the latest window: 14 × the 199 h of data, beyond the horizon of 3 × 199 = 597 h
+    wh.add_valve("H1")
+    for edge in EDGES:
+        wh.add_fits("H1", edge, HOURS, 1.0 + 0.0001 * HOURS, 0.2, 0.1)
+    trend = wh.q("SELECT * FROM parameter_trends WHERE valve_id = 'H1' AND edge = 's1' AND parameter = 'alpha_hat' AND side = 'high'")
+    assert trend["crossing_status"][0] == "predicted" and trend["remaining_hours"][0] == pytest.approx(2801.0, abs=1e-3)
+    c = wh.condition("H1", "s1")
+    assert c["state"] == "healthy" and c["remaining_basis"] == "beyond_horizon" and c["limiting_parameter"] == "alpha_hat"
+    assert c["remaining_hours"] is None and c["remaining_hours_low"] is None and c["remaining_hours_high"] is None
+    assert c["end_of_life_hours"] is None and c["remaining_horizon_hours"] == pytest.approx(597.0)
+    assert "only beyond the horizon" in c["reason"] and "2801" not in c["reason"]
+    rank = pl.read_parquet(export_bi(wh.con, tmp_path)["fleet_ranking"]).row(0, named=True)
+    assert (rank["remaining_hours"], rank["remaining_basis"], rank["urgency_tier"]) == (None, "beyond_horizon", 6)
+    # the human-facing words: the horizon rounded down to two figures, so "more than" stays true
+    words = "> 590 h (no wear toward a bound within the horizon)"
+    assert remaining_text(c) == remaining_text(rank) == words
+    page = render_report(plant="P", generated_at=COMMISSIONED, ranking=wh.q("SELECT * FROM fleet_ranking"),
+                         conditions=wh.q("SELECT * FROM valve_condition"), fleet_png=_png(tmp_path), valve_pngs={},
+                         discrepancy={}, snapshot=tmp_path)
+    assert html.escape(words) in page and "2801" not in page and "2,801" not in page
+
+
+def test_a_worn_valves_near_term_forecast_is_unchanged(wh):
+    # Table 3's wear rate (x̂ +7.75 nm/h = 0.22 %/1000 h of x_max 3.5 mm) on a valve at 5.5 %, 6-hourly
+    # windows with scatter: 6 % is ~2,300 h ahead, inside the horizon of 3 × the 2,000 h of data
+    rng = np.random.default_rng(11)
+    h = np.arange(20_000.0, 22_000.0, 6.0)
+    x = 5.5 + 7.75e-6 / 3.5 * 100 * (h - h[-1]) + 0.05 * rng.standard_normal(h.size)
+    wh.add_valve("W")
+    wh.add_fits("W", "s2", h, 1.17, x, 0.18)
+    trend = wh.q("SELECT * FROM parameter_trends WHERE valve_id = 'W' AND parameter = 'x_hat_pct' AND side = 'high'").row(0, named=True)
+    c = wh.condition("W", "s2")
+    assert c["remaining_basis"] == "forecast" and c["limiting_parameter"] == "x_hat_pct"
+    assert (c["remaining_hours"], c["remaining_hours_low"], c["remaining_hours_high"], c["end_of_life_hours"]) == (
+        trend["remaining_hours"], trend["remaining_hours_low"], trend["remaining_hours_high"], trend["end_of_life_hours"])
+    assert 1500 < c["remaining_hours"] < 3000 and c["remaining_hours_high"] < c["remaining_horizon_hours"]
+    assert remaining_text(c) == (f"{two_figures(c['remaining_hours'])} h (95 %: {two_figures(c['remaining_hours_low'])}–"
+                                 f"{two_figures(c['remaining_hours_high'])} h)")
+
+
+def _png(tmp_path):
+    path = tmp_path / "fleet.png"
+    path.write_bytes(b"png")
+    return path
 
 
 def test_remaining_life_interval_covers_the_crossing_of_a_noisy_trend(wh):
@@ -213,7 +283,7 @@ def test_fleet_ranking_orders_by_urgency(wh):
     wh.add_fits("B_faulty", "s1", HOURS, np.where(HOURS == HOURS[-1], 2.5, 1.0), 0.2, 0.1)
     wh.add_fits("C_worn", "s1", HOURS, 1.4 + flat, 0.2, 0.1)
     wh.add_fits("D_soon", "s1", HOURS, 1.0 + 0.001 * HOURS, 0.2, 0.1)  # 1.3 at 300 h
-    wh.add_fits("E_later", "s1", HOURS, 1.0 + 0.0001 * HOURS, 0.2, 0.1)  # 1.3 at 3000 h
+    wh.add_fits("E_later", "s1", HOURS, 1.0 + 0.0004 * HOURS, 0.2, 0.1)  # 1.3 at 750 h
     wh.add_fits("F_unknown", "s1", HOURS[:3], 1.0, 0.2, 0.1)
     rank = wh.q("SELECT valve_id, state FROM fleet_ranking ORDER BY urgency_rank")
     # the random scatter of the healthy edges may give a forecast too, but far beyond these
