@@ -17,11 +17,20 @@ area law a plant configuration would name: the sharp-edged valve type is configu
 ``area_law = "sharp"``, worn lands are not configured (Eq. 3's nameplate; the workflow's edge-shape
 nuisances must absorb them); ``--declared eq3`` gives every valve Eq. 3, the sharp-edged one too.
 
+``--plant ref`` takes the true plants from the second reference plant (``tests/refplant``, written
+apart from ``model/``: its own integrator, Karnopp sticking, loads ramping to a new level every
+1–4 s, 1 ms transmitter lag and one sample of skew): a valve as built (``manufactured``, seed) with
+the hidden effect in that package's own implementation, three windows by default there; the two
+effects outside the library (``pressure_dependent_friction``, ``transmitter_lag`` on p1) are
+added to ``--effects all``, and for them ``unexplained``, ``ambiguous`` or ``none`` are right and
+any name is wrong.
+
 ``--method before`` runs the workflow as it was before issue 17 on the same cells (the design data
 taken as exact; with commissioning only α and underlap fitted, ``pipeline.fit_condition``).
 
 Outcome per run: ``named`` (the right effect named first), ``ambiguous`` (the right effect among the
-verdict's readings), ``none``, ``wrong`` (another effect named first, or an ambiguous verdict without
+verdict's readings), ``none``, ``unexplained`` (the equations pointed at an effect whose replay did
+not close its gap: no name given), ``wrong`` (another effect named first, or an ambiguous verdict without
 the right one); on clean data ``none`` is right, ``ambiguous`` is reported as such and ``named`` is
 wrong. Parameter error: |θ̂ − θ| / |θ − neutral| where the right effect is the first reading.
 
@@ -57,6 +66,25 @@ def true_plant(seed: int, family: str = "eq3"):
     return study_conditions(plant), z
 
 
+REF_OUTSIDE = ("pressure_dependent_friction", "transmitter_lag")
+
+
+def ref_lake(key: str | None, value, valve_seed: int, window_seed: int, n_windows: int):
+    """Lake rows of the reference plant's valve ``valve_seed`` (``manufactured``) over windows drawn
+    from ``window_seed``, with effect ``key`` (a library key or one of ``REF_OUTSIDE``) at ``value``
+    (None: its typical magnitude)."""
+    from datetime import datetime, timezone
+
+    from tests.refplant import NAMEPLATE, effect, manufactured, simulate_windows, to_lake_frame
+
+    fx = None
+    if key is not None:
+        name, _, ch = key.partition("[")
+        fx = effect(name, value, channel=ch.rstrip("]") or "p1")
+    recs = simulate_windows(manufactured(NAMEPLATE, seed=valve_seed), n_windows, window_seed, effects=fx)
+    return to_lake_frame(recs, "V1", datetime(2025, 3, 1, tzinfo=timezone.utc))
+
+
 def design_plant(family: str, declared: str):
     """The design data the workflow is given: Table 1 with the area law the plant configuration
     declares. ``nameplate``: a sharp-edged valve type is configured ``area_law = "sharp"``, worn
@@ -90,31 +118,33 @@ def commissioning_condition_before(seed: int, n_windows: int, family: str = "eq3
 
 
 @functools.lru_cache(maxsize=4)
-def commissioning_model(seed: int, n_windows: int, family: str = "eq3", declared: str = "nameplate"):
+def commissioning_model(seed: int, n_windows: int, family: str = "eq3", declared: str = "nameplate", plant_source: str = "model"):
     """The nuisances calibrated on a clean commissioning window of the seed's valve."""
     from transforms.discrepancy import DiscrepancySettings, split_records
     from transforms.discrepancy.calibration import calibrate
     from transforms.discrepancy.nuisance import NuisancePriors
 
-    plant, _ = true_plant(seed, family)
     design = design_plant(family, declared)
     s = DiscrepancySettings()
-    recs = split_records(_lake(None, 5000 + seed, n_windows, plant), s)
+    if plant_source == "ref":
+        recs = split_records(ref_lake(None, None, seed, 5000 + seed, n_windows), s)
+    else:
+        plant, _ = true_plant(seed, family)
+        recs = split_records(_lake(None, 5000 + seed, n_windows, plant), s)
     cal = calibrate(recs, design, design.nominal_condition, NuisancePriors(), s)
     return cal.plant, cal.condition
 
 
 def run_cell(key: str, magnitude: str, commissioning: bool, seed: int, n_windows: int, method: str = "nuisance", family: str = "eq3",
-             declared: str = "nameplate") -> dict:
+             declared: str = "nameplate", plant_source: str = "model") -> dict:
     from model.effects import library_entry
     from transforms.discrepancy import DiscrepancySettings, split_records
     from transforms.discrepancy.nuisance import NuisancePriors
     from transforms.discrepancy.pipeline import diagnose
 
     t0 = time.process_time()
-    plant, z = true_plant(seed, family)
     design = design_plant(family, declared)
-    spec = None if key == "none" else library_entry(key)
+    spec = None if key in ("none",) + REF_OUTSIDE else library_entry(key)
     value = None
     effects = None
     if spec is not None:
@@ -123,14 +153,22 @@ def run_cell(key: str, magnitude: str, commissioning: bool, seed: int, n_windows
         value = spec.neutral + sign * mag
         effects = spec.effects(value)
     s = DiscrepancySettings()
-    recs = split_records(_lake(effects, 100 + seed, n_windows, plant), s)
+    if plant_source == "ref":
+        lake = ref_lake(None if key == "none" else key, value, seed, 100 + seed, n_windows)
+    else:
+        lake = _lake(effects, 100 + seed, n_windows, true_plant(seed, family)[0])
+    recs = split_records(lake, s)
     if commissioning or method == "before":
         if not commissioning:
             cp, cc = design, design.nominal_condition
         else:
-            cp, cc = (commissioning_model if method == "nuisance" else commissioning_condition_before)(seed, n_windows, family, declared)
+            cp, cc = (commissioning_model if method == "nuisance" else commissioning_condition_before)(seed, n_windows, family, declared,
+                                                                                                    *((plant_source,) if method == "nuisance" else ()))
         d = diagnose(recs, cp, cc, s, monitoring=False)
-        if d.named:
+        if d.verdict is not None:  # unexplained (or gain/offset ambiguous): the verdict decides
+            v = d.verdict
+            verdict, got, got_value, alts = v.verdict, (v.effect.key if v.effect else None), v.value, v.alternative_keys
+        elif d.named:
             first = d.named[0]
             verdict = "ambiguous" if first.alternative is not None else "named"
             got, got_value = first.spec.key, first.value
@@ -142,10 +180,10 @@ def run_cell(key: str, magnitude: str, commissioning: bool, seed: int, n_windows
         d = diagnose(recs, design, None, s, monitoring=False, priors=NuisancePriors())
         v = d.verdict
         verdict, got, got_value, alts, conf = v.verdict, (v.effect.key if v.effect else None), v.value, v.alternative_keys, v.confidence
-    if key == "none":
-        outcome = {"none": "none", "ambiguous": "ambiguous", "named": "wrong"}[verdict]
-    elif verdict == "none":
-        outcome = "none"
+    if key == "none" or key in REF_OUTSIDE:
+        outcome = {"none": "none", "ambiguous": "ambiguous", "named": "wrong", "unexplained": "unexplained"}[verdict]
+    elif verdict in ("none", "unexplained"):
+        outcome = verdict
     elif got == key:
         outcome = verdict
     elif verdict == "ambiguous" and key in alts:
@@ -157,8 +195,10 @@ def run_cell(key: str, magnitude: str, commissioning: bool, seed: int, n_windows
         rel_err = abs(got_value - value) / abs(value - spec.neutral)
     return {
         "effect": key, "magnitude": magnitude, "commissioning": commissioning, "seed": seed, "value": value, "method": method, "family": family, "declared": declared,
+        "plant": plant_source, "pressure_delay_samples": d.pressure_delay_samples,
         "verdict": verdict, "got": got, "got_value": got_value, "alternatives": alts, "confidence": conf, "outcome": outcome,
         "rel_err": rel_err, "gap_nominal": d.gap_nominal, "gap_before": d.stage_gaps[0], "gap_after": d.stage_gaps[-1],
+        "split_before": d.split_gaps[0], "split_after": d.split_gaps[-1], "floors": d.noise_floors,
         "cpu_s": time.process_time() - t0,
     }
 
@@ -175,15 +215,15 @@ def table(rows: list[dict]) -> str:
     groups = defaultdict(list)
     for r in rows:
         groups[(r["commissioning"], r["magnitude"], r["effect"])].append(r)
-    lines = ["| commissioning | magnitude | effect | runs | named first | ambiguous (right listed) | none | wrong | max rel. error (named) |",
-             "|---|---|---|---|---|---|---|---|---|"]
+    lines = ["| commissioning | magnitude | effect | runs | named first | ambiguous (right listed) | none | unexplained | wrong | max rel. error (named) |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
     for (c, m, e), rs in sorted(groups.items(), key=lambda kv: (kv[0][0], kv[0][1] != "typical", kv[0][2])):
         n = len(rs)
-        cnt = {o: sum(r["outcome"] == o for r in rs) for o in ("named", "ambiguous", "none", "wrong", "error")}
+        cnt = {o: sum(r["outcome"] == o for r in rs) for o in ("named", "ambiguous", "none", "unexplained", "wrong", "error")}
         errs = [r["rel_err"] for r in rs if r.get("rel_err") is not None and r["outcome"] == "named"]
         err = f"{max(errs):.1%}" if errs else "–"
         wrong = f"{cnt['wrong']}" + (f" (+{cnt['error']} errors)" if cnt["error"] else "")
-        lines.append(f"| {'yes' if c else 'no'} | {m if e != 'none' else '–'} | {e} | {n} | {cnt['named']} | {cnt['ambiguous']} | {cnt['none']} | {wrong} | {err} |")
+        lines.append(f"| {'yes' if c else 'no'} | {m if e != 'none' else '–'} | {e} | {n} | {cnt['named']} | {cnt['ambiguous']} | {cnt['none']} | {cnt['unexplained']} | {wrong} | {err} |")
     return "\n".join(lines)
 
 
@@ -202,19 +242,20 @@ def main(argv=None) -> None:
     ap.add_argument("--family", default="eq3", choices=("eq3", "sharp", "worn3", "worn4"), help="the true valve's edge shape")
     ap.add_argument("--declared", default="nameplate", choices=("nameplate", "eq3"),
                     help="the area law the workflow is given: the valve type's (sharp for the sharp family, Eq. 3 for worn lands) or Eq. 3 always")
+    ap.add_argument("--plant", default="model", choices=("model", "ref"), help="the true plants: model/'s own code with perturbed parameters, or the second reference plant (tests/refplant)")
     ap.add_argument("--out", default="bench/discrepancy_robustness.jsonl")
     a = ap.parse_args(argv)
-    keys = [s.key for s in EFFECT_LIBRARY] if a.effects == "all" else a.effects.split(",")
+    keys = [s.key for s in EFFECT_LIBRARY] + (list(REF_OUTSIDE) if a.plant == "ref" else []) if a.effects == "all" else a.effects.split(",")
     mags = a.magnitudes.split(",")
     comms = [c == "yes" for c in a.commissioning.split(",")]
     seeds = range(a.first_seed, a.first_seed + a.seeds)
     tasks = []
     for c in comms:
         for seed in seeds:  # seed-major, so a worker reuses its commissioning calibration
-            tasks.append(("none", "typical", c, seed, a.windows, a.method, a.family, a.declared))
+            tasks.append(("none", "typical", c, seed, a.windows, a.method, a.family, a.declared, a.plant))
             for m in mags:
                 for k in keys:
-                    tasks.append((k, m, c, seed, a.windows, a.method, a.family, a.declared))
+                    tasks.append((k, m, c, seed, a.windows, a.method, a.family, a.declared, a.plant))
     t0 = time.time()
     rows = []
     out = Path(a.out)

@@ -24,17 +24,23 @@ from numba import njit
 from .area import valve_edge_constants
 from .effects import Effects
 from .params import PlantParams, ValveCondition
-from .simulate import (_DS, DEFAULT_REG_BAND_PA, DEFAULT_SUBSTEPS, P_LIMIT_FACTOR, _event_step,
+from .simulate import (_AIR, _BETA, _DS, _KE, _KI, _RS, DEFAULT_REG_BAND_PA, DEFAULT_SUBSTEPS, P_LIMIT_FACTOR, _event_step,
                        _F_R, _mode_of, _rk4, _valve_tuples, pack_params, params_tuple,
                        rhs_mode_kernel)
 
 
+DRIVE_FULL, DRIVE_HYDRAULIC, DRIVE_MECHANICAL = 0, 1, 2
+"""What the replay takes from the record besides the valve's inputs (:func:`replay`'s ``drive``)."""
+
+
 @njit(cache=True)
 def _replay_kernel(x, ps, pr, F_l, restart_at, restart_state, ecs_row, alpha_row, P, fs, n_sub,
-                   p_limit, out):
+                   p_limit, drive, given, out):
     """Integrate one record; ``out`` (4, n) receives X, v_X, p1, p2 from sample
-    ``restart_at[0]`` on (NaN before). Returns the first sample index where the state diverged,
-    or -1."""
+    ``restart_at[0]`` on (NaN before). ``drive`` 1: X follows ``given[0]`` (linear between
+    samples, v_X its slope; no friction branch, only the chamber equations evolve); 2: (p1, p2) follow
+    ``given[0:2]`` (the caller zeroes the bulk modulus, so they do not evolve inside a step).
+    Returns the first sample index where the state diverged, or -1."""
     n = x.shape[0]
     P = params_tuple(P)
     ecs, alpha = _valve_tuples(ecs_row, alpha_row)
@@ -52,6 +58,10 @@ def _replay_kernel(x, ps, pr, F_l, restart_at, restart_state, ecs_row, alpha_row
             s = (x[k], 0.0, restart_state[r, 0], restart_state[r, 1], restart_state[r, 2],
                  restart_state[r, 3])
             r += 1
+        if drive == 1:
+            s = (s[0], s[1], given[0, k], s[3], s[4], s[5])
+        elif drive == 2:
+            s = (s[0], s[1], s[2], s[3], given[0, k], given[1, k])
         out[0, k] = s[2]
         out[1, k] = s[3]
         out[2, k] = s[4]
@@ -73,6 +83,20 @@ def _replay_kernel(x, ps, pr, F_l, restart_at, restart_state, ecs_row, alpha_row
             ps_t = ps[k] + slope_ps * (j * h)
             ps_h = ps_t + slope_ps * 0.5 * h
             ps_1 = ps_t + slope_ps * h
+            if drive != 0:
+                # X at the substep's start; the (held) pressures at its midpoint
+                f = j / n_sub if drive == 1 else (j + 0.5) / n_sub
+                g0 = given[0, k] + f * (given[0, k + 1] - given[0, k])
+                g1 = given[1, k] + f * (given[1, k + 1] - given[1, k])
+                if drive == 1:
+                    # the cylinder moves at the slope of its recorded position over the interval,
+                    # so the chamber volumes at the samples are exactly the recorded ones
+                    s = (s[0], s[1], g0, (given[0, k + 1] - given[0, k]) / T0, s[4], s[5])
+                    k1 = rhs_mode_kernel(s[0], s[1], s[2], s[3], s[4], s[5], 0.0, 0.0, fl, ps_t,
+                                         p_r, ecs, alpha, P)
+                    s = _rk4(s, 0.0, k1, 0.0, fl, ps_t, ps_h, ps_1, p_r, ecs, alpha, P, h)
+                    continue
+                s = (s[0], s[1], s[2], s[3], g0, g1)
             mode = _mode_of(s, fl, P)
             k1 = rhs_mode_kernel(s[0], s[1], s[2], s[3], s[4], s[5], mode, 0.0, fl, ps_t, p_r,
                                  ecs, alpha, P)
@@ -108,7 +132,8 @@ class ReplayResult:
 def replay(params: PlantParams, x_m, p_s_pa, p_r_pa, F_l_n, restart_at, restart_states,
            *, condition: ValveCondition | None = None, effects: Effects | None = None,
            substeps: int = DEFAULT_SUBSTEPS,
-           reg_band_pa: float = DEFAULT_REG_BAND_PA) -> ReplayResult:
+           reg_band_pa: float = DEFAULT_REG_BAND_PA, drive: int = DRIVE_FULL,
+           given=None) -> ReplayResult:
     """Replay the plant on one record of inputs (module docstring).
 
     Parameters
@@ -134,6 +159,16 @@ def replay(params: PlantParams, x_m, p_s_pa, p_r_pa, F_l_n, restart_at, restart_
         signals and back, :func:`model.effects.true_signals`, :func:`~model.effects.sensor_readings`).
     substeps, reg_band_pa
         As in :func:`model.simulate.simulate_inputs`.
+    drive : int
+        ``DRIVE_FULL`` (default): the whole state is integrated. ``DRIVE_HYDRAULIC``: the
+        cylinder's position follows ``given`` = X [m] per sample (linear between samples, so it
+        moves at the slope of the interval and the chamber volumes at the samples are the
+        recorded ones) and only the chamber equations (Eq. 6) are integrated: p1, p2 need no
+        load, mass or friction (the velocity returned is that slope). ``DRIVE_MECHANICAL``: the chamber pressures follow ``given`` = (p1, p2) [Pa]
+        (true) per sample and only the motion (Eq. 5, with sticking) is integrated: X needs no
+        flow model.
+    given : array_like, shape (n,) or (2, n), optional
+        The recorded signals of the driven replays (X, resp. (p1, p2)).
 
     Returns
     -------
@@ -156,11 +191,22 @@ def replay(params: PlantParams, x_m, p_s_pa, p_r_pa, F_l_n, restart_at, restart_
         if not np.all(np.isfinite(a)):
             raise ValueError("replay inputs must be finite")
     P = pack_params(params, reg_band_pa, effects, prescribed_spool=True)
+    if drive == DRIVE_FULL:
+        g = np.zeros((2, n))
+    else:
+        g = np.ascontiguousarray(np.asarray(given, float).reshape(-1, n))
+        if g.shape[0] != (1 if drive == DRIVE_HYDRAULIC else 2):
+            raise ValueError("given: X for the hydraulic replay, (p1, p2) for the mechanical one")
+        g = np.ascontiguousarray(np.vstack([g, np.zeros((2 - g.shape[0], n))]))
+        if not np.all(np.isfinite(g)):
+            raise ValueError("the driving signals must be finite")
+    if drive == DRIVE_MECHANICAL:
+        P[[_BETA, _KI, _KE, _AIR, _RS]] = 0.0  # the pressures are given: no chamber dynamics
     out = np.empty((4, n))
     p_limit = P_LIMIT_FACTOR * float(np.max(np.abs(ps)))
     bad = _replay_kernel(x, ps, pr, fl, at, st, valve_edge_constants(params.geometry, cond),
                          np.asarray(cond.alpha, float), P, params.sensors.sample_rate_hz,
-                         int(substeps), p_limit, out)
+                         int(substeps), p_limit, int(drive), g, out)
     if bad >= 0:
         raise FloatingPointError(f"replay diverged at sample {bad}")
     return ReplayResult(X_m=out[0], vX_m_s=out[1], p1_pa=out[2], p2_pa=out[3])

@@ -534,15 +534,20 @@ the first nine columns are the specified ones."""
 
 # --- discrepancy verdicts with nuisance parameters (issue 17) ---------------------------------
 
-DISCREPANCY_VERDICTS = ("named", "ambiguous", "none")
+DISCREPANCY_VERDICTS = ("named", "ambiguous", "unexplained", "none")
 DISCREPANCY_FINDING_FIELDS = DISCREPANCY_FINDING_FIELDS + (
-    Field("verdict", pl.Utf8, "", "named (the effect explains what the base model's uncertain parameters cannot within their tolerances), ambiguous (another reading explains the same data: see alternatives) or none.", isin=DISCREPANCY_VERDICTS, nullable=True),
+    Field("verdict", pl.Utf8, "", "named (the effect explains what the base model's uncertain parameters cannot within their tolerances, and its replay closes the gap where it acts), ambiguous (another reading explains the same data: see alternatives), unexplained (the equations point at an effect whose replay does not close its gap: the data disagree with the model in a way no library effect explains; see disagreement) or none.", isin=DISCREPANCY_VERDICTS, nullable=True),
     Field("confidence", pl.Float64, "", "How sure the verdict's first reading is, in [0, 1] (docs/discrepancy.md, Verdicts).", ge=0.0, le=1.0, nullable=True),
     Field("alternatives", pl.Utf8, "", "The other readings of the same data ('; '-separated: effects with their values, or the base model with nuisance values); null if none.", nullable=True),
     Field("separate_by", pl.Utf8, "", "What data would tell the readings apart (ambiguous verdicts).", nullable=True),
     Field("verdict_reason", pl.Utf8, "", "One sentence: why this verdict.", nullable=True),
     Field("nuisances", pl.Utf8, "", "The calibrated nuisance parameters, 'name=value unit (zσ)' '; '-separated, z = deviation from nominal in prior σ; null when the model was taken as exact.", nullable=True),
     Field("gap_nominal", pl.Float64, "", "Normalised replay gap of the nominal (design-data, uncalibrated) base model.", ge=0.0, nullable=True),
+    Field("gap_kind", pl.Utf8, "", "Where the effect acts and is judged: hydraulic (p1, p2 replayed on the recorded cylinder motion) or mechanical (X replayed on the recorded pressures); null without one.", isin=("hydraulic", "mechanical"), nullable=True),
+    Field("gap_kind_before", pl.Float64, "", "That gap (RMS on the 1 bar / 1 mm scales) of the model before the effect is added.", ge=0.0, nullable=True),
+    Field("gap_kind_after", pl.Float64, "", "... and with it: named needs ≥ 1.5× less, or ≤ 2× gap_kind_floor.", ge=0.0, nullable=True),
+    Field("gap_kind_floor", pl.Float64, "", "That gap's noise floor: what the recorded sensor noise alone leaves.", ge=0.0, nullable=True),
+    Field("disagreement", pl.Utf8, "", "unexplained: which equation, signal and operating region disagree, and how much.", nullable=True),
 )
 
 DISCREPANCY_CANDIDATE_FIELDS: tuple[Field, ...] = _RUN_FIELDS + (
@@ -563,7 +568,7 @@ DISCREPANCY_CANDIDATE_FIELDS: tuple[Field, ...] = _RUN_FIELDS + (
 
 DISCREPANCY_GAP_FIELDS: tuple[Field, ...] = _RUN_FIELDS + (
     _STAGE,
-    Field("signal", pl.Utf8, "", "Replayed signal.", isin=("p1", "p2", "X")),
+    Field("signal", pl.Utf8, "", "Replayed signal: p1, p2, X of the whole replay; p1_hydraulic, p2_hydraulic of the replay on the recorded cylinder motion, X_mechanical of the replay on the recorded pressures.", isin=("p1", "p2", "X", "p1_hydraulic", "p2_hydraulic", "X_mechanical")),
     _REGION,
     Field("rms", pl.Float64, "", "RMS of replayed reading minus recorded signal, in unit.", nullable=True),
     Field("unit", pl.Utf8, "", "Pa or m."),

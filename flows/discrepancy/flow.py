@@ -180,28 +180,34 @@ def nuisance_text(rows: list[dict]) -> str:
 
 
 def verdict_columns(d: Diagnosis, rank: int) -> dict:
-    """The issue-17 columns of a findings row: the verdict, how sure, the other readings, why,
-    and the calibrated nuisances (exact model: the verdict of the selection alone)."""
+    """The verdict columns of a findings row: the verdict, how sure, the other readings, why,
+    the calibrated nuisances (exact model: the verdict of the selection alone), and the gap where
+    the effect acts (docs/warehouse.md)."""
     from scipy import stats
 
     v = d.verdict
+    n = d.named[rank - 1] if d.named and rank <= len(d.named) else None
+    acting = {"gap_kind": n.gap_kind, "gap_kind_before": _nn(n.acting_before), "gap_kind_after": _nn(n.acting_after),
+              "gap_kind_floor": _nn(n.floor)} if n is not None else {"gap_kind": None, "gap_kind_before": None, "gap_kind_after": None, "gap_kind_floor": None}
+    if v is not None and v.verdict == "unexplained":
+        acting = {"gap_kind": v.gap_kind, "gap_kind_before": _nn(v.gap_before), "gap_kind_after": _nn(v.gap_after), "gap_kind_floor": _nn(v.floor)}
+    common = {"gap_nominal": _nn(d.gap_nominal), **acting, "disagreement": (v.where or None) if v is not None else None}
     if v is not None:
         if rank > 1:
             return {"verdict": "named", "confidence": None, "alternatives": None, "separate_by": None, "verdict_reason": None,
-                    "nuisances": nuisance_text(v.nuisances), "gap_nominal": _nn(d.gap_nominal)}
+                    "nuisances": nuisance_text(v.nuisances), **common}
         return {"verdict": v.verdict, "confidence": _nn(v.confidence), "alternatives": "; ".join(v.alternatives) or None,
                 "separate_by": v.separate_by or None, "verdict_reason": v.reason or None, "nuisances": nuisance_text(v.nuisances),
-                "gap_nominal": _nn(d.gap_nominal)}
+                **common}
     if not d.named:
         return {"verdict": "none", "confidence": None, "alternatives": None, "separate_by": None,
                 "verdict_reason": "no library effect explains a significant share of the residuals of the model taken as exact",
-                "nuisances": None, "gap_nominal": _nn(d.gap_nominal)}
-    n = d.named[rank - 1]
+                "nuisances": None, **common}
     conf = float(min(0.999, stats.norm.cdf(n.alternative_t))) if math.isfinite(n.alternative_t) else 0.999
     return {"verdict": "ambiguous" if n.alternative else "named", "confidence": conf,
             "alternatives": n.alternative.key if n.alternative else None, "separate_by": None,
             "verdict_reason": f"explains {n.relative_gain:.0%} of the cross-validated residuals of the model taken as exact (t = {n.t_stat:.3g})",
-            "nuisances": None, "gap_nominal": _nn(d.gap_nominal)}
+            "nuisances": None, **common}
 
 
 def _tables(valve_id: str, run_id: str, run_at: datetime, d: Diagnosis, plots: list[Path | None], level: float, source: str = "design", cond: ValveCondition | None = None, fit: ConditionFit | None = None) -> dict[str, pl.DataFrame]:
@@ -209,7 +215,8 @@ def _tables(valve_id: str, run_id: str, run_at: datetime, d: Diagnosis, plots: l
     t1 = datetime.fromtimestamp(max(b for _, b in d.records) / 1e6, tz=timezone.utc)
     common = {"run_id": run_id, "valve_id": valve_id, "run_at": run_at}
     findings = []
-    if d.named:
+    unexplained = d.verdict is not None and d.verdict.verdict == "unexplained"  # no name: one row effect none
+    if d.named and not unexplained:
         for n, path in zip(d.named, plots):
             k = n.rank
             findings.append({
@@ -225,7 +232,7 @@ def _tables(valve_id: str, run_id: str, run_at: datetime, d: Diagnosis, plots: l
                 "alternative_effect": n.alternative.key if n.alternative else None, "alternative_t": _nn(n.alternative_t),
                 **verdict_columns(d, k),
             })
-    elif d.verdict is not None and d.verdict.effect is not None:
+    elif d.verdict is not None and d.verdict.effect is not None and not unexplained:
         # named or ambiguous against the nuisance tolerances (no residual left for the selection)
         v = d.verdict
         g0, g1 = v.gap_before, v.gap_after if math.isfinite(v.gap_after) else v.gap_before
@@ -384,10 +391,13 @@ def summary_lines(report: DiscrepancyReport) -> list[str]:
     if first.get("verdict"):
         conf = f", confidence {first['confidence']:.0%}" if first.get("confidence") is not None else ""
         what = {"named": f"found {first['effect']}", "ambiguous": f"cannot tell: {first['effect']} or another reading",
+                "unexplained": "the data disagree with the model in a way no library effect explains",
                 "none": "found no effect beyond the base model"}[first["verdict"]]
         lines.append(f"{report.valve_id}: verdict {first['verdict'].upper()} -- {what}{conf}")
         if first.get("verdict_reason"):
             lines.append(f"    why: {first['verdict_reason']}")
+        if first.get("disagreement"):
+            lines.append(f"    where: {first['disagreement']}")
         if first.get("alternatives"):
             lines.append(f"    other readings: {first['alternatives']}")
         if first.get("separate_by"):

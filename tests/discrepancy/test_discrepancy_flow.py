@@ -76,7 +76,11 @@ def test_flow_names_the_hidden_effect_and_stores_everything(tmp_path):
         counts = {t: con.execute(f"SELECT count(*) FROM {t} WHERE run_id = ?", [report.run_id]).fetchone()[0] for t in DISCREPANCY_TABLES}
         assert counts["discrepancy_findings"] == 1 and counts["discrepancy_candidates"] == 11
         assert counts["discrepancy_monitoring"] == 4 and counts["discrepancy_condition"] == 4
-        assert counts["discrepancy_gaps"] == 2 * 3 * 7 and counts["discrepancy_residuals"] == 2 * 3 * 7
+        # stages x signals (p1, p2, X whole; p1, p2 hydraulic; X mechanical) x regions
+        assert counts["discrepancy_gaps"] == 2 * 6 * 7 and counts["discrepancy_residuals"] == 2 * 3 * 7
+        kind, before, after, floor = con.execute("SELECT gap_kind, gap_kind_before, gap_kind_after, gap_kind_floor FROM discrepancy_findings WHERE run_id = ?",
+                                                 [report.run_id]).fetchone()
+        assert kind == "hydraulic" and after * 1.5 <= before and 0.03 < floor < 0.08  # a leak acts on the chambers; Table 1's 0.05 bar noise
         src = con.execute("SELECT DISTINCT source FROM discrepancy_condition WHERE run_id = ?", [report.run_id]).fetchall()
         assert src == [("commissioning",)]
 
@@ -125,3 +129,20 @@ def test_command_line_says_what_it_found_how_sure_and_why():
     assert "why: the data fit either" in text and "other readings: the base model with underlap_s1" in text
     assert "to tell them apart: a commissioning window" in text
     assert "gap 2.4 with the design data → 0.3" in text and "underlap_s1=31.00 µm (-1.8σ)" in text and "alpha_s1" not in text
+
+
+def test_command_line_shows_an_unexplained_disagreement():
+    from flows.discrepancy.flow import DiscrepancyReport, summary_lines
+
+    finding = {
+        "effect": "none", "variant": "", "rank": 1, "parameter_name": None, "parameter_value": None, "parameter_unit": None,
+        "parameter_ci_low": None, "parameter_ci_high": None, "gap_before": 0.55, "gap_after": 0.55, "gap_explained": None,
+        "alternative_effect": None, "alternative_t": None, "verdict": "unexplained", "confidence": 0.999,
+        "verdict_reason": "the data disagree with the model in a way no library effect explains: load_mass_change fits the equations, but ...",
+        "alternatives": "load_mass_change delta_m=-1.4e+03 kg (not confirmed)", "separate_by": None, "nuisances": "",
+        "disagreement": "the motion (Eq. 5, X): the replayed X is off by 0.3 mm RMS in region retracting", "gap_nominal": None,
+    }
+    text = "\n".join(summary_lines(DiscrepancyReport("V1", "r" * 32, 4, [finding], [], 0.55, 0.55, "commissioning")))
+    assert "verdict UNEXPLAINED -- the data disagree with the model in a way no library effect explains" in text
+    assert "where: the motion (Eq. 5, X): the replayed X is off by 0.3 mm RMS in region retracting" in text
+    assert "no library effect named" in text and "found load_mass_change" not in text

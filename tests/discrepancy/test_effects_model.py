@@ -21,7 +21,7 @@ from model.effects import (
     true_signals,
     valve_flows,
 )
-from model.replay import replay
+from model.replay import DRIVE_HYDRAULIC, DRIVE_MECHANICAL, replay
 from schemas.fields import DISCREPANCY_EFFECTS
 
 SPEC = Path(__file__).resolve().parents[3] / "shared" / "spec" / "interfaces.md"
@@ -157,3 +157,26 @@ def test_valve_flows_with_supply_line_use_the_valve_pressure():
     np.testing.assert_allclose(q1, q1b, rtol=1e-12)
     assert np.all(psv < ps) and np.all(psvb == psv)
     assert P_ATM_PA == pytest.approx(1.013e5)
+
+
+@pytest.mark.parametrize("key,value", [(None, 0.0), ("entrained_air", 5e-3)])
+def test_split_replays_on_true_signals_reproduce_the_simulator(key, value):
+    """The hydraulic replay (p1, p2 on the true cylinder motion: no load, mass or friction given)
+    and the mechanical one (X on the true pressures: no flow model) reproduce the simulator."""
+    fx = None if key is None else library_entry(key).effects(value)
+    r = simulate_windows(TABLE1, [TABLE1.nominal_condition], 10.0, seed=3, effects=fx)
+    st = [[r.X_m[0, 0], r.vX_m_s[0, 0], r.p1_pa[0, 0], r.p2_pa[0, 0]]]
+    args = (TABLE1, r.x_m[0], r.ps_pa[0], r.pr_pa[0])
+    hyd = replay(*args, np.zeros(r.n_samples), [0], st, effects=fx, drive=DRIVE_HYDRAULIC, given=r.X_m[0])
+    np.testing.assert_array_equal(hyd.X_m, r.X_m[0])
+    assert np.max(np.abs(hyd.p1_pa - r.p1_pa[0])) < 0.05e5 and np.max(np.abs(hyd.p2_pa - r.p2_pa[0])) < 0.05e5
+    # the mechanical replay integrates the force twice, open loop: restart it every 0.5 s
+    idx = np.arange(0, r.n_samples - 1, 500)
+    sts = [[r.X_m[0, k], r.vX_m_s[0, k], r.p1_pa[0, k], r.p2_pa[0, k]] for k in idx]
+    mech = replay(*args, r.F_l_n[0], idx, sts, effects=fx, drive=DRIVE_MECHANICAL, given=[r.p1_pa[0], r.p2_pa[0]])
+    np.testing.assert_array_equal(mech.p1_pa, r.p1_pa[0])
+    assert np.max(np.abs(mech.X_m - r.X_m[0])) < 5e-6
+    # and a wrong mass shows in the mechanical replay only
+    wrong = replay(*args, r.F_l_n[0], idx, sts, effects=library_entry("load_mass_change").effects(600.0), drive=DRIVE_MECHANICAL,
+                   given=[r.p1_pa[0], r.p2_pa[0]])
+    assert np.max(np.abs(wrong.X_m - r.X_m[0])) > 20e-6

@@ -389,8 +389,11 @@ def calibrate(records, plant: PlantParams, condition: ValveCondition, priors: Nu
     detector missed (:func:`split_segment`)."""
     from transforms.discrepancy.rows import _gaps, prepare_records
 
+    from transforms.discrepancy.alignment import align_records
+
     fx = Effects() if effects is None else effects
     nm = NuisanceModel.of(plant, condition, priors)
+    records, _ = align_records(records, plant, condition, settings)  # the pressure channels' delay
     prepared = prepare_records(records, plant, condition, settings)
     if not prepared:
         raise ValueError("no record long enough to calibrate on")

@@ -11,18 +11,38 @@ are the scales at which the two kinds of error matter about equally to the monit
 chamber pressure is ~1 % of the Eq. 7 pressure drop; 1 mm of position is ~0.2 % of the stroke,
 what a 1 % flow error accumulates over a 2.5 s replay segment at 0.04 m/s). Recorded noise
 (~0.05 bar, 1 µm) puts a floor of ~0.04 under it.
+
+The same record is also replayed split in two (:func:`model.replay.replay`'s ``drive``), so that
+each effect is judged where it acts and an error in the load estimate cannot hide or invent it:
+
+* the **hydraulic gap** (signals ``p1_hydraulic``, ``p2_hydraulic``): p1, p2 replayed from the
+  recorded spool position, supply, return and the recorded cylinder motion (no load, mass or
+  friction), sqrt(((e_p1/1 bar)² + (e_p2/1 bar)²)/2); leakage, air, the supply line and the sensor
+  effects act here;
+* the **mechanical gap** (signal ``X_mechanical``): X replayed from the recorded pressures with
+  the load estimate, mass and friction, restarted from the measured state every
+  ``mechanical_segment_s`` and at the start of every move, e_X/1 mm over the moving samples
+  (|v_X| > ``v_standstill_m_s``: while the cylinder sticks the load does not show, so when it
+  breaks away is the load estimate's, not the motion's); mass and friction act here.
+
+Their **noise floors** are what the sensor noise alone leaves: the recorded noise's RMS (from the
+high-frequency part of each signal, :func:`noise_rms`) on the same scales.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["GAP_SCALES", "GAP_SIGNALS", "NOISE_GAP", "GapAccumulator", "normalised_gap"]
+__all__ = ["GAP_SCALES", "GAP_SIGNALS", "NOISE_GAP", "SPLIT_GAPS", "GapAccumulator", "noise_rms", "normalised_gap"]
 
 GAP_SIGNALS = ("p1", "p2", "X")
-GAP_SCALES = {"p1": 1.0e5, "p2": 1.0e5, "X": 1.0e-3}
+GAP_SCALES = {"p1": 1.0e5, "p2": 1.0e5, "X": 1.0e-3, "p1_hydraulic": 1.0e5, "p2_hydraulic": 1.0e5, "X_mechanical": 1.0e-3}
 """Normalising scale of each signal's RMS error in the normalised gap: 1 bar, 1 bar, 1 mm."""
-GAP_UNITS = {"p1": "Pa", "p2": "Pa", "X": "m"}
+GAP_UNITS = {"p1": "Pa", "p2": "Pa", "X": "m", "p1_hydraulic": "Pa", "p2_hydraulic": "Pa", "X_mechanical": "m"}
+SPLIT_GAPS = {"hydraulic": ("p1_hydraulic", "p2_hydraulic"), "mechanical": ("X_mechanical",)}
+"""The split gaps and their signals (module docstring)."""
+RECORDED_OF = {"p1": "p1", "p2": "p2", "X": "X", "p1_hydraulic": "p1", "p2_hydraulic": "p2", "X_mechanical": "X"}
+"""The recorded signal each replayed one is compared with."""
 NOISE_GAP = 0.2
 """A normalised gap above this is more than recorded noise and the load estimate leave (exact
 model on Table 1's sensors: 0.04–0.2, docs/discrepancy.md)."""
@@ -31,6 +51,15 @@ model on Table 1's sensors: 0.04–0.2, docs/discrepancy.md)."""
 def normalised_gap(rms: dict[str, float]) -> float:
     """sqrt(mean over p1, p2, X of (rms / scale)²) (module docstring)."""
     return float(np.sqrt(np.mean([(rms[s] / GAP_SCALES[s]) ** 2 for s in GAP_SIGNALS])))
+
+
+def noise_rms(raw: np.ndarray, smooth: np.ndarray, centre_weight: float) -> tuple[float, int]:
+    """(sum of squares, count) of the recorded noise of one signal: raw − its Savitzky–Golay
+    smoothing, scaled by 1/(1 − ``centre_weight``) (the smoother's central coefficient: the
+    residual of a projection keeps 1 − h₀ of white noise's variance)."""
+    d = raw - smooth
+    ok = np.isfinite(d)
+    return float(np.sum(d[ok] ** 2)) / (1.0 - centre_weight), int(ok.sum())
 
 
 class GapAccumulator:
@@ -57,6 +86,12 @@ class GapAccumulator:
     def gap(self, region: str = "all") -> float:
         """The normalised gap in ``region``."""
         return normalised_gap({s: self.rms(s, region) for s in GAP_SIGNALS})
+
+    def split_gap(self, kind: str, region: str = "all") -> float:
+        """The hydraulic or mechanical gap (``SPLIT_GAPS``) in ``region``: the RMS of its signals'
+        errors on the gap scales."""
+        sig = SPLIT_GAPS[kind]
+        return float(np.sqrt(np.mean([(self.rms(s, region) / GAP_SCALES[s]) ** 2 for s in sig])))
 
     def rows(self) -> list[dict]:
         """One dict per (signal, region): signal, region, rms (SI), unit, n_samples."""

@@ -58,6 +58,7 @@ from transforms.discrepancy.rows import (  # noqa: F401 (ReplayTrace, prepare_re
     _residual_summary,
     _Rows,
     _rows,
+    noise_floors,
     perturbed,
     prepare_records,
 )
@@ -102,6 +103,20 @@ class NamedEffect:
     """The runner-up when it was hard to tell apart (advantage t < AMBIGUITY_T), else None."""
     alternative_t: float = float("inf")
     """t statistic of this effect's blockwise advantage over the runner-up."""
+    gap_kind: str = "hydraulic"
+    """Where the effect acts (:func:`transforms.discrepancy.verdict.acting_gap`)."""
+    acting_before: float = float("nan")
+    acting_after: float = float("nan")
+    """That gap (hydraulic or mechanical, ``gaps.SPLIT_GAPS``) before and after adding the effect."""
+    floor: float = float("nan")
+    """That gap's noise floor."""
+
+    @property
+    def confirmed(self) -> bool:
+        """The replay confirms it (:func:`transforms.discrepancy.verdict.confirmed`)."""
+        from transforms.discrepancy.verdict import confirmed
+
+        return confirmed(self.acting_before, self.acting_after, self.floor)
 
 
 AMBIGUITY_T = 2.0
@@ -133,6 +148,13 @@ class Diagnosis:
     """Normalised gap of the nominal (uncalibrated) base model; = stage 0 without nuisances."""
     model: tuple = ()
     """(plant, condition) of the final stage (calibrated nuisances when priors were given)."""
+    noise_floors: dict = field(default_factory=dict)
+    """The split gaps (hydraulic, mechanical) the recorded noise alone leaves (``rows.noise_floors``)."""
+    split_gaps: list = field(default_factory=list)
+    """Per stage: {hydraulic, mechanical} gap."""
+    pressure_delay_samples: int = 0
+    """The pressure channels' delay against the positions the records were aligned for
+    (:mod:`transforms.discrepancy.alignment`)."""
 
     @property
     def final_effects(self) -> Effects:
@@ -203,6 +225,49 @@ def _project_out(Nw: np.ndarray, *cols: np.ndarray) -> list[np.ndarray]:
         c2[ok] = c[ok] - N @ np.linalg.solve(H, N.T @ c[ok])
         out.append(c2)
     return out
+
+
+GAIN_OR_OFFSET = ("pressure_sensor_offset", "pressure_sensor_gain")
+PRESSURE_SPAN = 2.0
+"""Where a transmitter's pressure spans this factor (5th to 95th percentile), a gain error and an
+offset of it have different shapes (the gain's error grows with the pressure): the other one is
+fitted and replayed too, and the two are told apart on the hydraulic gap or reported ambiguous."""
+TOLD_APART = 1.25
+"""... told apart when the other's hydraulic gap is at least this factor larger."""
+
+
+def _gain_or_offset(prepared, first: "NamedEffect", refine, settings, verdict):
+    """The verdict for a named pressure transmitter offset or gain (``GAIN_OR_OFFSET``) where the
+    pressure spans ``PRESSURE_SPAN``: the other reading is fitted and replayed; kept named if the
+    named one's hydraulic gap is ``TOLD_APART`` smaller, else ``ambiguous`` with the better first
+    and both listed. Returns ``verdict`` unchanged where the pressure does not span the factor."""
+    from model.effects import library_entry
+    from transforms.discrepancy.verdict import SEPARATE_BY, Verdict
+
+    v = first.spec.variant
+    p = np.concatenate([q.rec.raw[v] for q in prepared])
+    lo, hi = np.nanpercentile(p, [5, 95])
+    if not (lo > 0 and hi >= PRESSURE_SPAN * lo):
+        return verdict
+    other = library_entry(("pressure_sensor_gain" if first.spec.name == "pressure_sensor_offset" else "pressure_sensor_offset") + f"[{v}]")
+    mean = float(np.nanmean(p))
+    guess = (first.value - 1.0) * mean if other.name == "pressure_sensor_offset" else first.value / mean  # same reading at the mean
+    fx, _, model, _ = refine([other], perturbed(Effects(), other, guess))
+    g_other = _gaps(prepared, *model, fx, settings, set())[0].split_gap("hydraulic")
+    g_first = first.acting_after
+    span = f"{v} spans {lo / 1e5:.3g}–{hi / 1e5:.3g} bar"
+    if g_other >= TOLD_APART * g_first:
+        if verdict is not None:
+            verdict.reason += f"; told from {other.key} ({span}: its replay leaves the hydraulic gap at {g_other:.3g} against {g_first:.3g})"
+        return verdict
+    readings = sorted([(g_first, first.spec, first.value), (g_other, other, other.value(fx))], key=lambda r: r[0])
+    (gb, sb, vb), (gw, sw, vw) = readings
+    return Verdict(
+        "ambiguous", float(min(0.999, gw / (gb + gw))), sb, vb, alternatives=[f"{sw.key} {sw.parameter_name}={vw:.4g} {sw.unit}"],
+        alternative_keys=[sw.key], separate_by=SEPARATE_BY["pressure_sensor_gain"],
+        reason=(f"{sb.key} and {sw.key} replay alike ({span}; hydraulic gap {gb:.3g} and {gw:.3g}, less than {TOLD_APART:g}× apart)"),
+        nuisances=verdict.nuisances if verdict is not None else [], scores=verdict.scores if verdict is not None else [],
+        gap_before=first.gap_before, gap_after=first.gap_after)
 
 
 NUISANCE_COLLINEAR = 0.05
@@ -279,9 +344,13 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
     from scipy import stats as _stats
 
     from transforms.discrepancy.calibration import CLEARANCE, NuisanceModel, calibrate_best, calibrate_prepared, joint_fit, refine_breakaway
+    from transforms.discrepancy.verdict import acting_gap, unexplained
+
+    from transforms.discrepancy.alignment import align_records
 
     settings = settings or DiscrepancySettings()
     condition = plant.nominal_condition if condition is None else condition
+    records, delay = align_records(records, plant, condition, settings)
     prepared = prepare_records(records, plant, condition, settings)
     if not prepared:
         raise ValueError("no record long enough to diagnose")
@@ -313,6 +382,7 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
     # once effects are named, the load is segmented again with the fitted model and the
     # selection repeated (alternating between the nuisance load and the effects)
     rows0, w_rows, sel, sig = _select(prepared, plant, condition, specs, settings, None if nm is None else (nm, z_cal))
+    floors = noise_floors(prepared, settings)
 
     def refine(named_specs, start):
         """(effects, SEs, stage model) of the named effects fitted (with the nuisances)."""
@@ -375,7 +445,8 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
         drop = None
         for k, fx in enumerate(stage_effects[1:], start=1):
             acc, kept = _gaps(prepared, *stage_model, fx, settings, kept_idx)
-            if not acc.gap() < stage_acc[-1].gap():
+            kind = acting_gap(named_specs[k - 1])
+            if not acc.split_gap(kind) < stage_acc[-1].split_gap(kind):
                 drop = k - 1
                 break
             stage_acc.append(acc)
@@ -393,7 +464,9 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
             alternative=specs[rcol] if (rcol is not None and rt < AMBIGUITY_T) else None, alternative_t=rt,
             rank=k + 1, spec=spec, value=val, ci_low=val - q * float(se[k]), ci_high=val + q * float(se[k]),
             linear_value=cs.theta + spec.neutral, relative_gain=cs.relative_gain, t_stat=cs.t_stat, z=cs.z,
-            gap_before=stage_gaps[k], gap_after=stage_gaps[k + 1],
+            gap_before=stage_gaps[k], gap_after=stage_gaps[k + 1], gap_kind=acting_gap(spec),
+            acting_before=stage_acc[k].split_gap(acting_gap(spec)), acting_after=stage_acc[k + 1].split_gap(acting_gap(spec)),
+            floor=floors[acting_gap(spec)],
         ))
     for c in candidates:
         c["unconfirmed"] = c.pop("column") in unconfirmed
@@ -421,15 +494,21 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
         if final_fit is None:
             final_fit = joint_fit(prepared, nm, z_cal, [], base, rows0, w_rows, settings, iterations=0)
         def gap_of(fx, model):
-            return _gaps(prepared, *model, fx, settings, set())[0].gap()
+            return _gaps(prepared, *model, fx, settings, set())[0]
 
-        verdict = nuisance_verdict(prepared, nm, final_fit, named_specs, specs, rows0, w_rows, settings, named, gap_of, stage_gaps[0])
+        verdict = nuisance_verdict(prepared, nm, final_fit, named_specs, specs, rows0, w_rows, settings, named, gap_of, stage_gaps[0], floors, stage_acc)
         gap_nominal = _gaps(prepared, *nominal, base, settings, set())[0].gap()
+    elif named and not named[0].confirmed:
+        first = named[0]
+        verdict = unexplained(first.spec, first.value, first.acting_before, first.acting_after, first.gap_kind, stage_acc[1], first.floor)
+    if named and (verdict is None or verdict.verdict == "named") and named[0].spec.name in GAIN_OR_OFFSET:
+        verdict = _gain_or_offset(prepared, named[0], refine, settings, verdict)
     return Diagnosis(
         n_records=len(prepared), records=[(p.rec.start_us, p.rec.end_us) for p in prepared], named=named,
         candidates=candidates, gap_rows=gap_rows, residual_rows=residual_rows, stage_effects=stage_effects,
         stage_gaps=stage_gaps, traces=traces, n_blocks=B, equation_sigmas=tuple(float(s) for s in sig),
-        monitoring=mon, verdict=verdict, gap_nominal=gap_nominal, model=stage_model,
+        monitoring=mon, verdict=verdict, gap_nominal=gap_nominal, model=stage_model, noise_floors=floors,
+        split_gaps=[{k: a.split_gap(k) for k in ("hydraulic", "mechanical")} for a in stage_acc], pressure_delay_samples=delay,
     )
 
 

@@ -10,9 +10,9 @@ import numpy as np
 
 from model.effects import Effects, EffectSpec, equation_terms, sensor_readings, true_signals
 from model.params import PlantParams, ValveCondition
-from model.replay import replay
+from model.replay import DRIVE_HYDRAULIC, DRIVE_MECHANICAL, replay
 from model.simulate import DEFAULT_REG_BAND_PA
-from transforms.discrepancy.gaps import GapAccumulator
+from transforms.discrepancy.gaps import RECORDED_OF, GapAccumulator, noise_rms
 from transforms.discrepancy.load import LoadEstimate, estimate_load, replay_load, stuck_spans
 from transforms.discrepancy.records import REGIONS, Record, operating_regions, prepare_record
 from transforms.discrepancy.residuals import (
@@ -298,6 +298,9 @@ class ReplayTrace:
 
 
 def _replay_record(p: _Prepared, plant, condition, effects, settings) -> dict[str, np.ndarray]:
+    """The record replayed whole (p1, p2, X) and split (``gaps.SPLIT_GAPS``): p1, p2 on the
+    recorded cylinder motion, X on the recorded pressures (restarts every
+    ``mechanical_segment_s``). Readings as recorded (sensor effects applied)."""
     rec = p.rec
     h = settings.savgol_window // 2
     n = rec.n
@@ -305,15 +308,31 @@ def _replay_record(p: _Prepared, plant, condition, effects, settings) -> dict[st
     x_true, p1_true, p2_true = true_signals(x_src, rec.sg["p1"], rec.sg["p2"], effects)
     seg = max(2, int(round(settings.replay_segment_s / rec.dt)))
     starts = np.arange(h, n - h - 1, seg)
-    v = rec.sg["v"][starts]
+    v_all = np.where(np.isfinite(rec.sg["v"]), rec.sg["v"], 0.0)
+    v = v_all[starts]
     v = np.where(np.abs(v) < 1e-3, 0.0, v)
     states = np.column_stack([rec.raw["X"][starts], v, p1_true[starts], p2_true[starts]])
     load = _replay_load_for(p, plant, condition, effects, settings)
-    res = replay(plant, x_true, rec.raw["ps"], rec.raw["pr"], load, starts, states, condition=condition, effects=effects)
+    args = (plant, x_true, rec.raw["ps"], rec.raw["pr"], load)
+    res = replay(*args, starts, states, condition=condition, effects=effects)
+    hyd = replay(*args, starts, states, condition=condition, effects=effects, drive=DRIVE_HYDRAULIC, given=rec.raw["X"])
+    _, p1_rec, p2_rec = true_signals(x_src, rec.raw["p1"], rec.raw["p2"], effects)
+    given_p = np.vstack([np.where(np.isfinite(p1_true), p1_true, p1_rec), np.where(np.isfinite(p2_true), p2_true, p2_rec)])
+    # the mechanical replay restarts every mechanical_segment_s and where a move begins: while the
+    # cylinder sticks the load does not show, so when it breaks away is not the motion's to judge
+    moving = np.abs(v_all) > settings.v_standstill_m_s
+    begins = np.flatnonzero(moving[1:] & ~moving[:-1]) + 1
+    mstarts = np.union1d(np.arange(h, n - h - 1, max(2, int(round(settings.mechanical_segment_s / rec.dt)))), begins[(begins > h) & (begins < n - h - 1)])
+    vm = v_all[mstarts]
+    mstates = np.column_stack([rec.raw["X"][mstarts], np.where(np.abs(vm) < 1e-3, 0.0, vm), given_p[0, mstarts], given_p[1, mstarts]])
+    mech = replay(*args, mstarts, mstates, condition=condition, effects=effects, drive=DRIVE_MECHANICAL, given=given_p)
     _, p1r, p2r = sensor_readings(np.zeros(1), res.p1_pa, res.p2_pa, effects)
-    out = {"p1": np.asarray(p1r, float).copy(), "p2": np.asarray(p2r, float).copy(), "X": res.X_m.copy()}
+    _, p1h, p2h = sensor_readings(np.zeros(1), hyd.p1_pa, hyd.p2_pa, effects)
+    out = {"p1": np.asarray(p1r, float).copy(), "p2": np.asarray(p2r, float).copy(), "X": res.X_m.copy(),
+           "p1_hydraulic": np.asarray(p1h, float).copy(), "p2_hydraulic": np.asarray(p2h, float).copy(), "X_mechanical": mech.X_m.copy()}
     for k in out:
         out[k][n - h:] = np.nan  # the record's tail has no Savitzky–Golay regions
+    out["X_mechanical"][~moving] = np.nan  # judged on moves only (above)
     return out
 
 
@@ -322,11 +341,27 @@ def _gaps(prepared, plant, condition, effects, settings, keep: set[int]) -> tupl
     kept = {}
     for i, p in enumerate(prepared):
         rr = _replay_record(p, plant, condition, effects, settings)
-        for s, meas in (("p1", p.rec.raw["p1"]), ("p2", p.rec.raw["p2"]), ("X", p.rec.raw["X"])):
-            acc.add(s, rr[s] - meas, p.regions)
+        for s, rep in rr.items():
+            acc.add(s, rep - p.rec.raw[RECORDED_OF[s]], p.regions)
         if i in keep:
             kept[i] = rr
     return acc, kept
+
+
+def noise_floors(prepared, settings) -> dict[str, float]:
+    """The split gaps the recorded noise alone leaves (``gaps.SPLIT_GAPS``; :func:`gaps.noise_rms`
+    of the records' p1, p2, X, on the gap scales)."""
+    from scipy.signal import savgol_coeffs
+
+    h0 = float(savgol_coeffs(settings.savgol_window, settings.savgol_order)[settings.savgol_window // 2])
+    tot = {"p1": [0.0, 0], "p2": [0.0, 0], "X": [0.0, 0]}
+    for p in prepared:
+        for k in tot:
+            ss, c = noise_rms(p.rec.raw[k], p.rec.sg[k], h0)
+            tot[k][0] += ss
+            tot[k][1] += c
+    rms = {k: np.sqrt(ss / c) if c else float("nan") for k, (ss, c) in tot.items()}
+    return {"hydraulic": float(np.sqrt(((rms["p1"] / 1e5) ** 2 + (rms["p2"] / 1e5) ** 2) / 2)), "mechanical": float(rms["X"] / 1e-3)}
 
 
 def _residual_summary(prepared, plant, condition, effects, settings) -> list[dict]:

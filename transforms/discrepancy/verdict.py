@@ -27,6 +27,13 @@ Two kinds of evidence (docs/discrepancy.md, "Verdicts"):
    balances the equation rows' small systematic errors but replays worse); the runner-up is not
    promoted.
 
+3. **No name without a shrinking gap.** A named reading must close the gap where it acts (the
+   hydraulic or the mechanical replay, :func:`acting_gap`) by ≥ ``GAP_SHRINK``× or to ≤
+   ``FLOOR_FACTOR`` × its noise floor (:func:`confirmed`). A selection whose effect does not is
+   ``unexplained`` (:func:`unexplained`: the equation, signal, region and size of the
+   disagreement); a reading named by the prior alone that does not beat the calibrated base model
+   in the replay is ``ambiguous``.
+
 Confidence: for (1) Φ(t) of the advantage over the runner-up (0.999 without one); for (2)
 1/(1 + exp(−(ΔO − Z_AMBIGUOUS²)/2)) for the effect reading, which is 0.5 at the ambiguity line;
 for ``none`` one minus the largest of those over all candidates.
@@ -40,10 +47,10 @@ import numpy as np
 from scipy import stats
 
 from model.effects import EffectSpec
-from transforms.discrepancy.gaps import NOISE_GAP
+from transforms.discrepancy.gaps import GAP_SCALES, NOISE_GAP, SPLIT_GAPS
 from transforms.discrepancy.nuisance import NUISANCE_UNITS
 
-__all__ = ["SEPARATE_BY", "Verdict", "Z_AMBIGUOUS", "Z_NAMED", "nuisance_verdict"]
+__all__ = ["GAP_SHRINK", "SEPARATE_BY", "Verdict", "Z_AMBIGUOUS", "Z_NAMED", "acting_gap", "confirmed", "nuisance_verdict", "unexplained"]
 
 Z_AMBIGUOUS = 3.0
 """Prior σ (along an effect's nuisance pattern) above which the nuisance reading is reported as doubtful."""
@@ -58,6 +65,54 @@ floor the replay is dominated by what neither model describes (the load estimate
 load steps) and does not arbitrate: there the true entrained air widened it by 12 %."""
 REFIT_CANDIDATES = 3
 """The leading candidates by the linearised ΔO are fitted again exactly (jointly with the nuisances)."""
+
+GAP_SHRINK = 1.5
+"""A ``named`` verdict needs the replay to confirm it: the gap where the effect acts
+(:func:`acting_gap`) shrinks by at least this factor when the effect is added ..."""
+FLOOR_FACTOR = 2.0
+"""... or down to this multiple of that gap's noise floor (what the sensor noise alone leaves)."""
+MECHANICAL_EFFECTS = ("friction_change", "load_mass_change")
+EQUATION_OF = {"p1_hydraulic": "chamber 1 (Eq. 6, p1)", "p2_hydraulic": "chamber 2 (Eq. 6, p2)", "X_mechanical": "the motion (Eq. 5, X)"}
+REGION_MIN_SAMPLES = 200
+"""An operating region is named as where the disagreement lies only with this many replayed samples."""
+
+
+def acting_gap(spec: EffectSpec) -> str:
+    """Where an effect acts: ``mechanical`` (friction, mass: the motion) or ``hydraulic`` (the rest:
+    the chambers' flows and the sensors)."""
+    return "mechanical" if spec.name in MECHANICAL_EFFECTS else "hydraulic"
+
+
+def confirmed(before: float, after: float, floor: float) -> bool:
+    """Does the replay confirm an effect: its gap shrinks ≥ ``GAP_SHRINK``× or to ≤ ``FLOOR_FACTOR`` × the floor."""
+    return bool(after * GAP_SHRINK <= before or after <= FLOOR_FACTOR * floor)
+
+
+def where_it_disagrees(acc, kind: str, floor: float) -> str:
+    """'equation, signal, region, size' of the largest disagreement of the ``kind`` gap
+    (:class:`transforms.discrepancy.gaps.GapAccumulator` of the model with the effect)."""
+    sig = max(SPLIT_GAPS[kind], key=lambda s: acc.rms(s) / GAP_SCALES[s] if np.isfinite(acc.rms(s)) else -1.0)
+    regions = [r for r in ("extending", "retracting", "standstill", "pressure_low", "pressure_mid", "pressure_high")
+               if acc.n.get((sig, r), 0) >= REGION_MIN_SAMPLES and np.isfinite(acc.rms(sig, r))]
+    reg = max(regions, key=lambda r: acc.rms(sig, r)) if regions else "all"
+    unit, scale = ("mm", 1e-3) if sig.startswith("X") else ("bar", 1e5)
+    rec = sig.split("_")[0]
+    return (f"{EQUATION_OF[sig]}: the replayed {rec} is off by {acc.rms(sig, reg) / scale:.3g} {unit} RMS in region {reg} "
+            f"({acc.rms(sig) / scale:.3g} {unit} over all samples; the {kind} gap {acc.split_gap(kind):.3g} is "
+            f"{acc.split_gap(kind) / floor:.2g}× its noise floor {floor:.2g})")
+
+
+def unexplained(spec: EffectSpec, value: float, before: float, after: float, kind: str, acc, floor: float, **kw) -> "Verdict":
+    """The verdict when the equations point at ``spec`` but its replay does not close the gap
+    where it acts (``acc``: the replay with it)."""
+    where = where_it_disagrees(acc, kind, floor)
+    return Verdict(
+        "unexplained", MAX_CONFIDENCE, spec, value, alternatives=[f"{spec.key} {spec.parameter_name}={value:.3g} {spec.unit} (not confirmed)"],
+        separate_by="", reason=(f"the data disagree with the model in a way no library effect explains: {spec.key} fits the equations, "
+                                f"but adding it leaves the {kind} gap at {before:.3g} → {after:.3g} (needs ≥ {GAP_SHRINK:g}× or ≤ "
+                                f"{FLOOR_FACTOR:g}× the noise floor {floor:.2g})"),
+        gap_before=before, gap_after=after, where=where, gap_kind=kind, floor=floor, **kw)
+
 
 SEPARATE_BY: dict[str, str] = {
     "spool_sensor_offset": "a commissioning window (an underlap pattern is there from the start, a sensor offset appears later) or the spool's null reading at stand-still with the pressure off",
@@ -87,7 +142,9 @@ class Verdict:
     Attributes
     ----------
     verdict : str
-        ``named``, ``ambiguous`` or ``none``.
+        ``named``, ``ambiguous``, ``unexplained`` (the equations point at an effect whose replay
+        does not close the gap where it acts: the data disagree with the model in a way no library
+        effect explains, ``where``) or ``none``.
     confidence : float
         In [0, 1]: how sure the first reading is (module docstring).
     effect : EffectSpec or None
@@ -120,7 +177,14 @@ class Verdict:
     gap_before: float = float("nan")
     gap_after: float = float("nan")
     """Normalised replay gap of the calibrated base model and with the first reading's effect
-    (for a verdict from the selection, the pipeline's stage gaps)."""
+    (for a verdict from the selection, the pipeline's stage gaps); for ``unexplained`` the gap
+    where the effect acts (hydraulic or mechanical)."""
+    where: str = ""
+    """``unexplained``: which equation, signal, operating region and how large."""
+    gap_kind: str = ""
+    """``unexplained``: the gap where the effect acts (``hydraulic`` or ``mechanical``); its
+    before/after are ``gap_before``/``gap_after``, its noise floor ``floor``."""
+    floor: float = float("nan")
 
 
 def _logistic(d: float) -> float:
@@ -194,10 +258,14 @@ def nuisance_scores(nm, fit, named_specs, specs, rows0, w_rows, settings, prepar
     return sorted(out, key=lambda r: -r["delta_objective"])
 
 
-def nuisance_verdict(prepared, nm, fit, named_specs, specs, rows0, w_rows, settings, named, gap_of, gap_before: float) -> Verdict:
+def nuisance_verdict(prepared, nm, fit, named_specs, specs, rows0, w_rows, settings, named, gap_of, gap_before: float, floors: dict, accs: list) -> Verdict:
     """The verdict of a run with nuisances (module docstring). ``named`` are the pipeline's
     NamedEffects (selection on what the nuisances cannot explain); ``fit`` the final joint fit;
-    ``gap_of(effects, (plant, condition))`` replays the records and returns the normalised gap."""
+    ``gap_of(effects, (plant, condition))`` replays the records and returns their
+    :class:`~transforms.discrepancy.gaps.GapAccumulator`; ``floors`` the split gaps' noise floors,
+    ``accs`` the pipeline's stage accumulators. A ``named`` verdict the replay does not confirm
+    (:func:`confirmed`) is ``unexplained``."""
+    from model.effects import Effects
     from transforms.discrepancy.calibration import Calibration
 
     cal = Calibration(nm=nm, z=fit.z, z_se=fit.z_se, plant=None, condition=None, sigmas=(0.0, 0.0, 0.0))  # type: ignore[arg-type]
@@ -211,6 +279,9 @@ def nuisance_verdict(prepared, nm, fit, named_specs, specs, rows0, w_rows, setti
         alt = first.alternative
         conf = float(min(MAX_CONFIDENCE, stats.norm.cdf(first.alternative_t))) if np.isfinite(first.alternative_t) else MAX_CONFIDENCE
         gaps = dict(gap_before=first.gap_before, gap_after=first.gap_after)
+        if not first.confirmed:
+            return unexplained(first.spec, first.value, first.acting_before, first.acting_after, first.gap_kind, accs[1], floors[first.gap_kind],
+                               nuisances=table, scores=public)
         if alt is not None:
             return Verdict(
                 "ambiguous", conf, first.spec, first.value, alternatives=[alt.key], alternative_keys=[alt.key],
@@ -226,11 +297,12 @@ def nuisance_verdict(prepared, nm, fit, named_specs, specs, rows0, w_rows, setti
     # simulation): where the base model replays within the noise floor, one whose exact fit widens
     # the replay gap beyond REPLAY_REFUTES is refuted, and the verdict is none (the runner-up is not
     # promoted: the equations pointed elsewhere)
-    gap_after, best, refuted = float("nan"), None, ""
+    gap_after, best, refuted, acc_after = float("nan"), None, "", None
     if scores and scores[0]["delta_objective"] >= Z_AMBIGUOUS**2:
         best = scores[0]
         if best["refit"] is not None:
-            gap_after = gap_of(best["refit"].effects, nm.model(best["refit"].z))
+            acc_after = gap_of(best["refit"].effects, nm.model(best["refit"].z))
+            gap_after = acc_after.gap()
             if gap_before <= NOISE_GAP and gap_after > REPLAY_REFUTES * gap_before:
                 refuted = (f"the equations' leading reading {best['key']} ({np.sqrt(best['delta_objective']):.2g}σ) is refuted by the "
                            f"replay (gap {gap_before:.3g} → {gap_after:.3g}); no reading is confirmed")
@@ -253,12 +325,22 @@ def nuisance_verdict(prepared, nm, fit, named_specs, specs, rows0, w_rows, setti
     if jf is not None:
         table = Calibration(nm=nm, z=jf.z, z_se=jf.z_se, plant=None, condition=None, sigmas=(0.0, 0.0, 0.0)).table()  # type: ignore[arg-type]
     gaps = dict(gap_before=gap_before, gap_after=gap_after)
-    if z >= Z_NAMED and not rivals:
+    held = ""
+    if z >= Z_NAMED and not rivals and acc_after is not None:
+        # named needs the replay too: the effect must close its gap against the calibrated base
+        # model (whose nuisances explain the same data off their priors); where it does not, the
+        # replay cannot tell the readings apart and the prior alone decides nothing
+        kind = acting_gap(spec)
+        before, after = accs[0].split_gap(kind), acc_after.split_gap(kind)
+        if not confirmed(before, after, floors[kind]):
+            held = f"; its replay does not tell them apart (the {kind} gap {before:.3g} → {after:.3g})"
+    if z >= Z_NAMED and not rivals and not held:
         return Verdict("named", best["confidence"], spec, best["value"], alternatives=[nuis], separate_by=sep,
                        reason=f"without {spec.key} the base model's parameters would have to move {z:.2g}σ outside their tolerances ({nuis})",
                        nuisances=table, scores=public, **gaps)
     return Verdict("ambiguous", best["confidence"], spec, best["value"], alternatives=[nuis] + alts,
                    alternative_keys=[sc["key"] for sc in rivals], separate_by=sep,
                    reason=(f"the data fit either {spec.key} {spec.parameter_name}={best['value']:.3g} {spec.unit} or {nuis}: "
-                           f"{z:.2g}σ from the tolerances, more than manufacturing scatter and datasheets usually allow, too little to rule them out"),
+                           + (f"{z:.2g}σ from the tolerances, more than manufacturing scatter and datasheets usually allow, too little to rule them out"
+                            if not held else f"{z:.2g}σ from the tolerances{held}")),
                    nuisances=table, scores=public, **gaps)

@@ -1,0 +1,37 @@
+"""The discrepancy workflow on the second reference plant (``tests/refplant``: written apart from
+``model/``, its own integrator, Karnopp sticking, loads ramping to a new level every 1-4 s, 1 ms
+transmitter lag and one sample of skew, a valve as built), without a commissioning window: the
+clean valve replays its chambers within 2x the noise floor and is not named anything; an effect
+outside the library (a 2 ms lag on the p1 transmitter) is never named."""
+
+from datetime import datetime, timezone
+
+import pytest
+
+from model import TABLE1
+from tests.refplant import NAMEPLATE, effect, manufactured, simulate_windows, to_lake_frame
+from transforms.discrepancy import DiscrepancySettings, split_records
+from transforms.discrepancy.nuisance import NuisancePriors
+from transforms.discrepancy.pipeline import diagnose
+
+SETTINGS = DiscrepancySettings()
+T0 = datetime(2025, 3, 1, tzinfo=timezone.utc)
+
+
+def _diagnose(effects, seed=0):
+    lake = to_lake_frame(simulate_windows(manufactured(NAMEPLATE, seed=seed), 1, 100 + seed, effects=effects), "V1", T0)
+    return diagnose(split_records(lake, SETTINGS), TABLE1, None, SETTINGS, monitoring=False, priors=NuisancePriors())
+
+
+@pytest.mark.slow
+def test_clean_reference_valve_replays_at_the_noise_floor_and_is_not_named():
+    d = _diagnose(None)
+    assert d.pressure_delay_samples == 2  # 1 ms transmitter lag + one sample of skew
+    assert d.split_gaps[0]["hydraulic"] <= 2.0 * d.noise_floors["hydraulic"], (d.split_gaps, d.noise_floors)
+    assert d.verdict.verdict != "named", d.verdict.reason
+
+
+@pytest.mark.slow
+def test_an_effect_outside_the_library_is_never_named():
+    d = _diagnose(effect("transmitter_lag", 2e-3, channel="p1"))
+    assert d.verdict.verdict in ("unexplained", "ambiguous"), (d.verdict.verdict, d.verdict.reason)
