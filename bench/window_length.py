@@ -80,17 +80,38 @@ def summary(fits: pl.DataFrame) -> pl.DataFrame:
     return counts.join(worst, on="length_s").join(spread, on="length_s").sort("length_s")
 
 
+def per_edge_scatter(fits: pl.DataFrame) -> pl.DataFrame:
+    """Per length and edge: the window-to-window standard deviation of α̂, x̂ (% of x_max) and e
+    (mm²) about each valve's own mean, pooled over the valves, and the largest |deviation| in
+    those standard deviations (how heavy the tails are)."""
+    params = ("alpha_hat", "x_hat_pct", "e_mm2")
+    dev = fits.filter(pl.col("status") == "ok").with_columns(
+        (pl.col(p) - pl.col(p).mean().over("length_s", "seed", "edge")).alias(f"d_{p}") for p in params
+    )
+    return (
+        dev.group_by("length_s", "edge")
+        .agg(pl.len().alias("windows"),
+             *[(pl.col(f"d_{p}") ** 2).mean().sqrt().alias(f"sd_{p}") for p in params],
+             *[(pl.col(f"d_{p}").abs().max() / (pl.col(f"d_{p}") ** 2).mean().sqrt()).alias(f"max_dev_sd_{p}") for p in params])
+        .sort("length_s", "edge")
+    )  # fmt: skip
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--valves", type=int, default=6)
     ap.add_argument("--duration-s", type=float, default=1200.0)
     ap.add_argument("--hours", type=float, default=8000.0)
     ap.add_argument("--lengths", default="10,20,30,60,120,300")
+    ap.add_argument("--per-edge", action="store_true", help="also the scatter per edge (sd over valves' ok windows, pooled) and the largest |deviation| / sd")
     a = ap.parse_args()
     lengths = [float(x) for x in a.lengths.split(",")]
     fits = pl.concat([valve_fits(s, a.hours, a.duration_s, lengths) for s in range(1, a.valves + 1)])
     with pl.Config(tbl_rows=50, tbl_cols=20, tbl_width_chars=250, float_precision=4):
         print(summary(fits))
+        if a.per_edge:
+            with pl.Config(float_precision=6):
+                print(per_edge_scatter(fits))
 
 
 if __name__ == "__main__":

@@ -376,7 +376,7 @@ CONDITION_BOUNDS_FIELDS: tuple[Field, ...] = (
     Field("e_mm2_fault_high", pl.Float64, "mm²", "e_mm2 above this in one window: faulty."),
     Field("e_mm2_wear_high", pl.Float64, "mm²", "Long-term level of e_mm2 above this: worn."),
     Field("change_z", pl.Float64, "", "Robust z-score beyond which a window departs significantly from its recent trend."),
-    Field("change_history_windows", pl.Int32, "", "Previous ok windows the rolling median and MAD are taken over; also the windows of the long-term level."),
+    Field("change_history_windows", pl.Int32, "", "Fewest previous ok windows the rolling median and IQR are taken over (when change_history_hours holds fewer); also for the long-term level."),
     Field("change_min_history", pl.Int32, "", "Fewest previous ok windows for a z-score."),
     Field("alpha_sigma_floor", pl.Float64, "", "Smallest scale of the alpha_hat z-score."),
     Field("x_hat_pct_sigma_floor", pl.Float64, "%", "Smallest scale of the x_hat_pct z-score."),
@@ -388,6 +388,7 @@ CONDITION_BOUNDS_FIELDS: tuple[Field, ...] = (
     Field("eq9_expected", pl.Float64, "", "Eq. 9 residual the valve's design gives at rest."),
     Field("eq9_tolerance", pl.Float64, "", "Largest |residual - expected| of a sound valve."),
     Field("updated_at", UTC_US, "", "When the row was written from the plant configuration."),
+    Field("change_history_hours", pl.Float64, "h", "Hours of previous ok windows the rolling median and IQR are taken over (at least change_history_windows windows); also the span of the long-term level."),
 )
 """Each configured valve's bounds (table ``condition_bounds``, replaced by every report)."""
 

@@ -167,8 +167,10 @@ class ConditionBounds:
       e above the 0.10–0.32 mm² seen on sound valves → 0.50 mm². Lower bounds catch the
       opposite drift (silting, a clogged edge): α̂ 0.80, x̂ −5 %.
     - **change detection** (a significant departure from the edge's own recent trend): a robust
-      z-score of each window against the median and MAD (×1.4826) of the previous
-      ``change_history_windows`` ok windows; |z| > ``change_z`` alarms. The scale is never taken
+      z-score of each window against the median and IQR (/1.349) of its history: the ok windows
+      of the previous ``change_history_hours`` (a day: 24 hourly snapshots, 1,440 one-minute
+      windows of a continuous recording), or the previous ``change_history_windows`` ok windows
+      if those reach further back (sparse snapshots); |z| > ``change_z`` alarms. The scale is never taken
       below the ``*_sigma_floor`` values (ordinary window-to-window scatter of a sound edge), so
       a quiet history does not turn a normal wobble into an alarm. z = 6 keeps the false-alarm
       rate of Gaussian scatter below 1e-8 per window and parameter.
@@ -205,6 +207,9 @@ class ConditionBounds:
     eq9_tolerance: float = 0.5
     eq9_expected: float | None = None
     """None: the residual of the design's rest state (computed by the report from Eq. 3/4)."""
+    change_history_hours: float = 24.0
+    """The change detector's history and the long-term level on the clock [h]: the ok windows of
+    this many hours (never fewer than ``change_history_windows``)."""
 
 
 BOUND_KEYS: tuple[str, ...] = tuple(f.name for f in fields(ConditionBounds))

@@ -4,10 +4,12 @@
   nominal α·A(u) (Eq. 3), the baseline Â(u) the fits are made against, and the current
   α̂·Â(u + x̂) of the latest ok window (the paper's Figs. 4, 5, 8 and 9), with the change
   current − baseline underneath, where wear of a few per cent becomes visible.
-* :func:`trends_figure`: per valve, α̂, x̂ and e over operating hours for each edge, with the
-  wear and fault bounds, the rolling median, the fitted trend and, where the edge has a forecast
-  within the horizon (``valve_condition``), the end of life with its 95 % interval (the paper's
-  Fig. 6); alarm windows in red.
+* :func:`trends_figure`: per valve, α̂, x̂ and e over operating hours for each edge, a point a
+  UTC day (``trend_daily``: the day's median, and its windows' minimum to maximum as a band), with
+  the wear and fault bounds, the fitted trend and, where the edge has a forecast within the
+  horizon (``valve_condition``), the end of life with its 95 % interval (the paper's Fig. 6);
+  days with an alarm marked in red. A continuous recording's 1,440 windows a day are its day's
+  point and band, not 1,440 points.
 * :func:`fleet_figure`: the fleet at a glance: the state of every edge of the most urgent
   valves, their remaining life (bars where there is a figure, the report's words beside), and the
   count of valves per state.
@@ -64,8 +66,14 @@ def _save(fig, path: Path) -> Path:
     return path
 
 
+def _daily_band(ax, h: np.ndarray, median: np.ndarray, lo: np.ndarray, hi: np.ndarray, colour: str, label: str) -> None:
+    """A day's median (points joined) and the band of its windows' minimum to maximum."""
+    ax.fill_between(h, lo, hi, color=colour, alpha=0.2, lw=0, step="mid", label=f"{label}: daily min–max")
+    ax.plot(h, median, ".-", color=colour, ms=4, lw=0.8, label=f"{label}: daily median")
+
+
 def _leak_panel(ax, d: pl.DataFrame | None) -> None:
-    """The edge's closed-edge leakage per window (× Eq. 3, 95 % intervals) and at commissioning."""
+    """The edge's closed-edge leakage (× Eq. 3): daily median and range of the windows' estimates, and at commissioning."""
     ax.set_xlabel("operating hours (h)")
     ax.grid(alpha=0.3)
     if ax.get_subplotspec().is_first_col():
@@ -74,17 +82,14 @@ def _leak_panel(ax, d: pl.DataFrame | None) -> None:
         ax.text(0.5, 0.5, "no leakage estimates", ha="center", va="center", transform=ax.transAxes)
         return
     d = d.sort("operating_hours")
-    h = d["operating_hours"].to_numpy()
-    y = d["leak_scale"].to_numpy()
-    lo = np.nan_to_num(y - d["leak_scale_ci_low"].to_numpy(), nan=0.0)
-    hi = np.nan_to_num(d["leak_scale_ci_high"].to_numpy() - y, nan=0.0)
-    ax.errorbar(h, y, yerr=[lo, hi], fmt=".", color="#37474f", ms=4, lw=0.6, alpha=0.7, label="window (95 %)")
+    y = d["median_leak_scale"].to_numpy()
+    _daily_band(ax, d["operating_hours"].to_numpy(), y, d["min_leak_scale"].to_numpy(), d["max_leak_scale"].to_numpy(), "#37474f", "windows")
     base = d["leak_scale_baseline"].drop_nulls()
     if base.len():
         ax.axhline(float(base[0]), color="#1565c0", lw=1.2, label="commissioning")
     ax.axhline(1.0, color="k", ls="--", lw=0.8, label="Eq. 3")
     top = max(2.0, 1.5 * float(np.nanpercentile(y, 95)), 1.5 * (float(base[0]) if base.len() else 0.0))
-    ax.set_ylim(0.0, top)  # the estimates, not the widest intervals of 10 s windows
+    ax.set_ylim(0.0, top)  # the daily medians, not the widest single windows
     ax.legend(fontsize=7, loc="upper left")
 
 
@@ -127,22 +132,26 @@ def characteristics_figure(valve_id: str, curves: dict[str, dict[str, np.ndarray
     return _save(fig, path)
 
 
-def trends_figure(valve_id: str, trend: pl.DataFrame, lines: pl.DataFrame, life: dict[str, dict], path: Path,
-                  leak: pl.DataFrame | None = None) -> Path:
-    """α̂, x̂, e and the closed-edge leakage over operating hours for the four edges of one valve.
+def trends_figure(valve_id: str, daily: pl.DataFrame, lines: pl.DataFrame, bounds: pl.DataFrame, life: dict[str, dict],
+                  path: Path, leak: pl.DataFrame | None = None) -> Path:
+    """α̂, x̂, e and the closed-edge leakage over operating hours for the four edges of one valve,
+    a point a UTC day (a continuous recording gives 1,440 windows a day: its picture is its days).
 
     Parameters
     ----------
-    trend : DataFrame
-        Rows of view ``trend_operating_hours`` for the valve.
+    daily : DataFrame
+        Rows of view ``trend_daily`` for the valve (per edge, day and parameter: median, min, max,
+        n_alarms, operating_hours at the day's last window).
     lines : DataFrame
         Rows of view ``parameter_trends`` for the valve (slope, intercept).
+    bounds : DataFrame
+        Rows of view ``stg_condition_bounds`` for the valve (fault and wear bounds per parameter).
     life : dict
         edge → its ``valve_condition`` row: the end of life is drawn where that row has a
         forecast (``remaining_basis`` forecast, on its ``limiting_parameter``), nowhere else.
     leak : DataFrame, optional
-        edge, operating_hours, leak_scale, leak_scale_ci_low, leak_scale_ci_high of the valve's
-        ok windows (``stg_edge_fits``) and leak_scale_baseline per edge: the bottom row.
+        Per edge and day: operating_hours, median_leak_scale, min_leak_scale, max_leak_scale of
+        the ok windows, and leak_scale_baseline: the bottom row.
     """
     params = ("alpha_hat", "x_hat_pct", "e_mm2")
     fig, axes = plt.subplots(4, 4, figsize=(16, 12.5), sharex="col", constrained_layout=True)
@@ -151,7 +160,7 @@ def trends_figure(valve_id: str, trend: pl.DataFrame, lines: pl.DataFrame, life:
     for j, edge in enumerate(EDGES):
         for i, p in enumerate(params):
             ax = axes[i, j]
-            d = trend.filter((pl.col("edge") == edge) & (pl.col("parameter") == p)).sort("operating_hours")
+            d = daily.filter((pl.col("edge") == edge) & (pl.col("parameter") == p)).sort("operating_hours")
             if i == 0:
                 ax.set_title(f"{valve_id} edge {edge}", fontsize=11)
             if j == 0:
@@ -161,13 +170,11 @@ def trends_figure(valve_id: str, trend: pl.DataFrame, lines: pl.DataFrame, life:
                 ax.text(0.5, 0.5, "no ok fits", ha="center", va="center", transform=ax.transAxes)
                 continue
             h = d["operating_hours"].to_numpy()
-            y = d["value"].to_numpy()
-            alarm = d["is_alarm"].fill_null(False).to_numpy()
-            ax.plot(h[~alarm], y[~alarm], ".", color="#37474f", ms=4, label="window")
+            lo_v, hi_v = d["min_value"].to_numpy(), d["max_value"].to_numpy()
+            _daily_band(ax, h, d["median_value"].to_numpy(), lo_v, hi_v, "#37474f", "windows")
+            alarm = d["n_alarms"].to_numpy() > 0
             if alarm.any():
-                ax.plot(h[alarm], y[alarm], "x", color=STATE_COLOURS["faulty"], ms=7, mew=2, label="alarm")
-            med = d["rolling_median"].to_numpy()
-            ax.plot(h, med, "-", color="#8e24aa", lw=1, alpha=0.8, label="rolling median")
+                ax.plot(h[alarm], hi_v[alarm], "x", color=STATE_COLOURS["faulty"], ms=7, mew=2, label="day with an alarm")
             x_end = h.max()
             lp = lines.filter((pl.col("edge") == edge) & (pl.col("parameter") == p))
             c = life.get(edge, {})
@@ -180,18 +187,19 @@ def trends_figure(valve_id: str, trend: pl.DataFrame, lines: pl.DataFrame, life:
             if lp.height and lp["slope_per_hour"][0] is not None and lp["n_fits"][0] >= 3:
                 xs = np.array([h.min(), x_end])
                 ax.plot(xs, lp["intercept"][0] + lp["slope_per_hour"][0] * xs, "--", color="#ef6c00", lw=1.2, label="trend (OLS)")
+            b = bounds.filter(pl.col("parameter") == p)
+            b = b.row(0, named=True) if b.height else {}
             for col, style, colour in (("wear_low", "--", STATE_COLOURS["worn"]), ("wear_high", "--", STATE_COLOURS["worn"]),
                                        ("fault_low", ":", STATE_COLOURS["faulty"]), ("fault_high", ":", STATE_COLOURS["faulty"])):  # fmt: skip
-                v = d[col][0]
-                if v is not None:
-                    ax.axhline(v, ls=style, color=colour, lw=1)
-            lo_y = min([float(np.nanmin(y))] + [v for v in (d["wear_low"][0],) if v is not None])
-            hi_y = max([float(np.nanmax(y))] + [v for v in (d["wear_high"][0],) if v is not None])
+                if b.get(col) is not None:
+                    ax.axhline(b[col], ls=style, color=colour, lw=1)
+            lo_y = min([float(np.nanmin(lo_v))] + [v for v in (b.get("wear_low"),) if v is not None])
+            hi_y = max([float(np.nanmax(hi_v))] + [v for v in (b.get("wear_high"),) if v is not None])
             pad = 0.08 * (hi_y - lo_y or 1.0)
             ax.set_ylim(lo_y - pad, hi_y + pad)
             if i == 0 and j == 0:
                 ax.legend(fontsize=7, loc="best")
-    fig.suptitle(f"Condition parameters of valve {valve_id} over operating hours "
+    fig.suptitle(f"Condition parameters of valve {valve_id} over operating hours, a point a day "
                  "(dashed orange: wear bounds; dotted red: fault bounds)", fontsize=13)  # fmt: skip
     return _save(fig, path)
 

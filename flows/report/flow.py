@@ -10,7 +10,9 @@
 3. creates or refreshes the ``sql/`` views (:mod:`flows.report.views`) and publishes the read-only
    snapshot ``WAREHOUSE/snapshot/valvemon.duckdb`` that readers query (:mod:`flows.report.publish`,
    which every writing command ends with);
-4. reads the views from the snapshot and writes the BI hand-off (:mod:`flows.report.export`), the PNG
+4. computes the views it reads once each (``REPORT_VIEWS`` and what they read, into temporary
+   tables of its read-only snapshot connection: :func:`flows.report.views.materialise_views`),
+   reads them and writes the BI hand-off (:mod:`flows.report.export`), the PNG
    pictures (:mod:`flows.report.figures`, drawn in a pool of processes: :func:`render_figures`) and
    ``WAREHOUSE/reports/report.html`` (:mod:`flows.report.html`), which also shows the latest
    ``valvemon discrepancy`` run of every valve analysed (:func:`discrepancy_results`; its overlay pictures are the workflow's own)
@@ -42,7 +44,7 @@ from flows.report.html import render_report
 from flows.report.publish import publish
 from flows.report.quality import data_quality
 from flows.report.standstill import STANDSTILL_COLUMNS, standstill_rows
-from flows.report.views import connect_snapshot, ensure_report_tables
+from flows.report.views import connect_snapshot, ensure_report_tables, materialise_views
 from model.area import edge_area
 from schemas.fields import EDGES
 from schemas.plant_config import PlantConfig
@@ -53,6 +55,10 @@ DISCREPANCY_DIR = Path(REPORTS_DIR) / "discrepancy"
 """Where ``valvemon discrepancy`` writes its overlay pictures, inside the warehouse."""
 DETAIL_VALVES = 20
 """Valves shown with pictures in the HTML report by default: the most urgent ones."""
+REPORT_VIEWS = ("valve_condition", "fleet_ranking", "parameter_trends", "trend_daily")
+"""The views the report reads, each computed once per run (:func:`flows.report.views.materialise_views`)."""
+REPORT_MEMORY = "2GB"
+"""DuckDB's memory limit for the report's queries; beyond it they spill to ``WAREHOUSE/.report_tmp``."""
 U_GRID_POINTS = 281
 
 
@@ -171,12 +177,26 @@ def run_report(config_path: str | Path, warehouse: str | Path, *, detail: int = 
     out_dir.mkdir(parents=True, exist_ok=True)
     con = connect_snapshot(warehouse)
     try:
+        con.execute(f"SET memory_limit = '{REPORT_MEMORY}'")
+        con.execute("SET temp_directory = ?", [str(warehouse / ".report_tmp")])
+        materialise_views(con, REPORT_VIEWS)
         exports = export_bi(con, warehouse)
         ranking = query_frame(con, "SELECT * FROM fleet_ranking ORDER BY urgency_rank")
         conditions = query_frame(con, "SELECT * FROM valve_condition ORDER BY valve_id, edge_order")
         chosen = valve_ids or ranking["valve_id"].head(detail).to_list()
         chosen = [v for v in ranking["valve_id"].to_list() if v in set(chosen)]
         jobs = [(fleet_figure, (ranking, conditions, out_dir / "fleet_overview.png"))]
+        # the chosen valves' rows, one query each: a point a day (trend_daily), the trend lines, the bounds, the leakage by day
+        daily, lines, bounds, leak = (query_frame(con, sql, [chosen]) for sql in (
+            "SELECT * FROM trend_daily WHERE list_contains(?, valve_id)",
+            "SELECT * FROM parameter_trends WHERE list_contains(?, valve_id)",
+            "SELECT * FROM stg_condition_bounds WHERE list_contains(?, valve_id)",
+            "SELECT f.valve_id, f.edge, max(f.operating_hours) AS operating_hours, median(f.leak_scale) AS median_leak_scale, "
+            "min(f.leak_scale) AS min_leak_scale, max(f.leak_scale) AS max_leak_scale, any_value(c.leak_scale_baseline) AS leak_scale_baseline "
+            "FROM stg_edge_fits f JOIN valve_condition c USING (valve_id, edge) "
+            "WHERE list_contains(?, f.valve_id) AND f.is_ok AND f.leak_scale IS NOT NULL "
+            "GROUP BY f.valve_id, f.edge, CAST(timezone('UTC', f.window_start) AS DATE)",
+        ))  # fmt: skip
         for vid in chosen:
             cond = conditions.filter(pl.col("valve_id") == vid)
             latest = {r["edge"]: r for r in cond.iter_rows(named=True)}
@@ -185,17 +205,9 @@ def run_report(config_path: str | Path, warehouse: str | Path, *, detail: int = 
                 "SELECT * FROM baselines WHERE valve_id = ? QUALIFY version = max(version) OVER (PARTITION BY edge)",
                 [vid],
             )
-            trend = query_frame(con, "SELECT * FROM trend_operating_hours WHERE valve_id = ?", [vid])
-            lines = query_frame(con, "SELECT * FROM parameter_trends WHERE valve_id = ?", [vid])
-            leak = query_frame(
-                con,
-                "SELECT f.edge, f.operating_hours, f.leak_scale, f.leak_scale_ci_low, f.leak_scale_ci_high, "
-                "c.leak_scale_baseline FROM stg_edge_fits f JOIN valve_condition c USING (valve_id, edge) "
-                "WHERE f.valve_id = ? AND f.is_ok AND f.leak_scale IS NOT NULL",
-                [vid],
-            )
+            mine = [f.filter(pl.col("valve_id") == vid) for f in (daily, lines, bounds, leak)]
             jobs += [(characteristics_figure, (vid, _edge_curves(config, vid, baselines, latest), latest, out_dir / f"characteristics_{vid}.png")),
-                     (trends_figure, (vid, trend, lines, latest, out_dir / f"trends_{vid}.png", leak))]  # fmt: skip
+                     (trends_figure, (vid, *mine[:3], latest, out_dir / f"trends_{vid}.png", mine[3]))]  # fmt: skip
         discrepancy = discrepancy_results(con, warehouse)
         quality = data_quality(con)
     finally:

@@ -36,7 +36,7 @@ from pathlib import Path
 import duckdb
 
 from flows.common.errors import ValvemonError
-from flows.common.warehouse_db import DB_NAME, db_path, ensure_tables, transaction
+from flows.common.warehouse_db import DB_NAME, add_missing_columns, db_path, ensure_tables, transaction
 from schemas.fields import CONDITION_BOUNDS_FIELDS, STANDSTILL_FIELDS, STANDSTILL_PROGRESS_FIELDS
 
 SQL_DIR = Path(__file__).resolve().parents[2] / "sql"
@@ -123,6 +123,7 @@ def ensure_report_tables(con: duckdb.DuckDBPyConnection) -> None:
 
     ensure_monitor_tables(con)
     ensure_tables(con, {name: (fields, None) for name, fields in REPORT_TABLES.items()})
+    add_missing_columns(con, REPORT_TABLES)
     con.execute("CREATE UNIQUE INDEX IF NOT EXISTS standstill_checks_key ON standstill_checks (valve_id, window_start)")
 
 
@@ -140,6 +141,34 @@ def create_views(con: duckdb.DuckDBPyConnection, sql_dir: Path = SQL_DIR) -> lis
             except duckdb.Error as exc:
                 raise ValvemonError(f"{v.path}: {str(exc).splitlines()[0]}") from None
     return [v.name for v in views]
+
+
+def materialise_views(con: duckdb.DuckDBPyConnection, names: tuple[str, ...], sql_dir: Path = SQL_DIR) -> list[str]:
+    """Compute the views ``names`` and the core and report views they read once each, in
+    dependency order, into temporary tables of the same names in this connection.
+
+    DuckDB resolves a name to a temporary object before the database's own, also inside a view's
+    body, so every later query of this connection reads the tables: a report that reads
+    ``valve_condition``, ``fleet_ranking``, ``parameter_trends`` and ``trend_daily`` evaluates
+    ``fit_checks`` (the rolling median and quartiles over every ok window) once, not once per
+    query and valve. Nothing is written to the database (a read-only connection will do).
+    Returns the views materialised, in order."""
+    views = discover_views(sql_dir)
+    wanted: set[str] = set()
+
+    def add(name: str) -> None:
+        if name not in wanted and views[name].layer != "staging":
+            wanted.add(name)
+            for d in views[name].depends_on:
+                add(d)
+
+    for name in names:
+        add(name)
+    db = con.execute("SELECT current_database()").fetchone()[0]
+    done = [v.name for v in ordered_views(views) if v.name in wanted]
+    for name in done:
+        con.execute(f'CREATE OR REPLACE TEMP TABLE {name} AS SELECT * FROM "{db}".main.{name}')
+    return done
 
 
 def snapshot_path(warehouse: str | Path) -> Path:

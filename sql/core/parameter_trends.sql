@@ -3,9 +3,10 @@
 --
 -- Trend: ordinary least squares of the parameter over operating hours (regr_slope,
 -- regr_intercept) on the ok windows without an alarm (window_alarms) of the last
--- trend_span_hours before the edge's latest ok window. Level: the median of the latest
--- change_history_windows of those windows, what "the long-term trend exceeds a bound" is
--- judged on.
+-- trend_span_hours before the edge's latest ok window: all of them, however many a
+-- continuous recording gives. Level: the median of those of them within change_history_hours
+-- before the edge's latest ok window, or of the latest change_history_windows of them if those
+-- reach further back; what "the long-term trend exceeds a bound" is judged on.
 --
 -- End of life: the hour at which the trend line reaches the bound, mean_hours + (bound -
 -- mean_value) / slope, with its 95 % confidence interval by Fieller's theorem: the hours x at
@@ -31,7 +32,7 @@ bounds as (
 ),
 
 latest as (
-    select valve_id, edge, max(operating_hours) as latest_hours
+    select valve_id, edge, max(operating_hours) as latest_hours, max(window_start) as latest_start
     from stg_edge_fits
     where is_ok
     group by valve_id, edge
@@ -50,7 +51,9 @@ in_span as (
         clean.value, latest.latest_hours,
         row_number() over (
             partition by clean.valve_id, clean.edge, clean.parameter order by clean.window_start desc
-        ) as recency
+        ) <= bounds.change_history_windows
+            or clean.window_start > latest.latest_start
+                                    - to_microseconds(cast(bounds.change_history_hours * 3600e6 as bigint)) as in_level
     from clean
     join latest using (valve_id, edge)
     join bounds using (valve_id, parameter)
@@ -72,10 +75,9 @@ fitted as (
         regr_sxx(in_span.value, in_span.operating_hours) as sxx,
         regr_syy(in_span.value, in_span.operating_hours) as syy,
         regr_sxy(in_span.value, in_span.operating_hours) as sxy,
-        median(in_span.value) filter (where in_span.recency <= bounds.change_history_windows) as level,
-        count(*) filter (where in_span.recency <= bounds.change_history_windows) as level_n
+        median(in_span.value) filter (where in_span.in_level) as level,
+        count(*) filter (where in_span.in_level) as level_n
     from in_span
-    join bounds using (valve_id, parameter)
     group by in_span.valve_id, in_span.edge, in_span.parameter
 ),
 

@@ -9,7 +9,7 @@ bounds as (
 
 settings as (
     select
-        valve_id, change_z, change_history_windows, change_min_history, fault_hold_hours,
+        valve_id, change_z, change_history_hours, change_history_windows, change_min_history, fault_hold_hours,
         trend_min_fits, trend_min_span_hours, trend_span_hours
     from bounds
 ),

@@ -12,7 +12,7 @@ from flows.common.errors import ValvemonError
 from flows.report.export import export_bi
 from flows.report.html import render_report
 from flows.report.remaining import remaining_text, two_figures
-from flows.report.views import SQL_DIR, discover_views, ordered_views
+from flows.report.views import SQL_DIR, discover_views, materialise_views, ordered_views
 from schemas.fields import EDGES
 from tests.report.viewdb import COMMISSIONED
 
@@ -320,3 +320,20 @@ def test_trend_views(wh):
     assert oh.height == HOURS.size
     assert np.allclose(oh["trend_value"].to_numpy(), 1.0 + 0.001 * HOURS)
     assert oh["rolling_median"][0] is None and oh["rolling_median"][30] == pytest.approx(1.0 + 0.001 * 17.5)
+
+
+def test_materialised_views_give_the_views_rows(wh):
+    # the report computes each view once into a temporary table of the same name; what it reads must not change
+    wh.add_valve("M1")
+    wh.add_healthy_edges("M1", HOURS, seed=6, skip=("s1",))
+    wh.add_fits("M1", "s1", HOURS, np.where(HOURS == 150, 1.25, 1.0), 0.1 + 0.01 * HOURS, 0.1)
+    names = ("valve_condition", "fleet_ranking", "trend_daily", "fault_alarms")
+    before = {n: wh.q(f"SELECT * FROM {n}") for n in names}
+    done = materialise_views(wh.con, names)
+    assert done.index("fit_checks") < done.index("window_alarms") < done.index("valve_condition") < done.index("fleet_ranking")
+    assert "stg_edge_fits" not in done  # staging views stay views
+    temp = {r[0] for r in wh.con.execute("SELECT table_name FROM duckdb_tables() WHERE temporary").fetchall()}
+    assert set(names) <= temp
+    for n in names:
+        assert wh.q(f"SELECT * FROM {n}").equals(before[n]), n
+    assert before["fault_alarms"].height == 1 and wh.condition("M1", "s1")["state"] == "healthy"
