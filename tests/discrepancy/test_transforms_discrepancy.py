@@ -104,6 +104,43 @@ def test_triangular_force_balance_is_the_load_and_steps_are_found():
         assert np.min(np.abs(est.steps - k)) <= 3
 
 
+def test_load_follows_ramps_and_keeps_mass_and_friction_apart():
+    """A rolling force (ramps to new levels, unseen by the step filter) is followed piecewise
+    linearly where one constant per segment leaves it; a mass and a friction mismatch, which act
+    on the acceleration and the velocity, stay separable from that load (what the regression
+    eliminates, :func:`load_projector`); a piecewise-constant load keeps one constant per segment."""
+    from transforms.discrepancy.load import load_projector, project_out
+
+    res, rec = _exact_record(seed=1)
+    s = DiscrepancySettings()
+    t = np.arange(rec.n) * 1e-3
+    ramp = np.interp(t, [0.0, 2.0, 2.3, 5.0, 5.35, 8.0, 8.1], [1500.0, 1500.0, -2500.0, -2500.0, 4000.0, 4000.0, 0.0])
+    L = s.interval_samples
+    a = np.full(rec.n, np.nan)
+    a[L:-L] = (rec.raw["X"][2 * L:] - 2 * rec.raw["X"][L:-L] + rec.raw["X"][:-2 * L]) / (L * 1e-3) ** 2
+    v = rec.sg["v"]
+    rng = np.random.default_rng(3)
+    f = ramp + 600.0 * a + 3000.0 * v + 30.0 * rng.normal(size=rec.n)  # load, a mass and a friction mismatch, noise
+    est = estimate_load(f, v, s, accel=a, dt=1e-3)
+    assert est.knot_samples == 100
+    ok = est.valid
+    err = np.sqrt(np.mean((est.load[ok] - ramp[ok]) ** 2))
+    const = estimate_load(f, v, s)  # one constant per segment
+    assert err < 250.0 and err < 0.2 * np.sqrt(np.mean((const.load[ok] - ramp[ok]) ** 2)), err  # N; the 0.1 s ramp's corners
+    flat = estimate_load(np.where(t < 5.0, 1500.0, -2500.0) + 600.0 * a + 30.0 * rng.normal(size=rec.n), v, s, accel=a, dt=1e-3)
+    assert flat.knot_samples == 0
+    # eliminating the load (rows every 20 samples, as the motion rows) leaves the mass and friction
+    rows = np.flatnonzero(ok & np.isfinite(a) & (np.abs(v) > s.v_move_m_s))[::20]
+    group = est.segment[rows]
+    proj = load_projector(group, rows.astype(float), {int(g): est.knots(int(g)) for g in np.unique(group)})
+    X = project_out(np.column_stack([a[rows], v[rows]]), proj)
+    coef = np.linalg.lstsq(X, project_out(f[rows], proj), rcond=None)[0]
+    assert coef[0] == pytest.approx(600.0, rel=0.1) and coef[1] == pytest.approx(3000.0, rel=0.25), coef
+    kn = est.knots(int(group[0]))
+    pwl = np.where(group == group[0], np.interp(rows, kn, np.cos(np.arange(kn.size))), 0.0)  # piecewise linear on its knots
+    assert np.max(np.abs(project_out(pwl, proj))) < 1e-9
+
+
 def test_demean_by_group():
     v = np.array([1.0, 3.0, 10.0, 14.0, 5.0])
     g = np.array([0, 0, 1, 1, 2])

@@ -88,10 +88,10 @@ class NuisanceModel:
 
 
 def _residuals(prepared, nm: NuisanceModel, z, effects, rows0, settings):
-    from transforms.discrepancy.rows import _demean_motion, _rows
+    from transforms.discrepancy.rows import _eliminate_load, _rows
 
     plant, cond = nm.model(z)
-    return _demean_motion(_rows(prepared, plant, cond, effects, settings).y, rows0)
+    return _eliminate_load(_rows(prepared, plant, cond, effects, settings).y, rows0)
 
 
 def jacobians(prepared, nm: NuisanceModel, z, effects: Effects, specs: list[EffectSpec], rows0, settings, r_here=None):
@@ -330,14 +330,14 @@ def calibrate_prepared(prepared, nm: NuisanceModel, settings, effects: Effects |
     """Calibrate the nuisances on prepared records with ``effects`` held (default none); with
     ``split``, add up to :data:`MAX_SPLITS` load steps the detector missed (:func:`split_segment`),
     refitting after each. Returns (fit, rows, weights, equation sigmas)."""
-    from transforms.discrepancy.rows import _demean_motion, _equation_sigmas, _rows
+    from transforms.discrepancy.rows import _eliminate_load, _equation_sigmas, _rows
 
     fx = Effects() if effects is None else effects
     z = np.zeros(len(nm.active)) if z0 is None else np.asarray(z0, float)
     for n_split in range(MAX_SPLITS + 1):
         plant, cond = nm.model(z)
         rows0 = _rows(prepared, plant, cond, fx, settings)
-        sig = _equation_sigmas(_demean_motion(rows0.y, rows0), rows0)
+        sig = _equation_sigmas(_eliminate_load(rows0.y, rows0), rows0)
         fit = None
         for _ in range(2):  # weights from the nominal residuals, then from the calibrated ones
             w = 1.0 / sig[rows0.eq]

@@ -25,6 +25,17 @@ instants), so the estimate is made piecewise constant:
 2. **levels.** Each segment between steps gets the median of F̂_l over its valid samples
    (those within ``step_guard_samples`` of a step left out); segments without any take the
    level of the next segment (else the previous one).
+3. **ramps.** A rolling force is not piecewise constant: it ramps to a new level over 0.1–0.4 s,
+   which the step filter's quadratic takes up and does not report. So the load is also fitted
+   piecewise linear in time within each segment (knots every ``load_knot_s`` between the
+   segment's first and last valid sample, constant beyond them; least squares on F̂_l jointly
+   with the velocity and acceleration, so a friction or mass mismatch does not decide it), and
+   that fit is kept where it leaves at most 1/``ramp_ratio`` of the constant levels' residual
+   RMS and the levels leave more than ``ramp_min_n`` (:func:`follows_ramps`). The regression
+   then eliminates the same piecewise-linear load from the motion rows
+   (:func:`load_projector`) instead of one constant per segment: a mass acts on the
+   acceleration and a friction on the velocity, which change within a move (0.3–0.6 s), faster
+   than a load that is linear over 0.1 s can follow, so both stay separable from it.
 
 While the cylinder sticks at the start of a record, before its first observable motion, the load
 is unknown (a step may have happened before); the workflow then tries driving the replay with the
@@ -36,14 +47,15 @@ The segments also carry the motion equation's nuisance intercepts in the sparse 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 
 import numpy as np
 
 from transforms.discrepancy.settings import DiscrepancySettings
 
-__all__ = ["LoadEstimate", "estimate_load", "replay_load", "segment_levels", "step_filter", "stuck_spans"]
+__all__ = ["LoadEstimate", "estimate_load", "follows_ramps", "load_projector", "project_out", "replay_load", "segment_knots", "segment_levels", "step_filter",
+           "stuck_spans"]
 
 
 @lru_cache(maxsize=8)
@@ -106,21 +118,34 @@ class LoadEstimate:
     hold_until: int = 0
     """A replay holds the cylinder (:func:`replay_load`) while it sticks before this sample:
     the load before the first observable motion was found to differ from the first level."""
+    knot_samples: int = 0
+    """Knot spacing of the piecewise-linear load within segments (samples); 0: one constant per
+    segment (module docstring, step 3)."""
 
-    def with_steps(self, steps: np.ndarray, f_hat: np.ndarray) -> "LoadEstimate":
+    def knots(self, s: int) -> np.ndarray:
+        """Knots (sample positions) of segment ``s``'s piecewise-linear load; empty: a constant."""
+        return segment_knots(self.valid, self.segment, s, self.knot_samples)
+
+
+    def with_steps(self, steps: np.ndarray, f_hat: np.ndarray, motion: tuple | None = None) -> "LoadEstimate":
         """The same estimate with the steps moved to ``steps`` (same count, increasing) and the
-        levels re-estimated from ``f_hat``."""
+        levels (and a piecewise-linear load, with the ``motion`` columns of
+        :func:`piecewise_linear_load`) re-estimated from ``f_hat``."""
         steps = np.asarray(steps, dtype=np.int64)
         segment = np.zeros(self.segment.size, dtype=np.int64)
         for s in steps:
             segment[s:] += 1
         levels = segment_levels(f_hat, self.valid, segment, len(steps) + 1)
-        return LoadEstimate(segment, steps, levels, levels[segment], self.brackets, self.valid, self.usable, self.hold_until)
+        load = levels[segment]
+        if self.knot_samples:
+            load = piecewise_linear_load(f_hat, self.valid, segment, len(steps) + 1, self.knot_samples, levels, motion)
+        return LoadEstimate(segment, steps, levels, load, self.brackets, self.valid, self.usable, self.hold_until, self.knot_samples)
 
     def with_added_step(self, k: int, guard: int) -> "LoadEstimate":
         """The same estimate with one more step at sample ``k`` (found while moving), the samples
         within ``guard`` of it left out of ``valid`` and ``usable``. Both new segments keep the
-        split segment's level (what the regression uses are the segments; it eliminates the levels)."""
+        split segment's level and load (what the regression uses are the segments and their knots;
+        it eliminates the load)."""
         k = int(k)
         i = int(np.searchsorted(self.steps, k))
         steps = np.insert(self.steps, i, k)
@@ -129,7 +154,137 @@ class LoadEstimate:
         away = np.ones(self.segment.size, dtype=bool)
         away[max(0, k - guard):k + guard] = False
         brackets = np.insert(self.brackets, i, (-1, -1), axis=0)
-        return LoadEstimate(segment, steps, levels, levels[segment], brackets, self.valid & away, self.usable & away, self.hold_until)
+        return LoadEstimate(segment, steps, levels, self.load, brackets, self.valid & away, self.usable & away, self.hold_until, self.knot_samples)
+
+
+def segment_knots(valid: np.ndarray, segment: np.ndarray, s: int, knot_samples: int) -> np.ndarray:
+    """Knots of segment ``s``'s piecewise-linear load: evenly spaced, at most ``knot_samples``
+    apart, from its first to its last valid sample (the load is held constant beyond them); empty
+    (a constant load) for ``knot_samples`` 0 or fewer than two valid samples."""
+    if knot_samples <= 0:
+        return np.zeros(0)
+    idx = np.flatnonzero(valid & (segment == s))
+    if idx.size < 2:
+        return np.zeros(0)
+    a, b = float(idx[0]), float(idx[-1])
+    return np.linspace(a, b, max(1, int(np.ceil((b - a) / knot_samples))) + 1)
+
+
+def hat_basis(knots: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Piecewise-linear hat functions on ``knots`` at positions ``t``, shape (t.size, knots.size),
+    constant beyond the end knots (a single knot: one constant column)."""
+    t = np.asarray(t, float)
+    B = np.zeros((t.size, knots.size))
+    if knots.size == 1:
+        B[:, 0] = 1.0
+        return B
+    j = np.clip(np.searchsorted(knots, t, side="right") - 1, 0, knots.size - 2)
+    w = np.clip((t - knots[j]) / (knots[j + 1] - knots[j]), 0.0, 1.0)
+    r = np.arange(t.size)
+    B[r, j] = 1.0 - w
+    B[r, j + 1] = w
+    return B
+
+
+SMOOTHING = 1e-3
+"""Second-difference penalty of the piecewise-linear load's knot values (relative to one sample's
+weight): it only bridges knots without valid samples (a standstill) linearly."""
+
+
+def _ramp_fit(f_hat, valid, segment, n_segments, knot_samples, motion):
+    """Least squares of ``f_hat`` over the valid samples on the segments' load (constant per
+    segment for ``knot_samples`` 0, else piecewise linear) and the ``motion`` columns; returns
+    (load at every sample or None where a segment has no knots, RMS residual, coefficients of the
+    load columns per segment)."""
+    n = f_hat.size
+    m = valid & np.isfinite(f_hat)
+    if motion is not None:
+        motion = np.column_stack(motion)
+        m &= np.all(np.isfinite(motion), axis=1)
+    idx = np.flatnonzero(m)
+    cols, spans = [], []
+    off = 0
+    for s in range(n_segments):
+        kn = segment_knots(valid, segment, s, knot_samples)
+        if kn.size == 0:
+            kn = np.zeros(1)
+        cols.append(hat_basis(kn, idx) * (segment[idx] == s)[:, None])
+        spans.append((off, kn))
+        off += kn.size
+    Bm = np.hstack(cols)
+    k = Bm.shape[1]
+    X = Bm if motion is None else np.hstack([Bm, motion[idx]])
+    D = []
+    for o, kn in spans:
+        if kn.size > 2:
+            d = np.zeros((kn.size - 2, X.shape[1]))
+            for i in range(kn.size - 2):
+                d[i, o + i:o + i + 3] = (1.0, -2.0, 1.0)
+            D.append(d)
+    A = np.vstack([X] + [SMOOTHING * d for d in D])
+    y = np.r_[f_hat[idx], np.zeros(A.shape[0] - idx.size)]
+    c = np.linalg.lstsq(A, y, rcond=None)[0]
+    res = f_hat[idx] - X @ c
+    rms = float(np.sqrt(np.mean(res ** 2))) if idx.size else 0.0
+    load = np.zeros(n)
+    for s, (o, kn) in enumerate(spans):
+        sel = segment == s
+        load[sel] = hat_basis(kn, np.flatnonzero(sel)) @ c[o:o + kn.size] if kn.size > 1 else c[o]
+    return load, rms, c[:k]
+
+
+def piecewise_linear_load(f_hat: np.ndarray, valid: np.ndarray, segment: np.ndarray, n_segments: int, knot_samples: int, levels: np.ndarray,
+                          motion: tuple | None = None) -> np.ndarray:
+    """The load at every sample, piecewise linear within segments (:func:`segment_knots`), fitted
+    to ``f_hat`` [N] over the valid samples jointly with the ``motion`` columns (velocity and
+    acceleration, whose coefficients are a friction and mass mismatch, not load); a segment
+    without valid samples keeps its ``levels`` value."""
+    load, _, _ = _ramp_fit(f_hat, valid, segment, n_segments, knot_samples, motion)
+    for s in range(n_segments):
+        if not np.any(valid[segment == s]):
+            load[segment == s] = levels[s]
+    return load
+
+
+def follows_ramps(f_hat: np.ndarray, valid: np.ndarray, segment: np.ndarray, n_segments: int, knot_samples: int, settings: DiscrepancySettings,
+                  motion: tuple | None = None) -> bool:
+    """Does the load vary within its segments? The piecewise-linear fit (jointly with the
+    ``motion`` columns) leaves at most 1/``settings.ramp_ratio`` of the residual RMS of one
+    constant per segment (jointly with the same columns), and that is above
+    ``settings.ramp_min_n``."""
+    if knot_samples <= 0:
+        return False
+    _, rms_const, _ = _ramp_fit(f_hat, valid, segment, n_segments, 0, motion)
+    _, rms_ramp, _ = _ramp_fit(f_hat, valid, segment, n_segments, knot_samples, motion)
+    return rms_const > settings.ramp_min_n and rms_ramp * settings.ramp_ratio <= rms_const
+
+
+def load_projector(group: np.ndarray, sample: np.ndarray, knots: dict) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The least-squares elimination of the load from motion rows (Frisch–Waugh): per group
+    (record × segment) its rows' positions and an orthonormal basis Q of its load columns
+    (one constant, or the hat functions on ``knots[group]`` at the rows' ``sample``); a value
+    vector loses Q Qᵀ of itself (:func:`project_out`)."""
+    out = []
+    for g in np.unique(group):
+        pos = np.flatnonzero(group == g)
+        kn = knots.get(int(g))
+        if kn is None or kn.size < 2:
+            out.append((pos, np.full((pos.size, 1), 1.0 / np.sqrt(pos.size))))
+            continue
+        B = hat_basis(kn, sample[pos])
+        U, sv, _ = np.linalg.svd(B, full_matrices=False)
+        out.append((pos, U[:, sv > 1e-9 * sv[0]]))
+    return out
+
+
+def project_out(values: np.ndarray, projector: list[tuple[np.ndarray, np.ndarray]]) -> np.ndarray:
+    """``values`` (shape (n,) or (n, k)) minus their least-squares fit on each group's load
+    columns (:func:`load_projector`)."""
+    out = np.array(values, dtype=float, copy=True)
+    for pos, Q in projector:
+        v = out[pos]
+        out[pos] = v - Q @ (Q.T @ v)
+    return out
 
 
 def segment_levels(f_hat: np.ndarray, valid: np.ndarray, segment: np.ndarray, n_segments: int) -> np.ndarray:
@@ -208,7 +363,8 @@ def replay_load(levels_per_sample: np.ndarray, holding_force: np.ndarray, stuck:
     return out
 
 
-def estimate_load(f_hat: np.ndarray, v: np.ndarray, settings: DiscrepancySettings, f_point: np.ndarray | None = None) -> LoadEstimate:
+def estimate_load(f_hat: np.ndarray, v: np.ndarray, settings: DiscrepancySettings, f_point: np.ndarray | None = None,
+                  accel: np.ndarray | None = None, dt: float | None = None) -> LoadEstimate:
     """Piecewise-constant load of one record from the triangular force balance ``f_hat`` [N]
     (:func:`transforms.discrepancy.residuals.triangular_force_balance` with
     ``settings.interval_samples``) and the cylinder velocity ``v`` [m/s] (module docstring).
@@ -216,7 +372,10 @@ def estimate_load(f_hat: np.ndarray, v: np.ndarray, settings: DiscrepancySetting
     ``f_point`` (optional): a pointwise load estimate (with a Savitzky–Golay acceleration),
     noisier but available in the short slip fragments of a creeping cylinder; a step found
     across a standstill is then placed at the first fragment that already shows the new level
-    (a load step is often what makes a resting cylinder creep)."""
+    (a load step is often what makes a resting cylinder creep).
+
+    ``accel`` [m/s²] (the acceleration averaged as in ``f_hat``) and ``dt`` [s]: with both, the
+    load is made piecewise linear within segments where it ramps (module docstring, step 3)."""
     n = f_hat.size
     w = settings.step_half_width
     L = settings.interval_samples
@@ -258,4 +417,11 @@ def estimate_load(f_hat: np.ndarray, v: np.ndarray, settings: DiscrepancySetting
     levels = segment_levels(f_hat, valid, segment, len(steps_arr) + 1)
     usable = valid & (np.abs(v) > settings.v_move_m_s)
     br = np.array([brackets.get(int(s), (-1, -1)) for s in steps_arr], dtype=np.int64).reshape(-1, 2)
-    return LoadEstimate(segment=segment, steps=steps_arr, levels=levels, load=levels[segment], brackets=br, valid=valid, usable=usable)
+    est = LoadEstimate(segment=segment, steps=steps_arr, levels=levels, load=levels[segment], brackets=br, valid=valid, usable=usable)
+    if accel is None or dt is None:
+        return est
+    k = max(2, int(round(settings.load_knot_s / dt)))
+    motion = (v, accel)
+    if not follows_ramps(f_hat, valid, segment, len(steps_arr) + 1, k, settings, motion):
+        return est
+    return replace(est, knot_samples=k, load=piecewise_linear_load(f_hat, valid, segment, len(steps_arr) + 1, k, levels, motion))

@@ -50,7 +50,7 @@ __all__ = [
 from transforms.discrepancy.rows import (  # noqa: F401 (ReplayTrace, prepare_records, perturbed: part of this module's interface)
     FD_FRACTION,
     ReplayTrace,
-    _demean_motion,
+    _eliminate_load,
     _equation_sigmas,
     _estimate_load,
     _gaps,
@@ -177,7 +177,7 @@ def _refine(prepared, plant, condition, specs: list[EffectSpec], start: Effects,
     r = None
     for _ in range(settings.gauss_newton_iterations):
         y_here = _rows(prepared, plant, condition, fx, settings).y
-        r = _demean_motion(y_here, rows0)
+        r = _eliminate_load(y_here, rows0)
         J = _jacobian(prepared, plant, condition, fx, specs, rows0, settings, y_here)
         ok = np.isfinite(r) & np.all(np.isfinite(J), axis=1)
         Jw = J[ok] * w_rows[ok, None]
@@ -201,7 +201,7 @@ def _refine(prepared, plant, condition, specs: list[EffectSpec], start: Effects,
         if small:
             break
     y_here = _rows(prepared, plant, condition, fx, settings).y
-    r = _demean_motion(y_here, rows0)
+    r = _eliminate_load(y_here, rows0)
     J = _jacobian(prepared, plant, condition, fx, specs, rows0, settings, y_here)
     st = block_stats(-r * w_rows, J * w_rows[:, None], rows0.block)
     _, _, loo = cv_losses(st, list(range(len(specs))))
@@ -287,7 +287,7 @@ def _select(prepared, plant, condition, specs, settings, nuisance=None):
     nuisances cannot explain."""
     base = Effects()
     rows0 = _rows(prepared, plant, condition, base, settings)
-    r0 = _demean_motion(rows0.y, rows0)
+    r0 = _eliminate_load(rows0.y, rows0)
     sig = _equation_sigmas(r0, rows0)
     w_rows = 1.0 / sig[rows0.eq]
     J0 = _jacobian(prepared, plant, condition, base, specs, rows0, settings, rows0.y)
@@ -725,7 +725,7 @@ def fit_condition(records: list[Record], plant: PlantParams, start: ValveConditi
         raise ValueError("no commissioning record long enough")
     base = Effects()
     rows0 = _rows(prepared, plant, cond0, base, settings)
-    sig = _equation_sigmas(_demean_motion(rows0.y, rows0), rows0)
+    sig = _equation_sigmas(_eliminate_load(rows0.y, rows0), rows0)
     w = 1.0 / sig[rows0.eq]
     z = np.zeros(8)
     steps = np.array([CONDITION_FD[0]] * 4 + [CONDITION_FD[1]] * 4)

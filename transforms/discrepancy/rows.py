@@ -13,7 +13,7 @@ from model.params import PlantParams, ValveCondition
 from model.replay import DRIVE_HYDRAULIC, DRIVE_MECHANICAL, replay
 from model.simulate import DEFAULT_REG_BAND_PA
 from transforms.discrepancy.gaps import RECORDED_OF, GapAccumulator, noise_rms
-from transforms.discrepancy.load import LoadEstimate, estimate_load, replay_load, stuck_spans
+from transforms.discrepancy.load import LoadEstimate, estimate_load, load_projector, project_out, replay_load, stuck_spans
 from transforms.discrepancy.records import REGIONS, Record, operating_regions, prepare_record
 from transforms.discrepancy.residuals import (
     demean_by_group,
@@ -85,11 +85,24 @@ def _force_balance(rec: Record, plant, condition, effects, settings) -> np.ndarr
     return triangular_force_balance(t["force"], rec.raw["X"], t["mass"], rec.dt, settings.interval_samples)
 
 
+def _load_motion(rec: Record, settings) -> tuple[np.ndarray, np.ndarray]:
+    """(v_X [m/s], the acceleration averaged as in the force balance, (X₊ − 2X + X₋)/(L T)²
+    [m/s²]): the columns of a friction and a mass mismatch in the load fit."""
+    L = settings.interval_samples
+    X = rec.raw["X"]
+    a = np.full(X.size, np.nan)
+    if X.size > 2 * L:
+        a[L:-L] = (X[2 * L:] - 2.0 * X[L:-L] + X[:-2 * L]) / (L * rec.dt) ** 2
+    return rec.sg["v"], a
+
+
 def _estimate_load(rec: Record, plant, condition, effects, settings) -> LoadEstimate:
-    """The piecewise-constant load of one record under the model with ``effects``."""
+    """The load of one record under the model with ``effects`` (piecewise constant, or piecewise
+    linear within segments where it ramps)."""
     f_hat = _force_balance(rec, plant, condition, effects, settings)
     t = _terms_sg(rec, plant, condition, effects)
-    load = estimate_load(f_hat, rec.sg["v"], settings, f_point=t["force"] - t["mass"] * rec.sg["a"])
+    v, a = _load_motion(rec, settings)
+    load = estimate_load(f_hat, v, settings, f_point=t["force"] - t["mass"] * rec.sg["a"], accel=a, dt=rec.dt)
     return _refine_rest_steps(rec, load, f_hat, plant, condition, effects, settings)
 
 
@@ -196,7 +209,7 @@ def _refine_rest_steps(rec: Record, load: LoadEstimate, f_hat: np.ndarray, plant
         cands = np.unique(np.r_[np.arange(max(lo + 1, prev_s + 1), min(hi, next_s - 1) + 1, REST_STEP_GRID), steps[i]])
         if b - a < 10 or cands.size < 2:
             continue
-        old, new = load.levels[i], load.levels[i + 1]
+        old, new = (load.levels[i], load.levels[i + 1]) if not load.knot_samples else (load.load[lo], load.load[hi])
         best, best_err = steps[i], np.inf
         for c in cands:
             F = replay_load(np.where(np.arange(a, b) < c, old, new), hold[a:b], stuck[a:b])
@@ -208,7 +221,7 @@ def _refine_rest_steps(rec: Record, load: LoadEstimate, f_hat: np.ndarray, plant
             if err < best_err:
                 best, best_err = int(c), err
         steps[i] = best
-    return load.with_steps(steps, f_hat)
+    return load.with_steps(steps, f_hat, _load_motion(rec, settings))
 
 
 # --- step 2: regression data ---------------------------------------------------------------
@@ -223,11 +236,22 @@ class _Rows:
     block: np.ndarray
     group: np.ndarray  # motion rows: (record, load segment) id = record × RECORD_STRIDE + segment; -1 otherwise
     sample: np.ndarray  # motion rows: the record's sample the row is centred at; -1 otherwise
+    knots: dict = field(default_factory=dict)  # motion group -> knots of its piecewise-linear load (absent: a constant)
+    _projector: list | None = None
+
+    @property
+    def projector(self) -> list:
+        """The elimination of the load from the motion rows (:func:`load.load_projector`)."""
+        if self._projector is None:
+            m = self.eq == 2
+            self._projector = load_projector(self.group[m], self.sample[m], self.knots)
+        return self._projector
 
 
 def _rows(prepared: list[_Prepared], plant, condition, effects, settings) -> _Rows:
     c = plant.cylinder
     ys, eqs, blocks, groups, samples = [], [], [], [], []
+    knots = {}
     for i, p in enumerate(prepared):
         rec = p.rec
         ir = interval_residuals(_terms_raw(rec, plant, condition, effects), rec.raw["X"], c.A1, c.A2, rec.dt, p.edges, settings.interval_smoothing)
@@ -248,14 +272,17 @@ def _rows(prepared: list[_Prepared], plant, condition, effects, settings) -> _Ro
         blocks += [bc, bc, bm[mrow]]
         groups += [np.full(ir.r1.size, -1), np.full(ir.r2.size, -1), (i * nb + seg[e[1:-1]])[mrow]]
         samples += [np.full(ir.r1.size + ir.r2.size, -1), e[1:-1][mrow]]
-    return _Rows(np.concatenate(ys), np.concatenate(eqs), np.concatenate(blocks), np.concatenate(groups), np.concatenate(samples))
+        if p.segmentation.knot_samples:
+            for sg in np.unique(seg[e[1:-1]][mrow]):
+                knots[i * nb + int(sg)] = p.segmentation.knots(int(sg))
+    return _Rows(np.concatenate(ys), np.concatenate(eqs), np.concatenate(blocks), np.concatenate(groups), np.concatenate(samples), knots)
 
 
-def _demean_motion(values: np.ndarray, rows: _Rows) -> np.ndarray:
+def _eliminate_load(values: np.ndarray, rows: _Rows) -> np.ndarray:
     out = np.array(values, dtype=float, copy=True)
     m = rows.eq == 2
     if m.any():
-        out[m] = demean_by_group(out[m], rows.group[m])
+        out[m] = project_out(out[m], rows.projector) if rows.knots else demean_by_group(out[m], rows.group[m])
     return out
 
 
@@ -279,7 +306,7 @@ def _jacobian(prepared, plant, condition, effects, specs: list[EffectSpec], rows
     for spec in specs:
         d = FD_FRACTION * spec.typical
         rp = _rows(prepared, plant, condition, perturbed(effects, spec, d), settings).y
-        cols.append(_demean_motion((rp - r_here) / d, rows))
+        cols.append(_eliminate_load((rp - r_here) / d, rows))
     return np.column_stack(cols) if cols else np.zeros((rows.y.size, 0))
 
 

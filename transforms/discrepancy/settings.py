@@ -61,6 +61,13 @@ class DiscrepancySettings:
         ... and at least this many robust standard deviations of the detector output.
     step_guard_samples : int
         Samples on either side of a detected load step left out of the motion equation.
+    load_knot_s : float
+        Knot spacing of the piecewise-linear load where the load ramps within segments
+        (:mod:`transforms.discrepancy.load`, step 3): a rolling force reaches a new level over
+        0.1–0.4 s. [s]
+    ramp_ratio, ramp_min_n : float
+        The piecewise-linear load is used where it leaves at most 1/``ramp_ratio`` of the
+        residual RMS of one constant per segment, and that RMS is above ``ramp_min_n``. [–], [N]
     replay_segment_s : float
         The replay restarts from the measured state every this many seconds (multiple
         shooting), so a small flow error cannot make the position drift over a whole record. [s]
@@ -103,6 +110,9 @@ class DiscrepancySettings:
     step_threshold_n: float = 400.0
     step_threshold_sigmas: float = 8.0
     step_guard_samples: int = 40
+    load_knot_s: float = 0.1
+    ramp_ratio: float = 2.0
+    ramp_min_n: float = 100.0
     replay_segment_s: float = 2.5
     mechanical_segment_s: float = 0.5
     block_s: float = 1.0

@@ -22,8 +22,9 @@ Two kinds of evidence (docs/discrepancy.md, "Verdicts"):
    nuisances' values that would explain the same data) and what data would separate them;
    ΔO_j ≥ ``Z_NAMED``² is ``named`` (such a deviation is not scatter: e.g. a 30 µm underlap
    pattern against 5 µm tolerance). The leading reading must hold in the replay as well: where
-   the base model replays within the noise floor, one whose exact joint fit widens the replay gap
-   by more than ``REPLAY_REFUTES`` is refuted and the verdict is ``none`` (a transmitter gain that
+   the base model replays within the noise floor (the whole replay's gap ≤ ``gaps.NOISE_GAP``, or
+   the gap where the reading acts ≤ ``FLOOR_FACTOR`` × its noise floor), one whose exact joint fit
+   widens that gap by more than ``REPLAY_REFUTES`` is refuted and the verdict is ``none`` (a transmitter gain that
    balances the equation rows' small systematic errors but replays worse); the runner-up is not
    promoted.
 
@@ -294,21 +295,43 @@ def nuisance_verdict(prepared, nm, fit, named_specs, specs, rows0, w_rows, setti
                     f"(cross-validated gain {first.relative_gain:.0%}, t = {first.t_stat:.3g}); gap {first.gap_before:.3g} → {first.gap_after:.3g}"),
             nuisances=table, scores=public, **gaps)
     # the leading reading must hold in the replay too (as the pipeline's confirmation by
-    # simulation): where the base model replays within the noise floor, one whose exact fit widens
-    # the replay gap beyond REPLAY_REFUTES is refuted, and the verdict is none (the runner-up is not
-    # promoted: the equations pointed elsewhere)
+    # simulation): where the whole replay is within the noise floor, one whose exact fit widens it
+    # beyond REPLAY_REFUTES is refuted, and the verdict is none (the runner-up is not promoted: the
+    # equations pointed elsewhere); where the gap the reading acts on is within FLOOR_FACTOR x its
+    # floor and the reading does not narrow it, the replay does not see it and the next reading
+    # (on another gap) is judged
     gap_after, best, refuted, acc_after = float("nan"), None, "", None
-    if scores and scores[0]["delta_objective"] >= Z_AMBIGUOUS**2:
-        best = scores[0]
-        if best["refit"] is not None:
-            acc_after = gap_of(best["refit"].effects, nm.model(best["refit"].z))
-            gap_after = acc_after.gap()
-            if gap_before <= NOISE_GAP and gap_after > REPLAY_REFUTES * gap_before:
-                refuted = (f"the equations' leading reading {best['key']} ({np.sqrt(best['delta_objective']):.2g}σ) is refuted by the "
-                           f"replay (gap {gap_before:.3g} → {gap_after:.3g}); no reading is confirmed")
-                best = None
+    dropped: set[str] = set()
+    unseen = []  # readings refuted where their own gap is at the noise floor (the next one is judged)
+    for cand in scores:
+        if cand["delta_objective"] < Z_AMBIGUOUS**2:
+            break
+        best = cand
+        if best["refit"] is None:
+            break
+        acc_after = gap_of(best["refit"].effects, nm.model(best["refit"].z))
+        gap_after = acc_after.gap()
+        if gap_before <= NOISE_GAP and gap_after > REPLAY_REFUTES * gap_before:
+            refuted = (f"the equations' leading reading {best['key']} ({np.sqrt(best['delta_objective']):.2g}σ) is refuted by the "
+                       f"replay (gap {gap_before:.3g} → {gap_after:.3g}); no reading is confirmed")
+            dropped.add(best["key"])
+            best = None
+            break
+        kind = acting_gap(best["spec"])
+        a_before, a_after = accs[0].split_gap(kind), acc_after.split_gap(kind)
+        if a_before <= FLOOR_FACTOR * floors[kind] and a_after >= a_before:
+            # the base model replays this gap at the noise floor and the reading does not narrow it:
+            # the replay does not see it; the next reading (another gap, or none) is judged
+            unseen.append(f"{best['key']} ({np.sqrt(best['delta_objective']):.2g}σ; the {kind} gap, within {FLOOR_FACTOR:g}× its noise floor "
+                          f"{floors[kind]:.2g}, {a_before:.3g} → {a_after:.3g})")
+            dropped.add(best["key"])
+            best, gap_after, acc_after = None, float("nan"), None
+            continue
+        break
+    note = ("the replay does not see the equations' reading " + "; nor ".join(unseen)) if unseen else ""
     if best is None:
-        rest = scores[1:] if refuted else scores
+        rest = [sc for sc in scores if sc["key"] not in dropped]
+        refuted = refuted or note
         worst = max([sc["confidence"] for sc in rest] + [0.0])
         zb = np.sqrt(scores[0]["delta_objective"]) if scores else 0.0
         return Verdict("none", float(min(MAX_CONFIDENCE, 1.0 - worst)), None, float("nan"),
@@ -317,7 +340,8 @@ def nuisance_verdict(prepared, nm, fit, named_specs, specs, rows0, w_rows, setti
                        nuisances=table, scores=public, gap_before=gap_before, gap_after=gap_before)
     spec = best["spec"]
     z = float(np.sqrt(best["delta_objective"]))
-    rivals = [sc for sc in scores if sc is not best and sc["delta_objective"] >= max(Z_AMBIGUOUS**2, 0.5 * best["delta_objective"])]
+    rivals = [sc for sc in scores if sc is not best and sc["key"] not in dropped and sc["delta_objective"] >= max(Z_AMBIGUOUS**2, 0.5 * best["delta_objective"])]
+    note = f" ({note})" if note else ""
     alts = [f"{sc['key']} {sc['spec'].parameter_name}={sc['value']:.3g} {sc['spec'].unit}" for sc in rivals]
     nuis = f"the base model with {best['nuisance_reading']}" if best["nuisance_reading"] else "the base model's tolerances"
     sep = SEPARATE_BY.get(spec.name, "a commissioning window")
@@ -336,11 +360,11 @@ def nuisance_verdict(prepared, nm, fit, named_specs, specs, rows0, w_rows, setti
             held = f"; its replay does not tell them apart (the {kind} gap {before:.3g} → {after:.3g})"
     if z >= Z_NAMED and not rivals and not held:
         return Verdict("named", best["confidence"], spec, best["value"], alternatives=[nuis], separate_by=sep,
-                       reason=f"without {spec.key} the base model's parameters would have to move {z:.2g}σ outside their tolerances ({nuis})",
+                       reason=f"without {spec.key} the base model's parameters would have to move {z:.2g}σ outside their tolerances ({nuis}){note}",
                        nuisances=table, scores=public, **gaps)
     return Verdict("ambiguous", best["confidence"], spec, best["value"], alternatives=[nuis] + alts,
                    alternative_keys=[sc["key"] for sc in rivals], separate_by=sep,
                    reason=(f"the data fit either {spec.key} {spec.parameter_name}={best['value']:.3g} {spec.unit} or {nuis}: "
                            + (f"{z:.2g}σ from the tolerances, more than manufacturing scatter and datasheets usually allow, too little to rule them out"
-                            if not held else f"{z:.2g}σ from the tolerances{held}")),
+                            if not held else f"{z:.2g}σ from the tolerances{held}") + note),
                    nuisances=table, scores=public, **gaps)
