@@ -56,13 +56,13 @@ def test_plant_model_from_the_configuration():
 
 def test_flow_names_the_hidden_effect_and_stores_everything(tmp_path):
     warehouse = tmp_path / "wh"
-    # commissioning: 3 clean hourly windows; afterwards 3 windows with a leaking rod seal
-    clean = simulate_lake(None, n_windows=3, seed=60, valve_id=VALVE, start=START)
-    leak = simulate_lake(Effects(external_leakage_m3_s_pa=1e-12), n_windows=3, seed=61, valve_id=VALVE, start=START + timedelta(hours=6))
+    # commissioning: 2 clean hourly windows; afterwards 2 windows with a leaking rod seal
+    clean = simulate_lake(None, n_windows=2, seed=60, valve_id=VALVE, start=START)
+    leak = simulate_lake(Effects(external_leakage_m3_s_pa=1e-12), n_windows=2, seed=61, valve_id=VALVE, start=START + timedelta(hours=6))
     _write_lake(warehouse, pl.concat([clean, leak]))
     config = _config(tmp_path, baseline_window=True)
     report = discrepancy_flow.fn(str(config), str(warehouse), VALVE, start=(START + timedelta(hours=5)).isoformat())
-    assert report.condition_source == "commissioning" and report.n_records == 3
+    assert report.condition_source == "commissioning" and report.n_records == 2
     assert [f["effect"] for f in report.findings] == ["external_leakage"]
     f = report.findings[0]
     assert f["parameter_name"] == "K_e" and f["parameter_unit"] == "m3/(s*Pa)" and f["rank"] == 1

@@ -196,12 +196,14 @@ def test_effect_on_another_family_is_named_or_honestly_ambiguous(plant, design, 
 
 # --- with a commissioning window ---------------------------------------------------------------
 
-CLEAR_GAP = [  # the gap-shrink magnitudes of test_hidden_effects.CLEAR, mass and air doubled: at 600 kg and 5e-3 they
-    # are named first here too, but raise the gap only to 0.088 / 0.084 against the commissioned model's
-    # floor of 0.047, so it cannot shrink 3x (the commissioning mass is right on this plant: z 1.38, true 1.34)
-    ("internal_leakage", 2e-12), ("external_leakage", 2e-12), ("entrained_air", 1e-2), ("spool_sensor_offset", 1e-5),
-    ("pressure_sensor_offset[p1]", 2e5), ("pressure_sensor_offset[p2]", -2e5), ("pressure_sensor_gain[p1]", 1.03),
-    ("pressure_sensor_gain[p2]", 0.97), ("supply_line_resistance", 1e11), ("friction_change", 2e4), ("load_mass_change", 1200.0),
+CLEAR_GAP = [  # the effects a commissioning calibration decides: nuisance patterns (the spool offset is the underlap
+    # pattern, the mass and d_v are nuisances) and the compressibility (air against the calibrated β, V01, V02);
+    # the other effects' "named first, gap shrinks ≥ 3×" on a model taken as exact is test_hidden_effects' CLEAR, same
+    # magnitudes. Mass and air doubled: at 600 kg and 5e-3 they are named first here too, but raise the gap only to
+    # 0.088 / 0.084 against the commissioned model's floor of 0.047, so it cannot shrink 3x (the commissioning mass is
+    # right on this plant: z 1.38, true 1.34)
+    ("entrained_air", 1e-2), ("spool_sensor_offset", 1e-5), ("pressure_sensor_gain[p1]", 1.03), ("friction_change", 2e4),
+    ("load_mass_change", 1200.0),
 ]
 
 

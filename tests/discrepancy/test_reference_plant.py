@@ -1,8 +1,9 @@
 """The discrepancy workflow on the second reference plant (``tests/refplant``: written apart from
 ``model/``, its own integrator, Karnopp sticking, loads ramping to a new level every 1-4 s, 1 ms
 transmitter lag and one sample of skew, a valve as built), without a commissioning window: the
-clean valve replays its chambers within 2x the noise floor and is not named anything; an effect
-outside the library (a 2 ms lag on the p1 transmitter) is never named."""
+clean valve replays its chambers within 2x the noise floor, its motion with a load that follows
+the ramps, and is ``none``; the effects outside the library (a 2 ms lag on the p1 transmitter, a
+pressure-dependent seal friction) are never named."""
 
 from datetime import datetime, timezone
 
@@ -24,14 +25,17 @@ def _diagnose(effects, seed=0):
 
 
 @pytest.mark.slow
-def test_clean_reference_valve_replays_at_the_noise_floor_and_is_not_named():
+def test_clean_reference_valve_replays_at_the_noise_floor_and_is_none():
     d = _diagnose(None)
     assert d.pressure_delay_samples == 2  # 1 ms transmitter lag + one sample of skew
     assert d.split_gaps[0]["hydraulic"] <= 2.0 * d.noise_floors["hydraulic"], (d.split_gaps, d.noise_floors)
-    assert d.verdict.verdict != "named", d.verdict.reason
+    # X on the recorded pressures: 0.16 mm with the ramping load followed, 2-4 mm with one constant per segment
+    assert d.split_gaps[0]["mechanical"] < 0.3, d.split_gaps
+    assert d.verdict.verdict == "none", d.verdict.reason
 
 
 @pytest.mark.slow
-def test_an_effect_outside_the_library_is_never_named():
-    d = _diagnose(effect("transmitter_lag", 2e-3, channel="p1"))
-    assert d.verdict.verdict in ("unexplained", "ambiguous"), (d.verdict.verdict, d.verdict.reason)
+@pytest.mark.parametrize("name,value", [("transmitter_lag", 2e-3), ("pressure_dependent_friction", 1e-4)])
+def test_an_effect_outside_the_library_is_never_named(name, value):
+    d = _diagnose(effect(name, value, channel="p1"))
+    assert d.verdict.verdict != "named", (d.verdict.verdict, d.verdict.effect, d.verdict.reason)
