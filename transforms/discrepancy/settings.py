@@ -111,8 +111,8 @@ class DiscrepancySettings:
     step_threshold_sigmas: float = 8.0
     step_guard_samples: int = 40
     load_knot_s: float = 0.1
-    ramp_ratio: float = 2.0
-    ramp_min_n: float = 100.0
+    ramp_ratio: float = 3.0
+    ramp_min_n: float = 250.0
     replay_segment_s: float = 2.5
     mechanical_segment_s: float = 0.5
     block_s: float = 1.0
