@@ -236,7 +236,7 @@ def main(argv=None) -> None:
     ap.add_argument("--windows", type=int, default=2, help="10 s windows per run")
     ap.add_argument("--magnitudes", default="typical,small")
     ap.add_argument("--commissioning", default="no,yes")
-    ap.add_argument("--effects", default="all")
+    ap.add_argument("--effects", default="all", help="all, or a comma-separated list of effect keys (none: the clean valve)")
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--method", default="nuisance", choices=("nuisance", "before"))
     ap.add_argument("--family", default="eq3", choices=("eq3", "sharp", "worn3", "worn4"), help="the true valve's edge shape")
@@ -252,9 +252,10 @@ def main(argv=None) -> None:
     tasks = []
     for c in comms:
         for seed in seeds:  # seed-major, so a worker reuses its commissioning calibration
-            tasks.append(("none", "typical", c, seed, a.windows, a.method, a.family, a.declared, a.plant))
+            if a.effects == "all" or "none" in keys:
+                tasks.append(("none", "typical", c, seed, a.windows, a.method, a.family, a.declared, a.plant))
             for m in mags:
-                for k in keys:
+                for k in (k for k in keys if k != "none"):
                     tasks.append((k, m, c, seed, a.windows, a.method, a.family, a.declared, a.plant))
     t0 = time.time()
     rows = []
