@@ -95,9 +95,10 @@ def ensure_monitor_tables(con) -> None:
             con.execute(f"DROP INDEX {name}_key")
 
 
-def monitor_params(valve: ValveSpec, sample_rate_hz: float, window_s: float | None = None) -> MonitorParams:
+def monitor_params(valve: ValveSpec, sample_rate_hz: float, window_s: float | None = None, window_rows: int | None = None) -> MonitorParams:
     """The algorithm's view of one valve: design data from the configuration, default settings,
-    the plant's window length (``[monitor] window_s``; None: a window is a whole run)."""
+    the plant's window length (``[monitor] window_s``; None: a window is a whole run) and rows
+    evaluated per window (``[monitor] window_rows``; None or 0: every row)."""
     return MonitorParams.from_design(
         piston_diameter_m=valve.piston_diameter_m,
         rod_diameter_m=valve.rod_diameter_m,
@@ -109,7 +110,14 @@ def monitor_params(valve: ValveSpec, sample_rate_hz: float, window_s: float | No
         x_max_m=valve.design.x_max_m,
         sample_period_s=1.0 / sample_rate_hz,
         window_s=window_s,
+        window_rows=window_rows or None,
     )
+
+
+def plant_monitor_params(config: PlantConfig, valve: ValveSpec) -> MonitorParams:
+    """:func:`monitor_params` with the plant's sample rate and ``[monitor]`` settings: what every
+    monitoring path (the command, the backfill) fits a valve's windows with."""
+    return monitor_params(valve, config.export.sample_rate_hz, config.monitor.window_s, config.monitor.window_rows)
 
 
 def nominal_characteristic(valve: ValveSpec, edge: str, x_hat_bound_m: float, area_law: str = "eq3") -> Characteristic:
@@ -146,10 +154,10 @@ BASELINE_METHOD = ("carrier-shaped step 4a, closed-edge leakage identified (λ�
 
 def _method_settings() -> dict:
     """The algorithm's settings (:class:`MonitorParams` defaults without the design data, which
-    :func:`monitor_params` takes from the configuration, the sample period and the window length,
-    which a baseline does not depend on: :func:`transforms.monitor.commissioning_baseline`)."""
+    :func:`monitor_params` takes from the configuration, the sample period, the window length and
+    the rows a window evaluates, which a baseline does not depend on: :func:`transforms.monitor.commissioning_baseline`)."""
     design = {"piston_area_m2", "annulus_area_m2", "v01_m3", "v02_m3", "bulk_modulus_pa", "density_kg_m3", "underlap_m", "x_max_m", "sample_period_s",
-              "window_s"}  # fmt: skip
+              "window_s", "window_rows"}  # fmt: skip
     return {f.name: f.default for f in dataclasses.fields(MonitorParams) if f.name not in design}
 
 
@@ -565,7 +573,7 @@ def monitor_valve(
 ) -> ValveReport:
     """Steps 2–6 for one valve over [start, end) of its lake; see the module docstring."""
     valve = config.valve(valve_id)
-    params = monitor_params(valve, config.export.sample_rate_hz, config.monitor.window_s)
+    params = plant_monitor_params(config, valve)
     baselines = ensure_baselines(valve, params, warehouse)
     report = ValveReport(valve_id, baseline_source=baselines["s1"].source, baseline_plausible=all(b.plausible for b in baselines.values()),
                          edge_law_note=baselines["s1"].edge_law_note)  # fmt: skip
