@@ -80,7 +80,7 @@ def summary(fits: pl.DataFrame) -> pl.DataFrame:
         ((pl.col("x_hat_ci_high_m") - pl.col("x_hat_ci_low_m")) / 2 / X_MAX * 100).median().alias("ci_x_pct"),
     )
     keys = ["length_s", "window_rows"]
-    return counts.join(worst, on=keys).join(spread, on=keys).sort("length_s", pl.col("window_rows").replace(0, 1 << 62))
+    return counts.join(worst, on=keys).join(spread, on=keys).sort(keys)
 
 
 def per_edge_scatter(fits: pl.DataFrame) -> pl.DataFrame:

@@ -219,6 +219,8 @@ def _float64(col: pl.Series) -> np.ndarray:
         col = col.cast(pl.Float64).fill_null(float("nan"))
     if col.dtype not in (pl.Float32, pl.Float64):
         col = col.cast(pl.Float64)
+    if col.n_chunks() > 1:  # each chunk as a view, joined in one copy (polars' own rechunk is ~2x slower)
+        return np.concatenate([c.to_numpy() for c in col.get_chunks()])
     return col.to_numpy()
 
 
