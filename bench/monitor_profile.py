@@ -84,6 +84,9 @@ def main() -> None:
     ap.add_argument("command", nargs=argparse.REMAINDER)
     args = ap.parse_args()
     t0 = cpu()
+    from flows.common.allocator import retain_polars_memory
+
+    retain_polars_memory()  # as the command does, before polars is imported
     import flows.cli
     import flows.monitor.flow
     import flows.report.publish  # noqa: F401 - the modules the command imports, timed here
