@@ -132,6 +132,9 @@ class Samples:
     """Tags (columns) no valve has → their samples, in the order of the frame (read past)."""
     truncated: bool = False
     """The frame ends with a text file's last line that has no line end (a cut file)."""
+    blocks: tuple[int, ...] | None = None
+    """Wide layout: ``accepted`` is one block of rows per tag, of these heights, in order (each
+    block's columns are read without a copy); None: rows in file order (long)."""
 
 
 def _require_columns(df: pl.DataFrame, wanted: dict[str, str]) -> None:
@@ -593,8 +596,9 @@ def wide_samples(
             col_lines, col_ts, value_si = col_lines.filter(pl.Series(ok)), col_ts.filter(pl.Series(ok)), value_si[ok]
             tag = tag.head(len(value_si))
         accepted.append(_accepted(col_lines, tag, col_ts, value_si))
-    acc = pl.concat(accepted) if accepted else _empty_accepted(tags)
-    return Samples(acc, _concat(quarantined), rows_in, samples_in, frozenset(tag_columns), tag_samples, faults.counts, faults.first, other, _cut(broken))
+    acc = pl.concat(accepted, rechunk=False) if accepted else _empty_accepted(tags)
+    blocks = tuple(a.height for a in accepted)
+    return Samples(acc, _concat(quarantined), rows_in, samples_in, frozenset(tag_columns), tag_samples, faults.counts, faults.first, other, _cut(broken), blocks)
 
 
 def samples_of(
@@ -649,6 +653,26 @@ def _deinterleave(tag_id: np.ndarray, t_ns: np.ndarray, values: np.ndarray, k: i
             t_cols[j, i] = t_ns[r]
             v_cols[j, i] = values[r]
     return t_cols, v_cols, True
+
+
+def tag_blocks(accepted: pl.DataFrame, blocks: tuple[int, ...]) -> list[tuple[int, np.ndarray, np.ndarray, np.ndarray]]:
+    """A wide layout's accepted samples (:attr:`Samples.blocks`) → each tag's ``(tag id, t_ns,
+    values, lines)``, each block's columns as they are (no copy of the whole frame's columns)."""
+    out = []
+    a = 0
+    for n in blocks:
+        if n:
+            part = accepted.slice(a, n)
+            out.append(
+                (
+                    int(part["tag"][:1].to_physical()[0]),
+                    part["timestamp_utc"].to_physical().to_numpy(),
+                    part["value_si"].to_numpy(),
+                    part["line"].to_numpy(),
+                )
+            )
+        a += n
+    return out
 
 
 def split_by_tag(tag_id: np.ndarray, t_ns: np.ndarray, values: np.ndarray) -> list[tuple[int, np.ndarray, np.ndarray, slice | np.ndarray]]:
