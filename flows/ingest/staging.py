@@ -41,7 +41,9 @@ from flows.common.lake import (
     hour_path,
     partition_path,
     read_partition,
+    row_group_spans,
     stage_file,
+    stage_link,
 )
 from schemas.plant_config import PlantConfig
 from transforms.ingest import merge_partition, split_days, tags_by_column
@@ -167,7 +169,21 @@ class LakeStager:
         return rest
 
     def _switch(self, vid: str, day: date, day_file: Path) -> None:
-        """A day outgrows its day file: its rows go to hour files, the day file goes at the commit."""
+        """A day outgrows its day file: its rows go to hour files, the day file goes at the commit.
+        A day file whose rows lie in one hour (the first hour file of a recording) already is that
+        hour's file, byte for byte: it is staged under the hour's name without being read or
+        written again."""
+        hour = self._one_hour(day_file)
+        if hour is not None:
+            target = hour_path(day_file.parent, hour)
+            stale = self.staged.pop(target, None)
+            if stale is not None:
+                stale.unlink(missing_ok=True)
+            self.staged[target] = self.staged.pop(day_file) if day_file in self.staged else stage_link(day_file, target)
+            if day_file.exists():
+                self.removed.append(day_file)
+            self.days_written.add((vid, day))
+            return
         old = self._current(day_file)
         if day_file in self.staged:
             self.staged.pop(day_file).unlink(missing_ok=True)
@@ -175,6 +191,19 @@ class LakeStager:
             self.removed.append(day_file)
         for hour, part in _hours(old) if old is not None and old.height else []:
             self._stage(vid, day, hour_path(day_file.parent, hour), part)
+
+    def _one_hour(self, day_file: Path) -> int | None:
+        """The UTC hour that holds every row of the day file as this export has it (footer
+        statistics, no data read), None if it spans more (or has no rows or statistics)."""
+        path = self.staged.get(day_file, day_file)
+        if day_file in self.removed or not path.exists():
+            return None
+        spans = row_group_spans(path)
+        if not spans or not sum(n for n, _, _ in spans):
+            return None
+        first, last = min(a for _, a, _ in spans), max(b for _, _, b in spans)
+        hour = first // US_PER_HOUR
+        return int(hour % 24) if last // US_PER_HOUR == hour else None
 
     def _merge(self, vid: str, day: date, path: Path, rows: pl.DataFrame) -> None:
         merged = merge_partition(self._current(path), rows, self.rule, tags_by_column(self.config, vid))
