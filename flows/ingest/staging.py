@@ -81,6 +81,8 @@ class LakeStager:
         self.rule = config.export.duplicate_rule
         self.gap_us = max(int(round(config.export.max_gap_s * 1e6)), 1)
         self.buffer: dict[tuple[str, date], list[pl.DataFrame]] = {}
+        self.first: dict[tuple[str, date], int] = {}
+        """The earliest buffered time (µs) of each valve-day in the buffer."""
         self.buffered = 0
         self.staged: dict[Path, Path] = {}
         """Final path → its staged temporary file, in the order written."""
@@ -98,6 +100,8 @@ class LakeStager:
         """One valve's new lake rows, sorted, later than any it gave before."""
         vid = frame["valve_id"][0]
         for day, part in split_days(frame):
+            if (vid, day) not in self.buffer:
+                self.first[(vid, day)] = part["timestamp_utc"].to_physical()[0]
             self.buffer.setdefault((vid, day), []).append(part)
             self.days.add((vid, day))
             self.buffered += part.height
@@ -108,13 +112,19 @@ class LakeStager:
         force = given_to is None or self.buffered > BUFFER_ROWS
         for key in list(self.buffer):
             vid, day = key
-            rows = pl.concat(self.buffer.pop(key))
-            self.buffered -= rows.height
             upto = None if force else given_to.get(vid)
             day_end = (day.toordinal() - 719163 + 1) * US_PER_DAY  # 719163: date(1970, 1, 1).toordinal()
-            keep = self._write(vid, day, rows, complete=force or upto >= day_end, before=None if force else upto // US_PER_HOUR * US_PER_HOUR)
+            complete = force or upto >= day_end
+            before = None if force else upto // US_PER_HOUR * US_PER_HOUR
+            if not complete and self.first[key] >= before:
+                continue  # no complete hour buffered (the usual case within an hour): nothing to write yet
+            rows = pl.concat(self.buffer.pop(key))
+            del self.first[key]
+            self.buffered -= rows.height
+            keep = self._write(vid, day, rows, complete=complete, before=before)
             if keep is not None and keep.height:
                 self.buffer[key] = [keep]
+                self.first[key] = keep["timestamp_utc"].to_physical()[0]
                 self.buffered += keep.height
 
     # --- the day folder -----------------------------------------------------------------------

@@ -159,9 +159,8 @@ def _value_checks(col: pl.Series, decimal: str) -> tuple[pl.Series, pl.Series | 
         values = text.cast(pl.Float64, strict=False)
         missing = text.is_null() | (text.str.len_bytes() == 0)
         non_numeric = values.is_null() & ~missing
-    non_finite = ~values.is_finite().fill_null(True)
-    if not non_finite.any():
-        non_finite = None
+    finite = values.is_finite()
+    non_finite = None if finite.all() else ~finite.fill_null(True)  # (all() passes nulls)
     return values, missing, non_numeric, non_finite
 
 
@@ -537,9 +536,9 @@ def wide_samples(
     df, lines, broken, broken_lines = _take_broken(df, lines)
     n = df.height
     ts_raw = df[export.timestamp_column]
-    ts = parse_timestamps(ts_raw, export.timestamp_format, timezone, lines=lines, unreadable="null", origin_ns=origin_ns)
+    ts = parse_timestamps(ts_raw, export.timestamp_format, timezone, lines=lines, unreadable="null", origin_ns=origin_ns).cast(UTC_NS)  # once, not per tag
     bad_ts = ts.is_null() if ts.null_count() else None
-    after_step = None if clock is None else clock.after_step(ts.cast(UTC_NS).to_physical(), lines)
+    after_step = None if clock is None else clock.after_step(ts.to_physical(), lines)
     faults = _Faults(tags, time.time_ns() if now_ns is None else now_ns)
     bad_quality = _bad_quality(df[export.quality_column], export.good_quality) if export.quality_column else None
     accepted, quarantined = [], []

@@ -336,7 +336,7 @@ class ExportStream:
         anchor = carry.anchor if carry is not None else None
         t_ns, values = series.t_ns, series.values
         if anchor is not None:
-            t_ns, values = np.r_[anchor[0], t_ns], np.r_[anchor[1], values]
+            t_ns, values = np.concatenate(([anchor[0]], t_ns)), np.concatenate(([anchor[1]], values))
         g = to_grid(t_ns, values, self.grid)
         if anchor is not None:  # instants up to the anchor were given with the previous batch
             first = int(np.searchsorted(g.t_us, anchor[0] // 1000, side="right"))  # t_us * 1000 <= anchor ns
