@@ -21,6 +21,13 @@ first 45 minutes of the same recording (``--warm-minutes``, 0: no warm-up; more 
 reads at once, so that its chunked reads compile the same kernel signatures), so that the numba
 kernels are in that tree's cache, as a nightly run finds them. ``--hours N`` takes the first N
 files and scales the sum to a day (linearly, start-up counted each time: an upper bound).
+``--steps ingest`` (a comma-separated list) runs only those steps; ``--duckdb`` adds, each round,
+DuckDB's bare ``COPY`` of the same files into a partitioned Parquet lake (one thread, no
+validation; :data:`DUCKDB_COPY`), pinned and measured alike, and prints the ingest ÷ DuckDB ratio:
+
+    .venv/bin/python bench/plant_day.py --day DAY --work DIR --code before=BEFORE --code after=AFTER \
+        --steps ingest --duckdb --warm-minutes 5
+
 The retention step thins the valve-day (``[retention] keep_days = 1``, ``mode = "thin"``,
 ``--as-of`` two days after it), as it would once the day is older than the plant's ``keep_days``.
 
