@@ -153,6 +153,9 @@ def ingest(
 @app.command()
 def monitor(config: Config, valves: Valves = None, start: From = None, end: To = None, warehouse: Warehouse = None) -> None:
     """Lake to opening-area points and fits."""
+    from flows.common.allocator import retain_polars_memory
+
+    retain_polars_memory()  # before polars is imported
     import flows.monitor.flow as monitor_flows
     from flows.common.prefect_run import run_flow
 
