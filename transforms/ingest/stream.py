@@ -270,7 +270,7 @@ class ExportStream:
                 carry = self._carry[tid]
                 self._tag(tid, carry.held_t, carry.held_v, _Lines(carry.held_line, _NONE, slice(0, 0)), carry, True)
         frames = self._give(final)
-        if frames:  # every valve in one pass (one pandera call per valve costs more)
+        if frames:  # every valve in one check (one call per valve costs more)
             validate_sensor_frame(pl.concat(frames), {f["valve_id"][0]: tags_by_column(self.config, f["valve_id"][0]) for f in frames})
         if final and self._span:
             c.time_start, c.time_end = pl.Series([min(self._span), max(self._span)], dtype=pl.Int64).cast(pl.Datetime("ns", "UTC")).to_list()
