@@ -138,6 +138,9 @@ def ingest(
     force: Annotated[bool, typer.Option("--force", help="Read files again even if the manifest already holds their content.")] = False,
 ) -> None:
     """Historian exports into the sensor lake."""
+    from flows.common.allocator import retain_polars_memory
+
+    retain_polars_memory()  # before polars is imported: each batch's columns reuse freed pages
     import flows.ingest.flow as ingest_flows
     from flows.common.prefect_run import run_flow
 

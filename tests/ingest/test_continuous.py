@@ -129,6 +129,24 @@ def test_a_day_file_that_outgrows_its_limit_switches_to_hour_files(wide10, tmp_p
     assert sorted(p.name for p in (wh / "lake").rglob("*.parquet")) == ["part-h00.parquet", "part-h01.parquet", "part-h02.parquet", "part-h03.parquet"]
     assert lake(wh).height == 18_000 + 108_000
     assert lake(wh)["timestamp_utc"].is_sorted() and lake(wh)["timestamp_utc"].n_unique() == 126_000
+    # the day file lay in one hour (00:00-00:30): it became part-h00 as it was (a hard link), then
+    # took the second file's rows of that hour; the lake is the one of both files in one run
+    both = tmp_path / "wh_both"
+    ingest(wide10, [tmp_path / "a.parquet", tmp_path / "b.parquet"], both)
+    assert_frame_equal(lake(wh), lake(both))
+    assert not list((wh / "lake").rglob(".*.tmp"))
+
+
+def test_a_day_file_within_one_hour_becomes_that_hour_file_unread(wide10, tmp_path, small):
+    """The first hour of a recording, alone in its day file, is staged as its hour file by a hard
+    link when the next hour arrives: the same bytes, not read or written again."""
+    wh = tmp_path / "wh"
+    ingest(wide10, recording(tmp_path / "a.parquet", 3600, 1200), wh)  # 01:00-01:20
+    day_file = next((wh / "lake").rglob("part-0.parquet"))
+    before = day_file.read_bytes()
+    ingest(wide10, recording(tmp_path / "b.parquet", 2 * 3600, 2400), wh)  # 02:00-02:40: 24,000 rows, over the limit
+    assert sorted(p.name for p in day_file.parent.iterdir()) == ["part-h01.parquet", "part-h02.parquet"]
+    assert (day_file.parent / "part-h01.parquet").read_bytes() == before
 
 
 CHILD = textwrap.dedent(
