@@ -129,6 +129,24 @@ def test_a_day_file_that_outgrows_its_limit_switches_to_hour_files(wide10, tmp_p
     assert sorted(p.name for p in (wh / "lake").rglob("*.parquet")) == ["part-h00.parquet", "part-h01.parquet", "part-h02.parquet", "part-h03.parquet"]
     assert lake(wh).height == 18_000 + 108_000
     assert lake(wh)["timestamp_utc"].is_sorted() and lake(wh)["timestamp_utc"].n_unique() == 126_000
+    # the day file lay in one hour (00:00-00:30): it became part-h00 as it was (a hard link), then
+    # took the second file's rows of that hour; the lake is the one of both files in one run
+    both = tmp_path / "wh_both"
+    ingest(wide10, [tmp_path / "a.parquet", tmp_path / "b.parquet"], both)
+    assert_frame_equal(lake(wh), lake(both))
+    assert not list((wh / "lake").rglob(".*.tmp"))
+
+
+def test_a_day_file_within_one_hour_becomes_that_hour_file_unread(wide10, tmp_path, small):
+    """The first hour of a recording, alone in its day file, is staged as its hour file by a hard
+    link when the next hour arrives: the same bytes, not read or written again."""
+    wh = tmp_path / "wh"
+    ingest(wide10, recording(tmp_path / "a.parquet", 3600, 1200), wh)  # 01:00-01:20
+    day_file = next((wh / "lake").rglob("part-0.parquet"))
+    before = day_file.read_bytes()
+    ingest(wide10, recording(tmp_path / "b.parquet", 2 * 3600, 2400), wh)  # 02:00-02:40: 24,000 rows, over the limit
+    assert sorted(p.name for p in day_file.parent.iterdir()) == ["part-h01.parquet", "part-h02.parquet"]
+    assert (day_file.parent / "part-h01.parquet").read_bytes() == before
 
 
 CHILD = textwrap.dedent(
@@ -166,15 +184,15 @@ def _child(config: Path, path: Path, wh: Path, warm: Path, small: dict, kill_at:
 @pytest.mark.slow
 @pytest.mark.parametrize("suffix", [".parquet", ".tdms", ".cfg"])
 def test_memory_does_not_grow_with_the_file(wide10, tmp_path, suffix):
-    """A file of 600,000 rows (3.6 M samples, ~100 MB as float64 columns, ~17 h at 10 Hz; COMTRADE
-    200,000 rows in batches of 60,000 samples) ingests in a few tens of MB above the interpreter;
-    taken whole, the same file needs far more.
+    """A file of 240,000 rows (1.44 M samples, 40 batches, ~6.7 h at 10 Hz; COMTRADE 200,000 rows
+    in batches of 60,000 samples) ingests in a few tens of MB above the interpreter; taken whole,
+    the same file needs far more (600,000 rows: 16–18 MB streamed, 220–240 MB whole).
     Wide Parquet read by record batches; TDMS by slices of every channel (that its lake is the one
     of the same data as CSV: ``tests/archive/test_recorder_formats.py``); COMTRADE binary records
     a batch at a time (``tests/ingest/test_comtrade.py``)."""
     make = {".parquet": recording, ".tdms": tdms_recording, ".cfg": comtrade_recording}[suffix]
     warm = make(tmp_path / f"warm{suffix}", 0, 600)
-    rows, small = (600_000, SMALL) if suffix != ".cfg" else (200_000, {**SMALL, "BATCH_SAMPLES": 60_000})  # COMTRADE: 27 batches, a fifth of the time
+    rows, small = (240_000, SMALL) if suffix != ".cfg" else (200_000, {**SMALL, "BATCH_SAMPLES": 60_000})  # COMTRADE: 27 batches, a fifth of the time
     big = make(tmp_path / f"big{suffix}", 86_400, rows / 10)
     streamed = _child(wide10, big, tmp_path / "wh_stream", warm, small)
     assert streamed.returncode == 0, streamed.stderr
@@ -188,26 +206,37 @@ def test_memory_does_not_grow_with_the_file(wide10, tmp_path, suffix):
     assert_frame_equal(lake(tmp_path / "wh_stream"), lake(tmp_path / "wh_whole"))
 
 
+@pytest.fixture(scope="module")
+def clean_continuous(tmp_path_factory):
+    """A half-hour day file, a 3-hour recording that turns it into hour files, and the lake of
+    one uninterrupted run of both: shared by the kill points."""
+    d = tmp_path_factory.mktemp("clean_continuous")
+    config = write_plant(d, "wide10.toml", layout="wide", tag_column=None, value_column=None, quality_column=None, good_quality=None, sample_rate_hz=10.0, max_gap_s=0.25)
+    first = recording(d / "first.parquet", 0, 1800)
+    rec = recording(d / "rec.parquet", 1800, 3 * 3600, seed=3)
+    clean = d / "clean"
+    ingest(config, first, clean)
+    done = _child(config, rec, clean, first, SMALL)  # the warm-up file is already in the manifest: skipped
+    assert done.returncode == 0, done.stderr
+    return config, first, rec, clean
+
+
 @pytest.mark.slow
+@pytest.mark.xdist_group("continuous_kill")  # one worker computes the shared clean lake once
 @pytest.mark.parametrize("kill_at", [1, 3])
-def test_kill_9_during_a_continuous_ingest_then_rerun_gives_the_identical_lake(wide10, tmp_path, kill_at):
+def test_kill_9_during_a_continuous_ingest_then_rerun_gives_the_identical_lake(clean_continuous, tmp_path, kill_at):
     """SIGKILL while the staged files are put in place, in a day that switches from its day file
     to hour files: readers see the old day; a rerun gives the lake of one clean run, byte for byte."""
-    first = recording(tmp_path / "first.parquet", 0, 1800)
-    rec = recording(tmp_path / "rec.parquet", 1800, 3 * 3600, seed=3)
-    clean, wh = tmp_path / "clean", tmp_path / "wh"
-    for w in (clean, wh):
-        ingest(wide10, first, w)
+    config, first, rec, clean = clean_continuous
+    wh = tmp_path / "wh"
+    ingest(config, first, wh)
     old = lake(wh)
-    ingest_small = {k: v for k, v in SMALL.items()}
-    done = _child(wide10, rec, clean, first, ingest_small)  # the warm-up file is already in the manifest: skipped
-    assert done.returncode == 0, done.stderr
-    killed = _child(wide10, rec, wh, first, ingest_small, kill_at=kill_at)
+    killed = _child(config, rec, wh, first, SMALL, kill_at=kill_at)
     assert killed.returncode == -signal.SIGKILL
     assert list((wh / "lake").rglob("part-0.parquet"))  # the switch did not commit: the day file is the day
     assert_frame_equal(lake(wh), old)
     assert table(wh, "ingest_manifest").height == 1
-    again = _child(wide10, rec, wh, first, ingest_small)
+    again = _child(config, rec, wh, first, SMALL)
     assert again.returncode == 0, again.stderr
     assert_frame_equal(lake(wh), lake(clean))
     assert _files(wh) == _files(clean)
