@@ -356,8 +356,12 @@ def nuisance_verdict(prepared, nm, fit, named_specs, specs, rows0, w_rows, setti
         # replay cannot tell the readings apart and the prior alone decides nothing
         kind = acting_gap(spec)
         before, after = accs[0].split_gap(kind), acc_after.split_gap(kind)
-        if not confirmed(before, after, floors[kind]):
-            held = f"; its replay does not tell them apart (the {kind} gap {before:.3g} → {after:.3g})"
+        # against a base model that already replays within FLOOR_FACTOR x the floor, reaching the
+        # floor confirms nothing: only a material shrink does
+        at_floor = before <= FLOOR_FACTOR * floors[kind]
+        if not confirmed(before, after, floors[kind]) or (at_floor and after * GAP_SHRINK > before):
+            held = f"; its replay does not tell them apart (the {kind} gap {before:.3g} → {after:.3g}" + (
+                f", the base model's already within {FLOOR_FACTOR:g}× its noise floor {floors[kind]:.2g})" if at_floor else ")")
     if z >= Z_NAMED and not rivals and not held:
         return Verdict("named", best["confidence"], spec, best["value"], alternatives=[nuis], separate_by=sep,
                        reason=f"without {spec.key} the base model's parameters would have to move {z:.2g}σ outside their tolerances ({nuis}){note}",
