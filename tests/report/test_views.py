@@ -7,6 +7,7 @@ import html
 import numpy as np
 import polars as pl
 import pytest
+from polars.testing import assert_frame_equal
 
 from flows.common.errors import ValvemonError
 from flows.report.export import export_bi
@@ -334,6 +335,6 @@ def test_materialised_views_give_the_views_rows(wh):
     assert "stg_edge_fits" not in done  # staging views stay views
     temp = {r[0] for r in wh.con.execute("SELECT table_name FROM duckdb_tables() WHERE temporary").fetchall()}
     assert set(names) <= temp
-    for n in names:
-        assert wh.q(f"SELECT * FROM {n}").equals(before[n]), n
+    for n in names:  # the trend's sums are merged in an order DuckDB's threads choose: equal to rounding
+        assert_frame_equal(wh.q(f"SELECT * FROM {n}"), before[n], check_exact=False, rel_tol=1e-6)
     assert before["fault_alarms"].height == 1 and wh.condition("M1", "s1")["state"] == "healthy"

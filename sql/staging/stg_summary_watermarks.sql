@@ -1,0 +1,17 @@
+-- stg_summary_watermarks: how far each valve's daily summaries reach (table summary_watermarks,
+-- moved by every writing command's publish, flows/report/summaries.py).
+-- One row per valve that has summaries: its windows before summarised_before (a UTC midnight)
+-- are in edge_day_summaries, parameter_day_summaries and alarm_windows; from it on the views
+-- compute them; raw_from is the earliest window they read raw (the change detector's history
+-- of the first open window, the level's windows). A valve without a row has nothing summarised.
+with
+
+marks as (
+    select * from summary_watermarks
+),
+
+final as (
+    select valve_id, summarised_before, raw_from from marks
+)
+
+select * from final
