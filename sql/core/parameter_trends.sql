@@ -51,15 +51,23 @@ span_days as (
     where days.n_clean > 0 and days.clean_last_hours >= latest.latest_hours - bounds.trend_span_hours
 ),
 
+pool_reference as (
+    -- one day's means as the reference the others are pooled relative to: exact for a constant parameter
+    select valve_id, edge, parameter, min(clean_mean_hours) as ref_hours, min(clean_mean_value) as ref_value
+    from span_days
+    group by valve_id, edge, parameter
+),
+
 pooled as (
     select
         valve_id, edge, parameter,
         sum(n_clean) as n_fits,
         max(clean_last_hours) - min(clean_first_hours) as span_hours,
         any_value(latest_hours) as latest_hours,
-        sum(n_clean * clean_mean_hours) / sum(n_clean) as mean_hours,
-        sum(n_clean * clean_mean_value) / sum(n_clean) as mean_value
+        any_value(ref_hours) + sum(n_clean * (clean_mean_hours - ref_hours)) / sum(n_clean) as mean_hours,
+        any_value(ref_value) + sum(n_clean * (clean_mean_value - ref_value)) / sum(n_clean) as mean_value
     from span_days
+    join pool_reference using (valve_id, edge, parameter)
     group by valve_id, edge, parameter
 ),
 
@@ -67,9 +75,12 @@ merged as (
     select
         pooled.*,
         sum(span_days.clean_sxx + span_days.n_clean * (span_days.clean_mean_hours - pooled.mean_hours) ** 2) as sxx,
-        sum(span_days.clean_syy + span_days.n_clean * (span_days.clean_mean_value - pooled.mean_value) ** 2) as syy,
-        sum(span_days.clean_sxy + span_days.n_clean * (span_days.clean_mean_hours - pooled.mean_hours)
-                                                   * (span_days.clean_mean_value - pooled.mean_value)) as sxy
+        -- a parameter constant over the span has no variance: exactly, not the day means' round-off
+        case when min(span_days.min_value) < max(span_days.max_value) then
+            sum(span_days.clean_syy + span_days.n_clean * (span_days.clean_mean_value - pooled.mean_value) ** 2) else 0 end as syy,
+        case when min(span_days.min_value) < max(span_days.max_value) then
+            sum(span_days.clean_sxy + span_days.n_clean * (span_days.clean_mean_hours - pooled.mean_hours)
+                                                       * (span_days.clean_mean_value - pooled.mean_value)) else 0 end as sxy
     from pooled
     join span_days using (valve_id, edge, parameter)
     group by all
