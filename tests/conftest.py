@@ -10,6 +10,16 @@ os.environ.setdefault("PREFECT_LOGGING_TO_API_ENABLED", "false")
 import pytest  # noqa: E402
 
 
+def pytest_collection_modifyitems(items):
+    """Every test that starts the Prefect API runs on one xdist worker (``--dist loadgroup``), so
+    a run of the whole suite starts that server once, not once per worker."""
+    for item in items:
+        names = getattr(item, "fixturenames", ())
+        callspec = getattr(item, "callspec", None)
+        if "prefect_server" in names or (callspec is not None and callspec.params.get("prefect") is True):
+            item.add_marker(pytest.mark.xdist_group("prefect"))
+
+
 @pytest.fixture(scope="session")
 def prefect_server():
     """A temporary local Prefect API (SQLite) for tests that run real flows; ~15 s to start once."""

@@ -188,26 +188,37 @@ def test_memory_does_not_grow_with_the_file(wide10, tmp_path, suffix):
     assert_frame_equal(lake(tmp_path / "wh_stream"), lake(tmp_path / "wh_whole"))
 
 
+@pytest.fixture(scope="module")
+def clean_continuous(tmp_path_factory):
+    """A half-hour day file, a 3-hour recording that turns it into hour files, and the lake of
+    one uninterrupted run of both: shared by the kill points."""
+    d = tmp_path_factory.mktemp("clean_continuous")
+    config = write_plant(d, "wide10.toml", layout="wide", tag_column=None, value_column=None, quality_column=None, good_quality=None, sample_rate_hz=10.0, max_gap_s=0.25)
+    first = recording(d / "first.parquet", 0, 1800)
+    rec = recording(d / "rec.parquet", 1800, 3 * 3600, seed=3)
+    clean = d / "clean"
+    ingest(config, first, clean)
+    done = _child(config, rec, clean, first, SMALL)  # the warm-up file is already in the manifest: skipped
+    assert done.returncode == 0, done.stderr
+    return config, first, rec, clean
+
+
 @pytest.mark.slow
+@pytest.mark.xdist_group("continuous_kill")  # one worker computes the shared clean lake once
 @pytest.mark.parametrize("kill_at", [1, 3])
-def test_kill_9_during_a_continuous_ingest_then_rerun_gives_the_identical_lake(wide10, tmp_path, kill_at):
+def test_kill_9_during_a_continuous_ingest_then_rerun_gives_the_identical_lake(clean_continuous, tmp_path, kill_at):
     """SIGKILL while the staged files are put in place, in a day that switches from its day file
     to hour files: readers see the old day; a rerun gives the lake of one clean run, byte for byte."""
-    first = recording(tmp_path / "first.parquet", 0, 1800)
-    rec = recording(tmp_path / "rec.parquet", 1800, 3 * 3600, seed=3)
-    clean, wh = tmp_path / "clean", tmp_path / "wh"
-    for w in (clean, wh):
-        ingest(wide10, first, w)
+    config, first, rec, clean = clean_continuous
+    wh = tmp_path / "wh"
+    ingest(config, first, wh)
     old = lake(wh)
-    ingest_small = {k: v for k, v in SMALL.items()}
-    done = _child(wide10, rec, clean, first, ingest_small)  # the warm-up file is already in the manifest: skipped
-    assert done.returncode == 0, done.stderr
-    killed = _child(wide10, rec, wh, first, ingest_small, kill_at=kill_at)
+    killed = _child(config, rec, wh, first, SMALL, kill_at=kill_at)
     assert killed.returncode == -signal.SIGKILL
     assert list((wh / "lake").rglob("part-0.parquet"))  # the switch did not commit: the day file is the day
     assert_frame_equal(lake(wh), old)
     assert table(wh, "ingest_manifest").height == 1
-    again = _child(wide10, rec, wh, first, ingest_small)
+    again = _child(config, rec, wh, first, SMALL)
     assert again.returncode == 0, again.stderr
     assert_frame_equal(lake(wh), lake(clean))
     assert _files(wh) == _files(clean)
