@@ -684,6 +684,7 @@ PARAMETER_DAY_FIELDS: tuple[Field, ...] = (
     Field("min_value", pl.Float64, "", "Minimum of the day's values."),
     Field("max_value", pl.Float64, "", "Maximum of the day's values."),
     Field("operating_hours", pl.Float64, "h", "Operating hours of the day's latest value."),
+    Field("last_window_start", UTC_US, "", "The day's latest window with a value."),
     Field("n_clean", pl.Int64, "", "Values of alarm-free windows (what the trend is fitted on).", ge=0),
     Field("clean_first_hours", pl.Float64, "h", "Operating hours of the earliest of them.", nullable=True),
     Field("clean_last_hours", pl.Float64, "h", "Operating hours of the latest of them.", nullable=True),

@@ -18,6 +18,7 @@ final as (
         min(value) as min_value,
         max(value) as max_value,
         max(operating_hours) as operating_hours,
+        max(window_start) as last_window_start,
         count(*) filter (where is_clean) as n_clean,
         min(operating_hours) filter (where is_clean) as clean_first_hours,
         max(operating_hours) filter (where is_clean) as clean_last_hours,

@@ -37,9 +37,10 @@ marks as (
 ),
 
 latest as (
-    select valve_id, edge, max(last_ok_operating_hours) as latest_hours, max(last_ok_window_start) as latest_start
-    from edge_days
-    where last_ok_window_start is not null
+    -- the edge's latest ok window: every ok window has an alpha_hat
+    select valve_id, edge, max(operating_hours) as latest_hours, max(last_window_start) as latest_start
+    from days
+    where parameter = 'alpha_hat'
     group by valve_id, edge
 ),
 

@@ -4,7 +4,7 @@
 with
 
 values_by_day as (
-    select * from parameter_days
+    select * exclude (last_window_start) from parameter_days
 ),
 
 days as (
