@@ -1,4 +1,4 @@
-"""The daily summaries (flows/report/summaries.py): night after night, the views read from the
+"""The daily summaries (flows/report/summaries.py): night after night (four), the views read from the
 summaries and the open windows give what they give computed from scratch (every window open),
 after late data re-monitors a closed day, after a bound changes, and after a run killed
 halfway and rerun; a rerun with nothing new writes nothing."""
@@ -41,7 +41,7 @@ def night(wh: Warehouse, day: int, rng: np.random.Generator, *, again: bool = Fa
             n = hours.size
             alpha = 1.0 - 2e-3 * hours / 24 + 0.01 * rng.standard_normal(n)
             if edge == "1r" and valve == "C1":
-                alpha[hours == 80] = 0.7  # an alarm on day 3, as a break
+                alpha[hours == 32] = 0.7  # an alarm on day 1, as a break
             status = np.where(rng.random(n) < 0.1, "too_few_points", "ok")
             wh.add_fits(valve, edge, hours, alpha, 0.2 + 0.03 * hours / 24 + 0.1 * rng.standard_normal(n),
                         0.1 + 0.01 * rng.standard_normal(n), status=status, x_determined=rng.random(n) > 0.2,
@@ -84,29 +84,29 @@ def plant(wh: Warehouse) -> Warehouse:
 
 def test_night_after_night_the_summaries_give_the_full_recomputation(plant, monkeypatch):
     wh, rng = plant, np.random.default_rng(7)
-    for day in range(6):
+    for day in range(4):
         night(wh, day, rng)
         update_summaries(wh.con, COMMISSIONED + timedelta(days=day + 1))
         assert_same(views(wh), from_scratch(wh))
     marks = wh.q("SELECT * FROM summary_watermarks ORDER BY valve_id")
-    assert marks["summarised_before"].to_list() == [COMMISSIONED + timedelta(days=5)] * 2  # the latest day stays open
+    assert marks["summarised_before"].to_list() == [COMMISSIONED + timedelta(days=3)] * 2  # the latest day stays open
     assert (marks["raw_from"] < marks["summarised_before"]).all()
-    assert wh.q("SELECT count(DISTINCT day_utc) AS n FROM edge_day_summaries")["n"][0] == 5
+    assert wh.q("SELECT count(DISTINCT day_utc) AS n FROM edge_day_summaries")["n"][0] == 3
     closed = views(wh)
     assert closed["fault_alarms"].filter(closed["fault_alarms"]["valve_id"] == "C1").height >= 1  # the break, kept when its day closed
     assert wh.q("SELECT count(*) AS n FROM alarm_windows")["n"][0] >= 1
     # nothing new: nothing written
-    assert update_summaries(wh.con, COMMISSIONED + timedelta(days=7)) == 0
+    assert update_summaries(wh.con, COMMISSIONED + timedelta(days=5)) == 0
     # late data: day 1 re-monitored with other values; the closed days from it on are computed again
     night(wh, 1, rng, again=True, late=30)
-    assert update_summaries(wh.con, COMMISSIONED + timedelta(days=31)) == len(PER_DAY) * 4 * 4  # days 1-4, 4 edges
+    assert update_summaries(wh.con, COMMISSIONED + timedelta(days=31)) == len(PER_DAY) * 4 * 2  # days 1-2, 4 edges
     assert_same(views(wh), from_scratch(wh))
     # a changed detector setting rebuilds the summaries
     wh.con.execute("UPDATE condition_bounds SET change_z = 4.0")
-    assert update_summaries(wh.con, COMMISSIONED + timedelta(days=32)) == len(PER_DAY) * 4 * 5
+    assert update_summaries(wh.con, COMMISSIONED + timedelta(days=32)) == len(PER_DAY) * 4 * 3
     assert_same(views(wh), from_scratch(wh))
     # a run killed halfway (after its deletes, while it computes the days) leaves the summaries as they were
-    night(wh, 6, rng, late=32)
+    night(wh, 4, rng, late=32)
     before = {t: wh.q(f"SELECT * FROM {t} ORDER BY ALL") for t in TABLES}
 
     def killed(*args, **kwargs):
