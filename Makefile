@@ -47,7 +47,7 @@ chromium:
 	fi
 
 test: setup chromium
-	$(VENV)/bin/python -m pytest -n 2 --dist loadgroup --durations=15
+	$(VENV)/bin/python -m pytest -n 2 --dist loadgroup --durations=30
 
 bench: setup
 	$(VENV)/bin/python bench/simulate.py

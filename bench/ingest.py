@@ -6,6 +6,7 @@ Usage (figures and the exact command in BENCHMARKS.md, "Ingest"):
     .venv/bin/python bench/ingest.py --storage       # lake storage study (codec, float width, row groups)
     .venv/bin/python bench/ingest.py --seconds 200   # a smaller input
     .venv/bin/python bench/ingest.py --recorder      # wide recorder formats: CSV, ASCII with header rows, TDMS, Parquet
+    .venv/bin/python bench/ingest.py --stages-of DAY --hours 3   # where a recorded day's ingest goes, per hour file
 
 Throughput: a synthetic plant export (one valve, six required tags, sampled exactly on the 1 kHz
 grid, realistic signals: smooth motion + sensor noise + 16-bit quantisation) is written as a
@@ -169,25 +170,71 @@ STAGES = [
 ]
 
 
-def _stages(run, repeat: int) -> dict[str, float]:
-    """CPU time per stage of ``run()``, by wrapping the stage functions where they are looked up."""
+CONTINUOUS_STAGES = [
+    ("flows.ingest.formats", "open_export", "open: format, BLAKE3 of the file in blocks"),
+    ("flows.ingest.formats", "iload", "Parquet decode of the batches (polars)"),
+    ("transforms.ingest.stream", "samples_of", "samples: checks, SI, quarantine masks"),
+    ("transforms.ingest.samples", "_value_checks", "  of which: null / NaN / inf masks"),
+    ("transforms.ingest.samples._Faults", "checked", "  of which: SI + range + time checks"),
+    ("transforms.ingest.samples", "_accepted", "  of which: accepted samples (frames)"),
+    ("transforms.ingest.samples", "ClockSteps.after_step", "  of which: clock steps"),
+    ("transforms.ingest.stream", "validate_raw_rows", "registry check: raw rows"),
+    ("transforms.ingest.stream", "tag_blocks", "per-tag arrays"),
+    ("transforms.ingest.stream", "prepare_tag", "order check, duplicates per tag"),
+    ("transforms.ingest.stream", "to_grid", "grid + gaps per tag"),
+    ("transforms.ingest.stream", "assemble_valve", "assemble valve rows (float32)"),
+    ("transforms.ingest.stream", "validate_sensor_frame", "registry check: lake rows"),
+    ("flows.ingest.staging", "split_days", "split by day / hour"),
+    ("flows.ingest.staging", "read_partition", "read existing lake file"),
+    ("flows.ingest.staging", "merge_partition", "merge with the lake file"),
+    ("flows.ingest.staging", "stage_file", "write lake files (LZ4, fsync)"),
+    ("flows.ingest.staging", "commit_files", "put files in place (rename)"),
+    ("flows.ingest.flow", "record_file", "DuckDB manifest, quarantine, gaps"),
+]
+"""Stages of a wide Parquet recording's ingest (``--stages-of``); an indented stage is part of the
+one above it."""
+
+
+def _stages(run, repeat: int, stages: list[tuple[str, str, str]] = STAGES) -> dict[str, float]:
+    """CPU time per stage of ``run()``, by wrapping the stage functions where they are looked up
+    (``module.Class`` for a method; a generator's time is that of its ``next`` calls)."""
     import importlib
+    import inspect
 
     best: dict[str, float] = {}
     for _ in range(repeat):
-        acc: dict[str, float] = {label: 0.0 for _, _, label in STAGES}
+        acc: dict[str, float] = {label: 0.0 for _, _, label in stages}
         saved = []
-        for mod_name, fn, label in STAGES:
-            mod = importlib.import_module(mod_name)
+        for mod_name, fn, label in stages:
+            try:
+                mod = importlib.import_module(mod_name)
+            except ModuleNotFoundError:  # module.Class
+                mod_name, cls = mod_name.rsplit(".", 1)
+                mod = getattr(importlib.import_module(mod_name), cls)
+            if "." in fn:  # Class.method, found in the module
+                cls, fn = fn.split(".")
+                mod = getattr(mod, cls)
             f = getattr(mod, fn)
             saved.append((mod, fn, f))
+
+            def timed_gen(gen, _label):
+                while True:
+                    t0 = time.process_time()
+                    try:
+                        item = next(gen)
+                    except StopIteration:
+                        acc[_label] += time.process_time() - t0
+                        return
+                    acc[_label] += time.process_time() - t0
+                    yield item
 
             def wrapped(*a, _f=f, _label=label, **k):
                 t0 = time.process_time()
                 try:
-                    return _f(*a, **k)
+                    out = _f(*a, **k)
                 finally:
                     acc[_label] += time.process_time() - t0
+                return timed_gen(out, _label) if inspect.isgenerator(out) else out
 
             setattr(mod, fn, wrapped)
         try:
@@ -374,13 +421,38 @@ def storage(seconds: int, repeat: int) -> None:
             print(f"  {c:<10} max |float32 - float64| = {err:.3g}   quantisation step = {step:.3g}   ratio = {err / step:.2g}")
 
 
+def stages_of(day: Path, hours: int) -> None:
+    """Where the ingest of a recorded valve-day's hourly wide Parquet files goes, stage by stage:
+    the first file ingested once (warm-up: numba's cache, imports), then ``hours`` files into an
+    empty warehouse; CPU seconds per stage and per hour file."""
+    from flows.ingest.flow import run_ingest
+
+    files = sorted((day / "exports").glob("*.parquet"))
+    config = day / "plant.toml"
+    with tempfile.TemporaryDirectory(prefix="valvemon-stages-") as tmp:
+        run_ingest(config, files[:1], Path(tmp) / "warm")
+        wh = Path(tmp) / "wh"
+        result = _stages(lambda: run_ingest(config, files[1 : 1 + hours], wh), 1, CONTINUOUS_STAGES)
+    print(f"{hours} hour file(s) of {day} after a warm-up on the first; CPU s per hour file (one core):")
+    for name, t in result.items():
+        print(f"  {name:<46}{t / hours:>8.3f}")
+    listed = sum(t for (_, _, name) in CONTINUOUS_STAGES if not name.startswith(" ") for t in [result[name]])
+    print(f"  {'(other: batching, carries, Python)':<46}{(result['total'] - listed) / hours:>8.3f}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seconds", type=int, default=1000, help="length of the synthetic export at 1 kHz [s] (default 1000: 6 M long rows)")
     ap.add_argument("--repeat", type=int, default=3, help="repetitions per measurement (median)")
     ap.add_argument("--storage", action="store_true", help="run the lake storage study instead")
     ap.add_argument("--recorder", action="store_true", help="wide recorder formats (CSV, iba ASCII, TDMS, Parquet) instead")
+    ap.add_argument("--stages-of", type=Path, default=None, metavar="DAY",
+                    help="stage breakdown of the ingest of a simulated valve-day (DAY/plant.toml, DAY/exports/*.parquet) instead")
+    ap.add_argument("--hours", type=int, default=3, help="with --stages-of: how many hour files (after the first, the warm-up)")
     args = ap.parse_args()
+    if args.stages_of:
+        stages_of(args.stages_of, args.hours)
+        return
     (storage if args.storage else recorder if args.recorder else throughput)(args.seconds, args.repeat)
 
 

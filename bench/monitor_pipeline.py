@@ -104,7 +104,7 @@ def _chunks(config, warehouse: Path, valve_ids):
     out = []
     for vid in valve_ids:
         valve = config.valve(vid)
-        params = fm.monitor_params(valve, config.export.sample_rate_hz, config.monitor.window_s)
+        params = fm.plant_monitor_params(config, valve)
         gap_s = params.gap_limit_periods * params.sample_period_s
         out += [(vid, rows) for rows in fm.lake_chunks(warehouse, vid, gap_s, None, None, window_s=params.window_s)]
     return out
@@ -123,7 +123,7 @@ def _warm_rows(config, warehouse: Path):
     lo = datetime(day.year, day.month, day.day, tzinfo=timezone.utc)
     rows = read_lake(warehouse, [vid], lo, lo + timedelta(minutes=10)).collect()
     valve = config.valve(vid)
-    return valve, fm.monitor_params(valve, config.export.sample_rate_hz, config.monitor.window_s), rows
+    return valve, fm.plant_monitor_params(config, valve), rows
 
 
 def step_full(config_path: Path, warehouse: Path, valve_ids, start: str | None = None, end: str | None = None) -> dict:
@@ -164,7 +164,7 @@ def step_transforms(config_path: Path, warehouse: Path, valve_ids) -> dict:
     base = {}
     for vid in valve_ids:
         v = config.valve(vid)
-        p = fm.monitor_params(v, config.export.sample_rate_hz, config.monitor.window_s)
+        p = fm.plant_monitor_params(config, v)
         base[vid] = (v, p, fm.ensure_baselines(v, p, warehouse))
     n = sum(r.height for _, r in chunks)
     c, w = time.process_time(), time.perf_counter()
@@ -191,7 +191,7 @@ def step_baseline(config_path: Path, warehouse: Path, valve_ids) -> dict:
     setup = {}
     for vid in valve_ids:
         v = config.valve(vid)
-        p = fm.monitor_params(v, config.export.sample_rate_hz, config.monitor.window_s)
+        p = fm.plant_monitor_params(config, v)
         b = fm.ensure_baselines(v, p, warehouse)
         setup[vid] = (
             p,

@@ -38,8 +38,8 @@ PHASES = {
 }
 # inside steps 2–4b: the compiled kernels (the first call of each loads it from numba's cache)
 KERNELS = {
-    "windows": [("transforms.windows", "_window_kernel")],
-    "Savitzky–Golay": [("transforms.derivatives", "_savgol_kernel")],
+    "windows": [("transforms.windows", "_window_kernel"), ("transforms.windows", "_evaluated_kernel")],
+    "Savitzky–Golay": [("transforms.derivatives", "_savgol_kernel"), ("transforms.derivatives", "_savgol_at_kernel")],
     "step 3 selection": [("transforms.selection", "_selection_kernel")],
     "Eq. 7 points": [("transforms.points", "_points_kernel")],
     "Eq. 8 fits (first estimates on every 8th point, final fit)": [("transforms.fit", "_fit_groups")],
@@ -84,6 +84,9 @@ def main() -> None:
     ap.add_argument("command", nargs=argparse.REMAINDER)
     args = ap.parse_args()
     t0 = cpu()
+    from flows.common.allocator import retain_polars_memory
+
+    retain_polars_memory()  # as the command does, before polars is imported
     import flows.cli
     import flows.monitor.flow
     import flows.report.publish  # noqa: F401 - the modules the command imports, timed here

@@ -21,6 +21,13 @@ first 45 minutes of the same recording (``--warm-minutes``, 0: no warm-up; more 
 reads at once, so that its chunked reads compile the same kernel signatures), so that the numba
 kernels are in that tree's cache, as a nightly run finds them. ``--hours N`` takes the first N
 files and scales the sum to a day (linearly, start-up counted each time: an upper bound).
+``--steps ingest`` (a comma-separated list) runs only those steps; ``--duckdb`` adds, each round,
+DuckDB's bare ``COPY`` of the same files into a partitioned Parquet lake (one thread, no
+validation; :data:`DUCKDB_COPY`), pinned and measured alike, and prints the ingest ÷ DuckDB ratio:
+
+    .venv/bin/python bench/plant_day.py --day DAY --work DIR --code before=BEFORE --code after=AFTER \
+        --steps ingest --duckdb --warm-minutes 5
+
 The retention step thins the valve-day (``[retention] keep_days = 1``, ``mode = "thin"``,
 ``--as-of`` two days after it), as it would once the day is older than the plant's ``keep_days``.
 
@@ -48,10 +55,27 @@ VALVE_DAY_ROWS = 86_400_000
 """A valve-day at 1 kHz."""
 
 
-def run_step(code: Path, cpu: int, argv: list[str], log: Path) -> dict:
-    """One ``valvemon`` command with ``PYTHONPATH=code``, pinned to ``cpu``: wall, CPU, peak RSS."""
+DUCKDB_COPY = """
+import sys, duckdb
+out, files = sys.argv[1], sys.argv[2:]
+con = duckdb.connect()
+con.execute("SET threads = 1")
+listed = ", ".join(f"'{f}'" for f in files)
+con.execute(
+    f"COPY (SELECT 'V001' AS valve_id, CAST(timestamp AS DATE) AS date, * FROM read_parquet([{listed}])) "
+    f"TO '{out}' (FORMAT parquet, PARTITION_BY (valve_id, date))"
+)
+"""
+"""DuckDB's bare copy of the exports into a partitioned Parquet lake (one thread, its defaults:
+snappy, the columns as they are): no validation, no grid, no units, no manifest."""
+
+
+def run_step(code: Path, cpu: int, argv: list[str], log: Path, script: str | None = None) -> dict:
+    """One ``valvemon`` command (or the Python ``script`` with ``argv``) with ``PYTHONPATH=code``,
+    pinned to ``cpu``: wall, CPU, peak RSS."""
     env = dict(os.environ, PYTHONPATH=str(code), POLARS_MAX_THREADS="1", NUMBA_NUM_THREADS="1")
-    cmd = ["taskset", "-c", str(cpu), sys.executable, "-c", "import sys; from flows.cli import main; sys.argv[0] = 'valvemon'; main()", *argv]
+    script = script or "import sys; from flows.cli import main; sys.argv[0] = 'valvemon'; main()"
+    cmd = ["taskset", "-c", str(cpu), sys.executable, "-c", script, *argv]
     t0 = time.perf_counter()
     with log.open("a") as out:
         out.write("$ " + " ".join(argv) + "\n")
@@ -86,8 +110,15 @@ def day_of(files: list[Path]) -> date:
     return date(int(stem[:4]), int(stem[4:6]), int(stem[6:8]))
 
 
+def duckdb_copy(cpu: int, files: list[Path], out: Path, log: Path) -> dict:
+    """:data:`DUCKDB_COPY` of ``files`` into ``out`` (emptied first), pinned to ``cpu``."""
+    if out.exists():
+        shutil.rmtree(out)
+    return run_step(ROOT, cpu, [str(out), *map(str, files)], log, DUCKDB_COPY)
+
+
 def path_once(code: Path, cpu: int, config: Path, files: list[Path], warehouse: Path, as_of: date, log: Path,
-              ingested: Path | None = None, keep: Path | None = None) -> dict:
+              ingested: Path | None = None, keep: Path | None = None, steps: tuple[str, ...] = STEPS) -> dict:
     """The nightly path into a fresh ``warehouse``: {step: measurement}. With ``ingested`` (a
     warehouse the same exports were ingested into) its copy replaces the ingest step; with
     ``keep`` the warehouse right after the ingest is copied there."""
@@ -101,7 +132,7 @@ def path_once(code: Path, cpu: int, config: Path, files: list[Path], warehouse: 
         "retention": ["retention", "--config", str(config), *wh, "--as-of", as_of.isoformat()],
     }
     out = {}
-    for step in STEPS:
+    for step in steps:
         if step == "ingest" and ingested is not None:
             shutil.copytree(ingested, warehouse)
             continue
@@ -124,7 +155,11 @@ def main() -> None:
     ap.add_argument("--hours", type=int, default=None, help="only the first N hourly files")
     ap.add_argument("--ingest-once", action="store_true",
                     help="ingest with the first code only and give the others a copy of its warehouse (codes whose ingest is the same)")
+    ap.add_argument("--steps", default=",".join(STEPS), help="the steps to run, comma-separated (default: all four)")
+    ap.add_argument("--duckdb", action="store_true",
+                    help="also DuckDB's bare COPY of the same files into a partitioned Parquet lake, pinned likewise, each round")
     args = ap.parse_args()
+    steps = tuple(s for s in STEPS if s in args.steps.split(","))
 
     codes = [(c.split("=", 1)[0], Path(c.split("=", 1)[1]).resolve()) for c in (args.code or [f"this={ROOT}"])]
     files = sorted((args.day / "exports").glob("*.parquet"))
@@ -149,38 +184,53 @@ def main() -> None:
         pq.write_table(table.slice(0, args.warm_minutes * 60_000), warm / files[0].name)
         del table
         for label, code in codes:
-            path_once(code, args.cpu, config, [warm / files[0].name], args.work / f"wh_warm_{label}", as_of, log)
+            path_once(code, args.cpu, config, [warm / files[0].name], args.work / f"wh_warm_{label}", as_of, log, steps=steps)
     ingested = args.work / "wh_ingested"
 
     results: dict[str, list[dict]] = {label: [] for label, _ in codes}
+    duck: list[dict] = []
     rows = export_rows(files)
     for r in range(args.rounds):
         for label, code in codes:
             first = label == codes[0][0]
-            once = args.ingest_once
+            once = args.ingest_once and "ingest" in steps
             res = path_once(code, args.cpu, config, files, args.work / f"wh_{label}", as_of, log,
-                            ingested if once and not first else None, ingested if once and first else None)
-            if "ingest" not in res:
+                            ingested if once and not first else None, ingested if once and first else None, steps)
+            if "ingest" not in res and "ingest" in steps:
                 res["ingest"] = results[codes[0][0]][-1]["ingest"]
             results[label].append(res)
             print(json.dumps({"round": r + 1, "code": label, **res}), flush=True)
+        if args.duckdb:
+            duck.append(duckdb_copy(args.cpu, files, args.work / "duckdb_lake", log))
+            print(json.dumps({"round": r + 1, "duckdb copy": duck[-1]}), flush=True)
 
     print(f"\n{len(files)} file(s), {rows:,} lake rows; CPU s per step (user + system, pinned to CPU {args.cpu}), "
           f"least of {args.rounds} round(s)\n")
     head = "| step | " + " | ".join(f"{label}: CPU s | wall s | peak RSS | M rows / CPU s" for label, _ in codes) + " |"
     print(head)
     print("|---|" + "---:|" * (4 * len(codes)))
-    best = {label: {s: min(rr[s]["cpu_s"] for rr in results[label]) for s in STEPS} for label, _ in codes}
-    for step in STEPS:
+    best = {label: {s: min(rr[s]["cpu_s"] for rr in results[label]) for s in steps} for label, _ in codes}
+    for step in steps:
         cells = []
         for label, _ in codes:
             rr = min(results[label], key=lambda x: x[step]["cpu_s"])[step]
             cells += [f"{rr['cpu_s']:.1f}", f"{rr['wall_s']:.1f}", f"{rr['rss_mb'] / 1024:.2f} GB", f"{rows / rr['cpu_s'] / 1e6:.2f}"]
         print(f"| {step} | " + " | ".join(cells) + " |")
+    if duck:
+        d = min(duck, key=lambda x: x["cpu_s"])
+        print(f"| DuckDB bare COPY | {d['cpu_s']:.1f} | {d['wall_s']:.1f} | {d['rss_mb'] / 1024:.2f} GB | {rows / d['cpu_s'] / 1e6:.2f} |")
+        if "ingest" in steps:
+            print("\ningest ÷ DuckDB bare COPY (CPU, least of each): "
+                  + ", ".join(f"{label} {best[label]['ingest'] / d['cpu_s']:.2f}×" for label, _ in codes)
+                  + "; per round: " + "; ".join(
+                      ", ".join(f"{label} {results[label][r]['ingest']['cpu_s'] / duck[r]['cpu_s']:.2f}×" for label, _ in codes)
+                      for r in range(len(duck))))
     day = VALVE_DAY_ROWS / rows  # a part of a day (--hours): scaled up linearly, start-up included each time
     scaled = "" if day == 1 else f" (measured on {rows:,} rows, scaled x{day:.2f} to a valve-day: an upper bound, start-up counted each time)"
     print()
     for label, _ in codes:
+        if steps != STEPS:
+            continue  # a part of the path: no plant-day figure
         total = sum(best[label].values()) * day
         per = ", ".join(f"{s} {best[label][s] * day * VALVES / 3600:.2f}" for s in STEPS)
         verdict = "within" if total * VALVES / 3600 <= GOAL_CORE_H else "over"

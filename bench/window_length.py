@@ -18,12 +18,14 @@ The recording is cut into windows of each length (``transforms.windows``) and mo
   window whose own scatter is well inside them does not turn noise into alarms.
 
     .venv/bin/python bench/window_length.py [--valves 6] [--duration-s 1200] [--lengths 10,20,30,60,120,300]
+        [--window-rows none,6000]   # also with long windows evaluated on every k-th row ([monitor] window_rows)
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import itertools
 import sys
 from pathlib import Path
 
@@ -41,18 +43,18 @@ from transforms.monitor import monitor  # noqa: E402
 X_MAX = TABLE1.geometry.x_max_m
 
 
-def valve_fits(seed: int, hours: float, duration_s: float, lengths: list[float]) -> pl.DataFrame:
+def valve_fits(seed: int, hours: float, duration_s: float, lengths: list[float], window_rows: list[int | None] = (None,)) -> pl.DataFrame:
     scenario = wear(scatter_seed=seed)
     xu, al = condition_arrays(scenario, np.array([hours]))
     lake = simulated_lake(condition_at(scenario, np.array([hours])), seed, duration_s=duration_s)
     nom = TABLE1.nominal_condition
     out = []
-    for length in lengths:
-        params = dataclasses.replace(table1_params(), window_s=length)
+    for length, rows in itertools.product(lengths, window_rows):
+        params = dataclasses.replace(table1_params(), window_s=length, window_rows=rows)
         fits = monitor(lake, params, {"V1": NOMINAL}, leakage={"V1": NOMINAL}).fits
         i = np.array([EDGES.index(e) for e in fits["edge"]])
         out.append(fits.with_columns(
-            pl.lit(length).alias("length_s"), pl.lit(seed).alias("seed"),
+            pl.lit(length).alias("length_s"), pl.lit(rows or 0).alias("window_rows"), pl.lit(seed).alias("seed"),
             (pl.col("alpha_hat") / pl.Series(al[0, i] / np.array(nom.alpha)[i]) - 1).alias("alpha_err"),
             ((pl.col("x_hat_m") - pl.Series(xu[0, i] - np.array(nom.underlap_m)[i])) / X_MAX * 100).alias("x_err_pct"),
             (pl.col("x_hat_m") / X_MAX * 100).alias("x_hat_pct"), (pl.col("e_m2") * 1e6).alias("e_mm2"),
@@ -63,21 +65,22 @@ def valve_fits(seed: int, hours: float, duration_s: float, lengths: list[float])
 def summary(fits: pl.DataFrame) -> pl.DataFrame:
     ok = fits.filter(pl.col("status") == "ok")
     spread = (
-        ok.group_by("length_s", "seed", "edge")
+        ok.group_by("length_s", "window_rows", "seed", "edge")
         .agg(pl.col("alpha_hat").std().alias("sd_alpha"), pl.col("x_hat_pct").std().alias("sd_x_pct"), pl.col("e_mm2").std().alias("sd_e_mm2"))
-        .group_by("length_s")
+        .group_by("length_s", "window_rows")
         .agg(pl.col("sd_alpha", "sd_x_pct", "sd_e_mm2").median())
     )
-    worst = ok.group_by("length_s").agg(
+    worst = ok.group_by("length_s", "window_rows").agg(
         (pl.col("alpha_err").abs().max() * 100).alias("worst_alpha_err_pct"), pl.col("x_err_pct").abs().max().alias("worst_x_err_pct_xmax"),
     )
-    counts = fits.group_by("length_s").agg(
+    counts = fits.group_by("length_s", "window_rows").agg(
         pl.len().alias("window_edges"), (pl.col("status") == "ok").mean().alias("ok_share"), pl.col("n_points").median().alias("median_points"),
         pl.col("n_points").quantile(0.05).alias("p05_points"),
         ((pl.col("alpha_ci_high") - pl.col("alpha_ci_low")) / 2).median().alias("ci_alpha"),
         ((pl.col("x_hat_ci_high_m") - pl.col("x_hat_ci_low_m")) / 2 / X_MAX * 100).median().alias("ci_x_pct"),
     )
-    return counts.join(worst, on="length_s").join(spread, on="length_s").sort("length_s")
+    keys = ["length_s", "window_rows"]
+    return counts.join(worst, on=keys).join(spread, on=keys).sort(keys)
 
 
 def per_edge_scatter(fits: pl.DataFrame) -> pl.DataFrame:
@@ -86,14 +89,14 @@ def per_edge_scatter(fits: pl.DataFrame) -> pl.DataFrame:
     those standard deviations (how heavy the tails are)."""
     params = ("alpha_hat", "x_hat_pct", "e_mm2")
     dev = fits.filter(pl.col("status") == "ok").with_columns(
-        (pl.col(p) - pl.col(p).mean().over("length_s", "seed", "edge")).alias(f"d_{p}") for p in params
+        (pl.col(p) - pl.col(p).mean().over("length_s", "window_rows", "seed", "edge")).alias(f"d_{p}") for p in params
     )
     return (
-        dev.group_by("length_s", "edge")
+        dev.group_by("length_s", "window_rows", "edge")
         .agg(pl.len().alias("windows"),
              *[(pl.col(f"d_{p}") ** 2).mean().sqrt().alias(f"sd_{p}") for p in params],
              *[(pl.col(f"d_{p}").abs().max() / (pl.col(f"d_{p}") ** 2).mean().sqrt()).alias(f"max_dev_sd_{p}") for p in params])
-        .sort("length_s", "edge")
+        .sort("length_s", "window_rows", "edge")
     )  # fmt: skip
 
 
@@ -103,10 +106,13 @@ def main() -> None:
     ap.add_argument("--duration-s", type=float, default=1200.0)
     ap.add_argument("--hours", type=float, default=8000.0)
     ap.add_argument("--lengths", default="10,20,30,60,120,300")
+    ap.add_argument("--window-rows", default="none",
+                    help="comma-separated [monitor] window_rows to compare (none: every row; window_rows 0 in the table)")
     ap.add_argument("--per-edge", action="store_true", help="also the scatter per edge (sd over valves' ok windows, pooled) and the largest |deviation| / sd")
     a = ap.parse_args()
     lengths = [float(x) for x in a.lengths.split(",")]
-    fits = pl.concat([valve_fits(s, a.hours, a.duration_s, lengths) for s in range(1, a.valves + 1)])
+    rows = [None if r.strip().lower() == "none" else int(r) for r in a.window_rows.split(",")]
+    fits = pl.concat([valve_fits(s, a.hours, a.duration_s, lengths, rows) for s in range(1, a.valves + 1)])
     with pl.Config(tbl_rows=50, tbl_cols=20, tbl_width_chars=250, float_precision=4):
         print(summary(fits))
         if a.per_edge:

@@ -138,6 +138,9 @@ def ingest(
     force: Annotated[bool, typer.Option("--force", help="Read files again even if the manifest already holds their content.")] = False,
 ) -> None:
     """Historian exports into the sensor lake."""
+    from flows.common.allocator import retain_polars_memory
+
+    retain_polars_memory()  # before polars is imported: each batch's columns reuse freed pages
     import flows.ingest.flow as ingest_flows
     from flows.common.prefect_run import run_flow
 
@@ -153,6 +156,9 @@ def ingest(
 @app.command()
 def monitor(config: Config, valves: Valves = None, start: From = None, end: To = None, warehouse: Warehouse = None) -> None:
     """Lake to opening-area points and fits."""
+    from flows.common.allocator import retain_polars_memory
+
+    retain_polars_memory()  # before polars is imported
     import flows.monitor.flow as monitor_flows
     from flows.common.prefect_run import run_flow
 

@@ -33,6 +33,7 @@ __all__ = [
     "DEFAULT_OUTPUTS",
     "add_savgol",
     "savgol_arrays",
+    "savgol_at",
     "savgol_exprs",
     "savgol_valid",
     "savgol_weights",
@@ -215,4 +216,67 @@ def savgol_arrays(x: np.ndarray, *, window: int, order: int, sample_period_s: fl
     out0 = np.empty(x.shape[0]) if smooth else np.empty(0)
     out1 = np.empty(x.shape[0])
     _savgol_kernel(x, w0, w1, 1.0 / sample_period_s, out0, out1, bool(smooth))
+    return (out0 if smooth else None), out1
+
+
+@numba.njit(cache=True)
+def _savgol_at_kernel(x, rows, w0, w1, scale1, smooth, deriv, want_smooth):
+    """The stencil sums of :func:`_savgol_kernel` at the given rows only, in blocks of 256 rows
+    (the stencil loop outside, the rows inside: independent sums side by side), each summed in
+    the same order (oldest sample first, from 0.0), so the values are bit for bit those of the
+    full pass."""
+    n = x.shape[0]
+    m = w1.shape[0]
+    h = m // 2
+    nr = rows.shape[0]
+    if n < m:  # no stencil fits
+        for r in range(nr):
+            deriv[r] = np.nan
+            if want_smooth:
+                smooth[r] = np.nan
+        return
+    block = 256
+    acc0 = np.empty(block)
+    acc1 = np.empty(block)
+    base = np.empty(block, dtype=np.int64)
+    for b0 in range(0, nr, block):
+        length = min(block, nr - b0)
+        for r in range(length):
+            i = rows[b0 + r]
+            # a stencil that leaves the array reads row h instead (its value is replaced by NaN)
+            base[r] = i - h if h <= i < n - h else 0
+            acc0[r] = 0.0
+            acc1[r] = 0.0
+        for k in range(m):
+            a0 = w0[k]
+            a1 = w1[k]
+            if want_smooth:
+                for r in range(length):
+                    v = x[base[r] + k]
+                    acc0[r] += a0 * v
+                    acc1[r] += a1 * v
+            else:
+                for r in range(length):
+                    acc1[r] += a1 * x[base[r] + k]
+        for r in range(length):
+            i = rows[b0 + r]
+            inside = h <= i < n - h
+            deriv[b0 + r] = acc1[r] * scale1 if inside else np.nan
+            if want_smooth:
+                smooth[b0 + r] = acc0[r] if inside else np.nan
+
+
+def savgol_at(x: np.ndarray, rows: np.ndarray, *, window: int, order: int, sample_period_s: float, smooth: bool = True):
+    """:func:`savgol_arrays` evaluated at ``rows`` only (sorted or not; int64 indices into ``x``):
+    (smoothed or None, first derivative), one entry per row, equal bit for bit to the full pass's
+    entries at those rows. What the monitor runs when it evaluates every k-th row of a window."""
+    if sample_period_s <= 0:
+        raise ValueError("sample_period_s must be > 0")
+    x = _float_array(x)
+    rows = np.ascontiguousarray(rows, dtype=np.int64)
+    w0 = np.array(_weights(window, order, 0))
+    w1 = np.array(_weights(window, order, 1))
+    out0 = np.empty(rows.shape[0]) if smooth else np.empty(0)
+    out1 = np.empty(rows.shape[0])
+    _savgol_at_kernel(x, rows, w0, w1, 1.0 / sample_period_s, out0, out1, bool(smooth))
     return (out0 if smooth else None), out1

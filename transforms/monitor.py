@@ -21,6 +21,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass
+from functools import partial
 
 import numba
 import numpy as np
@@ -38,7 +39,7 @@ from transforms.baseline import (
     recognise_edge_law,
 )
 from transforms.characteristic import Characteristic, scaled_shifted
-from transforms.derivatives import add_savgol, savgol_arrays
+from transforms.derivatives import add_savgol, savgol_arrays, savgol_at
 from transforms.fit import fit_arrays, fit_groups, sorted_fits, walk_segment
 from transforms.leakage import closed_leakage, effective_scale, inflation, leak_columns, leak_scale_step
 from transforms.params import EDGES, MonitorParams
@@ -57,7 +58,7 @@ from transforms.selection import (
     selection_stats,
     stats_frame,
 )
-from transforms.windows import assign_windows, infer_sample_period_s, window_arrays, window_table
+from transforms.windows import assign_windows, evaluated_rows, infer_sample_period_s, window_arrays, window_table
 
 __all__ = [
     "LAKE_COLUMNS",
@@ -183,11 +184,14 @@ def _groups(windows: pl.DataFrame) -> pl.DataFrame:
 
 def _valve_polars(lake_v, valve_id, p, leakage, with_ratio, want_points):
     framed = prepare_samples(_time_sorted(lake_v), p)
+    windows = window_table(framed)
+    if p.window_rows is not None:  # every k-th row of a long window (MonitorParams.window_rows)
+        k = (pl.len().over("window_id") // p.window_rows).clip(lower_bound=1)
+        framed = framed.filter(pl.int_range(pl.len()).over("window_id") % k == 0)
     points = opening_area_points(
         framed, p, selected={e: pl.col(selected_column(e)) for e in EDGES},
         leakage=None if leakage is None else leakage.get(valve_id), with_ratio=with_ratio,
     )
-    windows = window_table(framed)
     ratio = None
     if with_ratio:
         ratio = points["leak_ratio"].to_numpy()
@@ -204,6 +208,8 @@ def _valve_polars(lake_v, valve_id, p, leakage, with_ratio, want_points):
 
 
 _SIGNALS_F64 = ("ps_pa", "pr_pa", "p1_pa", "p2_pa", "x_spool_m", "x_cyl_m")
+_GATHERED = ("ps_pa", "pr_pa", "x_spool_m", "x_cyl_m")
+"""The raw signals steps 3 and Eq. 7 read at the evaluated rows (p1, p2 enter smoothed)."""
 
 
 def _float64(col: pl.Series) -> np.ndarray:
@@ -213,6 +219,8 @@ def _float64(col: pl.Series) -> np.ndarray:
         col = col.cast(pl.Float64).fill_null(float("nan"))
     if col.dtype not in (pl.Float32, pl.Float64):
         col = col.cast(pl.Float64)
+    if col.n_chunks() > 1:  # each chunk as a view, joined in one copy (polars' own rechunk is ~2x slower)
+        return np.concatenate([c.to_numpy() for c in col.get_chunks()])
     return col.to_numpy()
 
 
@@ -221,11 +229,11 @@ def _valve_numba(lake_v, valve_id, p, leakage, with_ratio, want_points):
     dt = p.sample_period_s or infer_sample_period_s(lake_v)
     n = lake_v.height
     ts = lake_v["timestamp_utc"].cast(_UTC_US).to_physical().to_numpy()
-    win, valid, n_windows = window_arrays(
+    lake_win, valid, n_windows = window_arrays(
         ts, sample_period_s=dt, gap_limit_s=p.gap_limit_periods * dt, step_tolerance=p.step_tolerance,
         half_window=p.half_window, window_s=p.window_s,
     )
-    first = np.concatenate([[0], np.flatnonzero(win[1:] != win[:-1]) + 1]) if n else np.zeros(0, dtype=np.int64)
+    first = np.concatenate([[0], np.flatnonzero(lake_win[1:] != lake_win[:-1]) + 1]) if n else np.zeros(0, dtype=np.int64)
     last = np.append(first[1:] - 1, n - 1) if n else first
     windows = pl.DataFrame(
         {
@@ -240,22 +248,34 @@ def _valve_numba(lake_v, valve_id, p, leakage, with_ratio, want_points):
     # Savitzky–Golay as plain weighted sums over the whole column in one compiled pass per
     # signal; the validity comes from window_arrays and is applied in the selection kernel
     arrays = {c: _float64(lake_v[c]) for c in _SIGNALS_F64}
+    # a long window is evaluated on every k-th row (MonitorParams.window_rows): the
+    # Savitzky–Golay sums at those rows only, the other signals gathered there
+    rows = evaluated_rows(first, last - first + 1, p.window_rows)
+    sg = savgol_arrays if rows is None else partial(savgol_at, rows=rows)
     for column, (smooth_name, deriv_name) in _SG_OUTPUTS.items():
-        sm, de = savgol_arrays(arrays[column], window=p.savgol_window, order=p.savgol_order, sample_period_s=dt,
-                               smooth=smooth_name is not None)  # fmt: skip
+        sm, de = sg(arrays[column], window=p.savgol_window, order=p.savgol_order, sample_period_s=dt,
+                    smooth=smooth_name is not None)  # fmt: skip
         if smooth_name is not None:
             arrays[smooth_name] = sm
         arrays[deriv_name] = de
-    codes, flagged, removed, selected, _ = selection_codes(arrays, win, n_windows, p, valid=valid)
-    stats = stats_frame(valve_id, windows, flagged, removed, selected)
+    win = lake_win
+    if rows is not None:
+        for c in _GATHERED:
+            arrays[c] = arrays[c][rows]
+        win, valid = lake_win[rows], valid[rows]
+    codes, flagged, removed, selected, n_evaluated = selection_codes(arrays, win, n_windows, p, valid=valid)
+    # the counts are those of the evaluated rows (n_samples too, so removed + selected = n_samples)
+    stats = stats_frame(valve_id, windows if rows is None else windows.with_columns(n_samples=n_evaluated), flagged, removed, selected)
 
     idx, area, offs, ratio, u = points_arrays(
         arrays, codes, SELECTED_CODE, selected.sum(axis=0), p, leakage=None if leakage is None else leakage.get(valve_id),
         with_ratio=with_ratio,
     )
+    if rows is not None:
+        idx = rows[idx]  # lake rows of the points
     points = None
     if want_points:
-        pw = win[idx]
+        pw = lake_win[idx]
         points = pl.DataFrame(
             {
                 "valve_id": pl.repeat(valve_id, idx.shape[0], eager=True, dtype=pl.Utf8),
@@ -684,9 +704,10 @@ def commissioning_baseline(
     at the nominal state and Eq. 3's leakage, then ``max(leakage_passes, LEAK_ITERATIONS − 1)``
     more rounds (default ``params.leakage_passes``); Â then runs down to −x_max along the
     identified leakage. The points of all windows are pooled, so the rows are taken as whole runs
-    (``params.window_s`` is not applied: a baseline does not depend on the window length).
+    (``params.window_s`` and ``params.window_rows`` are not applied: a baseline does not depend on
+    the window length, and it uses every row).
     """
-    params = dataclasses.replace(params, window_s=None)
+    params = dataclasses.replace(params, window_s=None, window_rows=None)
     valve_ids = lake["valve_id"].unique().to_list()
     if len(valve_ids) != 1:
         raise ValueError(f"commissioning_baseline needs the rows of one valve, got {len(valve_ids)}")

@@ -152,6 +152,13 @@ class MonitorParams:
     it from the plant configuration (``[monitor] window_s``)."""
     step_tolerance: float = 0.1
     """Relative deviation of a time step from the sample period beyond which the SG stencil is cut."""
+    window_rows: int | None = None
+    """Rows of a window that steps 2–3 and Eq. 7 evaluate, at most about this many: a window of n
+    samples is evaluated on every k-th row from its first, k = max(1, n // window_rows) (the
+    Savitzky–Golay stencil still spans every sample around an evaluated row, so its values there
+    are those of evaluating every row). None = every row. The flows set it from the plant
+    configuration (``[monitor] window_rows``, default 6,000: a 60 s window at 1 kHz every 10th
+    row, a 10 s snapshot every row; docs/monitoring.md, "Fewer points, not faster points")."""
     savgol_window: int = 21
     savgol_order: int = 3
 

@@ -41,7 +41,7 @@ import numpy as np
 import polars as pl
 
 __all__ = [
-    "LONG_RUN_FRACTION", "WINDOW_COLUMNS", "assign_windows", "infer_sample_period_s", "window_arrays", "window_flags",
+    "LONG_RUN_FRACTION", "WINDOW_COLUMNS", "assign_windows", "evaluated_rows", "infer_sample_period_s", "window_arrays", "window_flags",
     "window_length_us", "window_starts", "window_table",
 ]  # fmt: skip
 
@@ -263,3 +263,30 @@ def window_arrays(
         window_length_us(window_s),
         int(half_window),
     )
+
+
+@numba.njit(cache=True)
+def _evaluated_kernel(first, count, stride):
+    total = 0
+    for w in range(first.shape[0]):
+        total += (count[w] + stride[w] - 1) // stride[w]
+    rows = np.empty(total, dtype=np.int64)
+    k = 0
+    for w in range(first.shape[0]):
+        for i in range(first[w], first[w] + count[w], stride[w]):
+            rows[k] = i
+            k += 1
+    return rows
+
+
+def evaluated_rows(first: np.ndarray, count: np.ndarray, window_rows: int | None) -> np.ndarray | None:
+    """The rows steps 2–3 evaluate when a window of n samples is evaluated on every k-th row
+    from its first, k = max(1, n // ``window_rows``) (:class:`transforms.params.MonitorParams`
+    ``window_rows``): sorted int64 row indices, or None when every row is (no window has k > 1).
+    ``first``, ``count``: each window's first row and number of rows, in row order."""
+    if window_rows is None or count.shape[0] == 0:
+        return None
+    stride = np.maximum(np.asarray(count, dtype=np.int64) // int(window_rows), 1)
+    if int(stride.max()) == 1:
+        return None
+    return _evaluated_kernel(np.ascontiguousarray(first, dtype=np.int64), np.ascontiguousarray(count, dtype=np.int64), stride)

@@ -11,13 +11,16 @@ after ``free``, ready for the next chunk.
 
 The price: the process keeps its high-water mark of heap memory until it exits, which a batch
 run (``valvemon monitor``, a backfill worker) reaches anyway. polars allocates with its own
-allocator and is not affected. Elsewhere than on glibc this does nothing.
+allocator (jemalloc), which :func:`retain_polars_memory` asks the same before polars is imported
+(the ``valvemon monitor`` command does). Elsewhere than on glibc :func:`retain_freed_memory` does
+nothing.
 """
 
 from __future__ import annotations
 
 import ctypes
 import ctypes.util
+import os
 import sys
 
 _M_TRIM_THRESHOLD = -1
@@ -30,6 +33,23 @@ TRIM_THRESHOLD_BYTES = (1 << 31) - 1
 """Free heap memory is returned to the system only above 2 GiB."""
 TOP_PAD_BYTES = 64 << 20
 """The heap grows 64 MiB at a time."""
+
+POLARS_ALLOCATOR_CONF = "dirty_decay_ms:-1,muzzy_decay_ms:-1"
+"""polars' allocator (jemalloc, configured by ``_RJEM_MALLOC_CONF``) keeping freed pages: without
+it each chunk's decoded columns come on fresh pages (one page fault per 4 KiB; on a valve-day of
+continuous recording ~3.5 of the monitor's 16 CPU s went to the kernel, BENCHMARKS.md)."""
+
+
+def retain_polars_memory() -> bool:
+    """Make polars keep its freed memory for the next chunk (:data:`POLARS_ALLOCATOR_CONF`, unless
+    the environment sets its own). It takes effect only before polars is imported (jemalloc reads
+    its configuration once); True if it will. Like :func:`retain_freed_memory`, the process
+    then keeps its high-water mark until it exits."""
+    if "polars" in sys.modules:
+        return False
+    os.environ.setdefault("_RJEM_MALLOC_CONF", POLARS_ALLOCATOR_CONF)
+    return True
+
 
 _done: bool | None = None
 

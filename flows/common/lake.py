@@ -247,6 +247,15 @@ def _stage(path: Path, frames: Iterable[pl.DataFrame], gap_us: int) -> Path:
     return tmp
 
 
+def stage_link(source: Path, path: Path) -> Path:
+    """Stage the bytes of the lake file ``source`` as the complete new content of ``path`` (same
+    folder) without a copy: a hard link under a hidden temporary name, which :func:`commit_files`
+    puts in place. Neither file is written through it afterwards (every change is a new file)."""
+    tmp = path.parent / f".{path.name}.{uuid.uuid4().hex}.tmp"
+    os.link(source, tmp)
+    return tmp
+
+
 def commit_files(staged: list[tuple[Path, Path]], remove: list[Path] = ()) -> None:
     """Put staged files ``(temporary, final)`` in place in the given order, then remove the files
     ``remove`` (day files whose rows moved into hour files: their removal commits the switch)."""

@@ -35,7 +35,7 @@ from flows.common.prefect_run import flow, task
 from flows.common.warehouse_db import connect, ensure_ingest_tables, insert_frame, transaction
 from flows.ingest.hashing import LEGACY_HASH_PREFIX, legacy_hash
 from flows.ingest.spill import QuarantineRows, QuarantineSpill
-from schemas.fields import GAP_FIELDS, GAP_SCHEMA, INGEST_RUN_FIELDS, MANIFEST_FIELDS, polars_schema
+from schemas.fields import GAP_FIELDS, INGEST_RUN_FIELDS, MANIFEST_FIELDS, polars_schema, validate_table
 from schemas.plant_config import ConfigError, PlantConfig
 from transforms.ingest import ExportCounts, Grid, IngestError, TagTable
 
@@ -212,7 +212,7 @@ def file_records(src, c: ExportCounts, quarantine: QuarantineRows, gap_frame: pl
     ingested file (``src``: its ``ExportSource``), per the registry."""
     path, ef = src.path, src
     gaps = _table(gap_frame.with_columns(file_hash=pl.lit(ef.file_hash), source_file=pl.lit(str(path))), GAP_FIELDS)
-    GAP_SCHEMA.validate(gaps, lazy=True)
+    validate_table(gaps, "GAP_SCHEMA")
     manifest = {
         "file_hash": ef.file_hash,
         "source_file": str(path),

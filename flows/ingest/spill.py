@@ -13,7 +13,7 @@ from pathlib import Path
 
 import polars as pl
 
-from schemas.fields import QUARANTINE_FIELDS, QUARANTINE_SCHEMA, polars_schema
+from schemas.fields import QUARANTINE_FIELDS, polars_schema, validate_table
 
 SPILL_ROWS = 1_000_000
 """Quarantined samples held in memory per file (~0.1 GB) before they are written out."""
@@ -24,7 +24,7 @@ def quarantine_rows(frame: pl.DataFrame, extra: dict) -> pl.DataFrame:
     source_file, run_id, ingested_at)."""
     rows = frame.with_columns(**{k: pl.lit(v) for k, v in extra.items()})
     rows = rows.select([f.name for f in QUARANTINE_FIELDS]).cast(dict(polars_schema(QUARANTINE_FIELDS)))
-    QUARANTINE_SCHEMA.validate(rows, lazy=True)
+    validate_table(rows, "QUARANTINE_SCHEMA")
     return rows
 
 

@@ -41,7 +41,9 @@ from flows.common.lake import (
     hour_path,
     partition_path,
     read_partition,
+    row_group_spans,
     stage_file,
+    stage_link,
 )
 from schemas.plant_config import PlantConfig
 from transforms.ingest import merge_partition, split_days, tags_by_column
@@ -79,6 +81,8 @@ class LakeStager:
         self.rule = config.export.duplicate_rule
         self.gap_us = max(int(round(config.export.max_gap_s * 1e6)), 1)
         self.buffer: dict[tuple[str, date], list[pl.DataFrame]] = {}
+        self.first: dict[tuple[str, date], int] = {}
+        """The earliest buffered time (µs) of each valve-day in the buffer."""
         self.buffered = 0
         self.staged: dict[Path, Path] = {}
         """Final path → its staged temporary file, in the order written."""
@@ -96,6 +100,8 @@ class LakeStager:
         """One valve's new lake rows, sorted, later than any it gave before."""
         vid = frame["valve_id"][0]
         for day, part in split_days(frame):
+            if (vid, day) not in self.buffer:
+                self.first[(vid, day)] = part["timestamp_utc"].to_physical()[0]
             self.buffer.setdefault((vid, day), []).append(part)
             self.days.add((vid, day))
             self.buffered += part.height
@@ -106,13 +112,19 @@ class LakeStager:
         force = given_to is None or self.buffered > BUFFER_ROWS
         for key in list(self.buffer):
             vid, day = key
-            rows = pl.concat(self.buffer.pop(key))
-            self.buffered -= rows.height
             upto = None if force else given_to.get(vid)
             day_end = (day.toordinal() - 719163 + 1) * US_PER_DAY  # 719163: date(1970, 1, 1).toordinal()
-            keep = self._write(vid, day, rows, complete=force or upto >= day_end, before=None if force else upto // US_PER_HOUR * US_PER_HOUR)
+            complete = force or upto >= day_end
+            before = None if force else upto // US_PER_HOUR * US_PER_HOUR
+            if not complete and self.first[key] >= before:
+                continue  # no complete hour buffered (the usual case within an hour): nothing to write yet
+            rows = pl.concat(self.buffer.pop(key))
+            del self.first[key]
+            self.buffered -= rows.height
+            keep = self._write(vid, day, rows, complete=complete, before=before)
             if keep is not None and keep.height:
                 self.buffer[key] = [keep]
+                self.first[key] = keep["timestamp_utc"].to_physical()[0]
                 self.buffered += keep.height
 
     # --- the day folder -----------------------------------------------------------------------
@@ -167,7 +179,21 @@ class LakeStager:
         return rest
 
     def _switch(self, vid: str, day: date, day_file: Path) -> None:
-        """A day outgrows its day file: its rows go to hour files, the day file goes at the commit."""
+        """A day outgrows its day file: its rows go to hour files, the day file goes at the commit.
+        A day file whose rows lie in one hour (the first hour file of a recording) already is that
+        hour's file, byte for byte: it is staged under the hour's name without being read or
+        written again."""
+        hour = self._one_hour(day_file)
+        if hour is not None:
+            target = hour_path(day_file.parent, hour)
+            stale = self.staged.pop(target, None)
+            if stale is not None:
+                stale.unlink(missing_ok=True)
+            self.staged[target] = self.staged.pop(day_file) if day_file in self.staged else stage_link(day_file, target)
+            if day_file.exists():
+                self.removed.append(day_file)
+            self.days_written.add((vid, day))
+            return
         old = self._current(day_file)
         if day_file in self.staged:
             self.staged.pop(day_file).unlink(missing_ok=True)
@@ -175,6 +201,19 @@ class LakeStager:
             self.removed.append(day_file)
         for hour, part in _hours(old) if old is not None and old.height else []:
             self._stage(vid, day, hour_path(day_file.parent, hour), part)
+
+    def _one_hour(self, day_file: Path) -> int | None:
+        """The UTC hour that holds every row of the day file as this export has it (footer
+        statistics, no data read), None if it spans more (or has no rows or statistics)."""
+        path = self.staged.get(day_file, day_file)
+        if day_file in self.removed or not path.exists():
+            return None
+        spans = row_group_spans(path)
+        if not spans or not sum(n for n, _, _ in spans):
+            return None
+        first, last = min(a for _, a, _ in spans), max(b for _, _, b in spans)
+        hour = first // US_PER_HOUR
+        return int(hour % 24) if last // US_PER_HOUR == hour else None
 
     def _merge(self, vid: str, day: date, path: Path, rows: pl.DataFrame) -> None:
         merged = merge_partition(self._current(path), rows, self.rule, tags_by_column(self.config, vid))

@@ -35,13 +35,14 @@ from typing import Callable, Iterator
 import duckdb
 import numpy as np
 import polars as pl
+import pyarrow.parquet as pq
 
 from flows.common.allocator import retain_freed_memory
 from flows.common.batches import WriteBatch
 from flows.common.config import load_plant_config, plant_valves
 from flows.common.errors import ValvemonError
 from flows.common.instants import utc_instant
-from flows.common.lake import list_partitions, read_lake
+from flows.common.lake import SENSOR_POLARS_SCHEMA, list_partitions, read_lake
 from flows.common.prefect_run import flow, task
 from flows.common.warehouse_db import add_missing_columns, connect, ensure_tables, insert_frame, query_frame, transaction
 from model.area import edge_area
@@ -95,9 +96,10 @@ def ensure_monitor_tables(con) -> None:
             con.execute(f"DROP INDEX {name}_key")
 
 
-def monitor_params(valve: ValveSpec, sample_rate_hz: float, window_s: float | None = None) -> MonitorParams:
+def monitor_params(valve: ValveSpec, sample_rate_hz: float, window_s: float | None = None, window_rows: int | None = None) -> MonitorParams:
     """The algorithm's view of one valve: design data from the configuration, default settings,
-    the plant's window length (``[monitor] window_s``; None: a window is a whole run)."""
+    the plant's window length (``[monitor] window_s``; None: a window is a whole run) and rows
+    evaluated per window (``[monitor] window_rows``; None or 0: every row)."""
     return MonitorParams.from_design(
         piston_diameter_m=valve.piston_diameter_m,
         rod_diameter_m=valve.rod_diameter_m,
@@ -109,7 +111,14 @@ def monitor_params(valve: ValveSpec, sample_rate_hz: float, window_s: float | No
         x_max_m=valve.design.x_max_m,
         sample_period_s=1.0 / sample_rate_hz,
         window_s=window_s,
+        window_rows=window_rows or None,
     )
+
+
+def plant_monitor_params(config: PlantConfig, valve: ValveSpec) -> MonitorParams:
+    """:func:`monitor_params` with the plant's sample rate and ``[monitor]`` settings: what every
+    monitoring path (the command, the backfill) fits a valve's windows with."""
+    return monitor_params(valve, config.export.sample_rate_hz, config.monitor.window_s, config.monitor.window_rows)
 
 
 def nominal_characteristic(valve: ValveSpec, edge: str, x_hat_bound_m: float, area_law: str = "eq3") -> Characteristic:
@@ -146,10 +155,10 @@ BASELINE_METHOD = ("carrier-shaped step 4a, closed-edge leakage identified (λ�
 
 def _method_settings() -> dict:
     """The algorithm's settings (:class:`MonitorParams` defaults without the design data, which
-    :func:`monitor_params` takes from the configuration, the sample period and the window length,
-    which a baseline does not depend on: :func:`transforms.monitor.commissioning_baseline`)."""
+    :func:`monitor_params` takes from the configuration, the sample period, the window length and
+    the rows a window evaluates, which a baseline does not depend on: :func:`transforms.monitor.commissioning_baseline`)."""
     design = {"piston_area_m2", "annulus_area_m2", "v01_m3", "v02_m3", "bulk_modulus_pa", "density_kg_m3", "underlap_m", "x_max_m", "sample_period_s",
-              "window_s"}  # fmt: skip
+              "window_s", "window_rows"}  # fmt: skip
     return {f.name: f.default for f in dataclasses.fields(MonitorParams) if f.name not in design}
 
 
@@ -395,26 +404,66 @@ CHUNK_ROWS = 2_000_000
 carries over): days are read together up to this many rows (a week of hourly 10 s snapshots at
 1 kHz is 1.7 M); a day holding more (a continuous recording) in spans of :data:`CHUNK_SPAN_S`."""
 
-CHUNK_SPAN_S = 1800.0
-"""Span of one read on a day with more than :data:`CHUNK_ROWS` rows: half an hour, 1.8 M rows of a
-1 kHz recording (rounded down to whole windows, at least one). [s]"""
+CHUNK_SPAN_S = 3600.0
+"""Span of one read on a day with more than :data:`CHUNK_ROWS` rows: an hour, 3.6 M rows of a
+1 kHz recording (rounded down to whole windows, at least one), the lake's hour file of a
+continuous recording, decoded once and without a row filter; half-hour spans decoded the row
+groups at their borders twice and filtered every column. [s]"""
 
 
-def _day_rows(warehouse: Path, valve_id: str, day: date) -> int:
-    """Rows of a valve's lake day (from the files' metadata)."""
-    lo = datetime.combine(day, datetime.min.time(), timezone.utc)
-    return int(read_lake(warehouse, [valve_id], lo, lo + timedelta(days=1)).select(pl.len()).collect().item())
+@dataclass(frozen=True)
+class _LakeFile:
+    """A lake file of the valve, with what its footer says (no data decoded)."""
+
+    path: Path
+    day: date
+    rows: int
+    first: datetime | None
+    last: datetime | None
+    """First and last time stamp from the row groups' statistics (None: not recorded)."""
 
 
-def _day_extent(warehouse: Path, valve_id: str, day: date) -> tuple[datetime, datetime]:
-    """First and last time stamp of a valve's lake day (only the time column is decoded)."""
+def _lake_files(warehouse: Path, valve_id: str, start: datetime | None, end: datetime | None) -> list[_LakeFile]:
+    """The valve's lake files of the days [start, end) can touch, in time order, with their
+    footers' row counts and time ranges."""
+    out = []
+    for _, day, path in list_partitions(warehouse, [valve_id], start, end):
+        md = pq.ParquetFile(path).metadata
+        j = md.schema.names.index("timestamp_utc")
+        stats = [md.row_group(g).column(j).statistics for g in range(md.num_row_groups)]
+        known = bool(stats) and all(st is not None and st.has_min_max for st in stats)
+        out.append(_LakeFile(path, day, md.num_rows, min(st.min for st in stats) if known else None,
+                             max(st.max for st in stats) if known else None))  # fmt: skip
+    return out
+
+
+def _day_extent(warehouse: Path, valve_id: str, day: date, files: list[_LakeFile]) -> tuple[datetime, datetime]:
+    """First and last time stamp of a valve's lake day: from the files' footers, else from the
+    time column."""
+    if all(f.first is not None for f in files):
+        return min(f.first for f in files), max(f.last for f in files)
     lo = datetime.combine(day, datetime.min.time(), timezone.utc)
     t = pl.col("timestamp_utc")
     return read_lake(warehouse, [valve_id], lo, lo + timedelta(days=1)).select(t.min().alias("a"), t.max().alias("b")).collect().row(0)
 
 
+def _read_span(files: list[_LakeFile], lo: datetime, hi: datetime) -> pl.LazyFrame | None:
+    """The rows of ``files`` in [lo, hi): only the files whose footers overlap the span are
+    scanned, and a time filter is applied only where a file reaches beyond the span (a row
+    filter copies every column). None: no file overlaps."""
+    chosen = [f for f in files if f.first is None or (f.first < hi and f.last >= lo)]
+    if not chosen:
+        return None
+    lf = pl.scan_parquet([str(f.path) for f in chosen], hive_partitioning=False, schema=SENSOR_POLARS_SCHEMA)
+    if any(f.first is None or f.first < lo for f in chosen):
+        lf = lf.filter(pl.col("timestamp_utc") >= lo)
+    if any(f.first is None or f.last >= hi for f in chosen):
+        lf = lf.filter(pl.col("timestamp_utc") < hi)
+    return lf
+
+
 def _read_spans(
-    warehouse: Path, valve_id: str, start: datetime | None, end: datetime | None, days: int, window_s: float | None,
+    warehouse: Path, valve_id: str, files: list[_LakeFile], start: datetime | None, end: datetime | None, days: int, window_s: float | None,
 ) -> Iterator[tuple[datetime, datetime]]:
     """The [lo, hi) spans :func:`span_chunks` reads one at a time: whole days, up to ``days`` of
     them holding at most :data:`CHUNK_ROWS` rows together (counted from the files' metadata); a
@@ -431,10 +480,11 @@ def _read_spans(
             lo = datetime.combine(group[0], datetime.min.time(), timezone.utc)
             yield lo, datetime.combine(group[-1] + timedelta(days=1), datetime.min.time(), timezone.utc)
 
-    for day in sorted({d for _, d, _ in list_partitions(warehouse, [valve_id], start, end)}):
-        n = _day_rows(warehouse, valve_id, day)
+    for day in sorted({f.day for f in files}):
+        day_files = [f for f in files if f.day == day]
+        n = sum(f.rows for f in day_files)
         if n > CHUNK_ROWS:
-            first, last = _day_extent(warehouse, valve_id, day)
+            first, last = _day_extent(warehouse, valve_id, day, day_files)
             yield from flush()
             group, rows = [], 0
             midnight = datetime.combine(day, datetime.min.time(), timezone.utc)
@@ -466,10 +516,13 @@ def span_chunks(
     days = CHUNK_DAYS if days is None else int(days)
     if days < 1:
         raise ValueError(f"chunk days must be >= 1, got {days}")
-    spans = list(_read_spans(warehouse, valve_id, start, end, days, window_s))
+    files = _lake_files(warehouse, valve_id, start, end)
+    spans = list(_read_spans(warehouse, valve_id, files, start, end, days, window_s))
     carry = None
     for i, (lo, hi) in enumerate(spans):
-        lf = read_lake(warehouse, [valve_id], max(lo, start) if start else lo, min(hi, end) if end else hi)
+        lf = _read_span(files, max(lo, start) if start else lo, min(hi, end) if end else hi)
+        if lf is None:
+            lf = pl.LazyFrame(schema=SENSOR_POLARS_SCHEMA)
         rows = (lf if select is None else lf.select(select)).collect()
         if carry is not None:
             rows = pl.concat([carry, rows])
@@ -565,7 +618,7 @@ def monitor_valve(
 ) -> ValveReport:
     """Steps 2–6 for one valve over [start, end) of its lake; see the module docstring."""
     valve = config.valve(valve_id)
-    params = monitor_params(valve, config.export.sample_rate_hz, config.monitor.window_s)
+    params = plant_monitor_params(config, valve)
     baselines = ensure_baselines(valve, params, warehouse)
     report = ValveReport(valve_id, baseline_source=baselines["s1"].source, baseline_plausible=all(b.plausible for b in baselines.values()),
                          edge_law_note=baselines["s1"].edge_law_note)  # fmt: skip

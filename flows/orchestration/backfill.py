@@ -85,6 +85,7 @@ from flows.monitor.flow import (
     lake_chunks,
     monitor_params,
     monitor_rows,
+    plant_monitor_params,
     store_spans,
 )
 from schemas.fields import EDGE_FIT_FIELDS, EDGES, SELECTION_FIELDS, polars_schema
@@ -302,7 +303,7 @@ def unit_chunks(
 def monitor_unit(config: PlantConfig, unit: MonitorUnit, baselines: dict[str, Baseline], warehouse: str | Path) -> MonitorOutcome:
     """Steps 2–4b for one unit (chunk by chunk of :func:`unit_chunks`) against the given baselines."""
     valve = config.valve(unit.valve_id)
-    params = monitor_params(valve, config.export.sample_rate_hz, config.monitor.window_s)
+    params = plant_monitor_params(config, valve)
     gap_s = params.gap_limit_periods * params.sample_period_s
     selection_schema = polars_schema(SELECTION_FIELDS)
     fits = [pl.DataFrame(schema=polars_schema(EDGE_FIT_FIELDS))]
@@ -505,7 +506,7 @@ def _valve_signature(config: PlantConfig, valve_id: str, baselines: dict[str, Ba
     valve = config.valve(valve_id)
     return json.dumps(
         {
-            "params": repr(monitor_params(valve, config.export.sample_rate_hz, config.monitor.window_s)),
+            "params": repr(plant_monitor_params(config, valve)),
             "commissioned": valve.commissioned.isoformat(),
             "baselines": {e: baselines[e].version for e in EDGES},
             "definition": baseline_definition(valve),

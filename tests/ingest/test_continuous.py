@@ -129,6 +129,24 @@ def test_a_day_file_that_outgrows_its_limit_switches_to_hour_files(wide10, tmp_p
     assert sorted(p.name for p in (wh / "lake").rglob("*.parquet")) == ["part-h00.parquet", "part-h01.parquet", "part-h02.parquet", "part-h03.parquet"]
     assert lake(wh).height == 18_000 + 108_000
     assert lake(wh)["timestamp_utc"].is_sorted() and lake(wh)["timestamp_utc"].n_unique() == 126_000
+    # the day file lay in one hour (00:00-00:30): it became part-h00 as it was (a hard link), then
+    # took the second file's rows of that hour; the lake is the one of both files in one run
+    both = tmp_path / "wh_both"
+    ingest(wide10, [tmp_path / "a.parquet", tmp_path / "b.parquet"], both)
+    assert_frame_equal(lake(wh), lake(both))
+    assert not list((wh / "lake").rglob(".*.tmp"))
+
+
+def test_a_day_file_within_one_hour_becomes_that_hour_file_unread(wide10, tmp_path, small):
+    """The first hour of a recording, alone in its day file, is staged as its hour file by a hard
+    link when the next hour arrives: the same bytes, not read or written again."""
+    wh = tmp_path / "wh"
+    ingest(wide10, recording(tmp_path / "a.parquet", 3600, 1200), wh)  # 01:00-01:20
+    day_file = next((wh / "lake").rglob("part-0.parquet"))
+    before = day_file.read_bytes()
+    ingest(wide10, recording(tmp_path / "b.parquet", 2 * 3600, 2400), wh)  # 02:00-02:40: 24,000 rows, over the limit
+    assert sorted(p.name for p in day_file.parent.iterdir()) == ["part-h01.parquet", "part-h02.parquet"]
+    assert (day_file.parent / "part-h01.parquet").read_bytes() == before
 
 
 CHILD = textwrap.dedent(
@@ -166,15 +184,15 @@ def _child(config: Path, path: Path, wh: Path, warm: Path, small: dict, kill_at:
 @pytest.mark.slow
 @pytest.mark.parametrize("suffix", [".parquet", ".tdms", ".cfg"])
 def test_memory_does_not_grow_with_the_file(wide10, tmp_path, suffix):
-    """A file of 600,000 rows (3.6 M samples, ~100 MB as float64 columns, ~17 h at 10 Hz; COMTRADE
-    200,000 rows in batches of 60,000 samples) ingests in a few tens of MB above the interpreter;
-    taken whole, the same file needs far more.
+    """A file of 240,000 rows (1.44 M samples, 40 batches, ~6.7 h at 10 Hz; COMTRADE 200,000 rows
+    in batches of 60,000 samples) ingests in a few tens of MB above the interpreter; taken whole,
+    the same file needs far more (600,000 rows: 16–18 MB streamed, 220–240 MB whole).
     Wide Parquet read by record batches; TDMS by slices of every channel (that its lake is the one
     of the same data as CSV: ``tests/archive/test_recorder_formats.py``); COMTRADE binary records
     a batch at a time (``tests/ingest/test_comtrade.py``)."""
     make = {".parquet": recording, ".tdms": tdms_recording, ".cfg": comtrade_recording}[suffix]
     warm = make(tmp_path / f"warm{suffix}", 0, 600)
-    rows, small = (600_000, SMALL) if suffix != ".cfg" else (200_000, {**SMALL, "BATCH_SAMPLES": 60_000})  # COMTRADE: 27 batches, a fifth of the time
+    rows, small = (240_000, SMALL) if suffix != ".cfg" else (200_000, {**SMALL, "BATCH_SAMPLES": 60_000})  # COMTRADE: 27 batches, a fifth of the time
     big = make(tmp_path / f"big{suffix}", 86_400, rows / 10)
     streamed = _child(wide10, big, tmp_path / "wh_stream", warm, small)
     assert streamed.returncode == 0, streamed.stderr

@@ -19,7 +19,7 @@ from flows.monitor.flow import run_monitor
 from flows.simulate.archive import DEFAULT_COMMISSIONED, SimulateRequest, run_simulate
 from model import TABLE1, condition_arrays, condition_at, wear
 from model.params import EDGES
-from schemas.plant_config import DEFAULT_WINDOW_S
+from schemas.plant_config import DEFAULT_WINDOW_ROWS, DEFAULT_WINDOW_S
 from transforms.monitor import monitor
 
 from .sim_lake import START, simulated_lake, table1_params
@@ -36,23 +36,30 @@ def test_continuous_recording_is_cut_into_accurate_windows():
     hours = np.array([8000.0])
     xu, al = condition_arrays(scenario, hours)
     lake = simulated_lake(condition_at(scenario, hours), 3, duration_s=1200.0)
-    params = dataclasses.replace(table1_params(), window_s=DEFAULT_WINDOW_S)
-    res = monitor(lake, params, {"V1": NOMINAL}, leakage={"V1": NOMINAL})
-    w = res.windows
-    assert w.height == 20
-    assert w["window_start"].to_list() == [START + timedelta(minutes=k) for k in range(20)]
-    assert ((w["window_end"] - w["window_start"]).dt.total_milliseconds() == 59_999).all()
-    fits = res.fits
-    assert fits.height == 20 * 4 and (fits["status"] == "ok").all()
-    nom = TABLE1.nominal_condition
-    i = np.array([EDGES.index(e) for e in fits["edge"]])
-    alpha_err = fits["alpha_hat"].to_numpy() / (al[0, i] / np.array(nom.alpha)[i]) - 1
-    x_err = fits["x_hat_m"].to_numpy() - (xu[0, i] - np.array(nom.underlap_m)[i])
-    assert np.abs(alpha_err).max() < ALPHA_TOL and np.abs(x_err).max() < X_TOL
-    # the state is the same all along: the windows agree with each other far inside the
-    # condition bounds' scatter floors (α 0.02, x̂ 0.30 % of x_max)
-    per_edge = fits.group_by("edge").agg(pl.col("alpha_hat").std().alias("sa"), (pl.col("x_hat_m").std() / X_MAX * 100).alias("sx"))
-    assert (per_edge["sa"] < 0.002).all() and (per_edge["sx"] < 0.03).all()
+    points = {}
+    # every row, and every 10th row of a window (the default [monitor] window_rows)
+    for rows in (None, DEFAULT_WINDOW_ROWS):
+        params = dataclasses.replace(table1_params(), window_s=DEFAULT_WINDOW_S, window_rows=rows)
+        res = monitor(lake, params, {"V1": NOMINAL}, leakage={"V1": NOMINAL})
+        w = res.windows
+        assert w.height == 20
+        assert w["window_start"].to_list() == [START + timedelta(minutes=k) for k in range(20)]
+        assert ((w["window_end"] - w["window_start"]).dt.total_milliseconds() == 59_999).all()
+        fits = res.fits
+        assert fits.height == 20 * 4 and (fits["status"] == "ok").all()
+        nom = TABLE1.nominal_condition
+        i = np.array([EDGES.index(e) for e in fits["edge"]])
+        alpha_err = fits["alpha_hat"].to_numpy() / (al[0, i] / np.array(nom.alpha)[i]) - 1
+        x_err = fits["x_hat_m"].to_numpy() - (xu[0, i] - np.array(nom.underlap_m)[i])
+        assert np.abs(alpha_err).max() < ALPHA_TOL and np.abs(x_err).max() < X_TOL
+        # the state is the same all along: the windows agree with each other far inside the
+        # condition bounds' scatter floors (α 0.02, x̂ 0.30 % of x_max)
+        per_edge = fits.group_by("edge").agg(pl.col("alpha_hat").std().alias("sa"), (pl.col("x_hat_m").std() / X_MAX * 100).alias("sx"))
+        assert (per_edge["sa"] < 0.002).all() and (per_edge["sx"] < 0.03).all()
+        points[rows] = fits["n_points"].to_numpy()
+    # a tenth of the rows, about a tenth of the points, each window still far above the 500 the fit needs
+    assert np.all(np.abs(points[DEFAULT_WINDOW_ROWS] * 10 - points[None]) <= 0.02 * points[None])
+    assert points[DEFAULT_WINDOW_ROWS].min() > 1000
 
 
 def test_snapshot_fits_unchanged_by_the_window_length():

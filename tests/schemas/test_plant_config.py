@@ -268,9 +268,10 @@ def test_monitor_window_default_and_round_trip(raw, tmp_path):
 
     assert parse_plant_config(raw).monitor.window_s == DEFAULT_WINDOW_S
     assert "monitor" not in plant_config_to_dict(parse_plant_config(raw))  # the default is not written
-    raw["monitor"] = {"window_s": 300}
+    raw["monitor"] = {"window_s": 300, "window_rows": 0}
     cfg = parse_plant_config(raw)
     assert cfg.monitor.window_s == 300.0
+    assert cfg.monitor.window_rows == 0
     path = tmp_path / "plant.toml"
     path.write_bytes(tomli_w.dumps(plant_config_to_dict(cfg)).encode())
     assert load_plant_config(path) == cfg
@@ -284,6 +285,8 @@ def test_monitor_window_default_and_round_trip(raw, tmp_path):
         ({"window_s": 172_800}, "monitor.window_s: 172800 must be <= 86400"),
         ({"window_s": "1 min"}, "monitor.window_s: expected a finite number"),
         ({"window": 60}, "monitor.window: unknown key"),
+        ({"window_rows": 500}, "monitor.window_rows: expected 0 (every row) or a whole number >= 1000, got 500"),
+        ({"window_rows": 6000.5}, "monitor.window_rows: expected 0 (every row) or a whole number >= 1000"),
         ("60", "monitor: expected a table"),
     ],
 )

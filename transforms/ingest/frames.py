@@ -1,4 +1,5 @@
-"""Gridded tags → the canonical sensor frame per valve and UTC day; pandera validation.
+"""Gridded tags → the canonical sensor frame per valve and UTC day; validation by the registry's
+schemas (one polars pass, pandera to name a failure).
 
 A lake row is one valve at one grid instant. It exists where *every required signal*
 (``ps, pr, p1, p2, x_spool, x_cyl``) has a value at that instant; ``x_ref`` is filled where its
@@ -12,23 +13,26 @@ from dataclasses import dataclass, replace
 from datetime import date
 from functools import lru_cache
 
+from typing import TYPE_CHECKING
+
 import numpy as np
-import pandera.errors
-import pandera.polars
 import polars as pl
 
 from schemas.fields import (
     RAW_ROW_FIELDS,
-    RAW_ROW_SCHEMA,
     REQUIRED_SIGNALS,
     SENSOR_FIELDS,
-    SENSOR_SCHEMA,
     SIGNAL_COLUMN,
+    conforms,
     pandera_schema,
     polars_schema,
 )
 from transforms.ingest.errors import IngestError
 from transforms.ingest.grid import Gridded
+
+if TYPE_CHECKING:
+    import pandera.errors
+    import pandera.polars
 
 SENSOR_POLARS_SCHEMA = polars_schema(SENSOR_FIELDS)
 US_PER_DAY = 86_400_000_000
@@ -122,6 +126,11 @@ def validate_sensor_frame(frame: pl.DataFrame, tags_by_column: dict[str, dict[st
     IngestError
         Naming the valve, the tag, the time and the failed check.
     """
+    if conforms(frame, SENSOR_FIELDS):  # one pass; pandera (imported only then) names a failure
+        return frame
+    import pandera.errors  # noqa: PLC0415
+    from schemas.fields import SENSOR_SCHEMA  # noqa: PLC0415
+
     try:
         return SENSOR_SCHEMA.validate(frame, lazy=True)
     except pandera.errors.SchemaErrors as err:
@@ -140,10 +149,15 @@ def validate_sensor_frame(frame: pl.DataFrame, tags_by_column: dict[str, dict[st
 
 
 @lru_cache(maxsize=16)
+def raw_row_fields(tags: tuple[str, ...]) -> tuple:
+    """The raw-row fields of a plant: ``RAW_ROW_FIELDS`` with ``tag`` an Enum of its tags."""
+    return tuple(replace(f, dtype=pl.Enum(list(tags))) if f.name == "tag" else f for f in RAW_ROW_FIELDS)
+
+
+@lru_cache(maxsize=16)
 def raw_row_schema(tags: tuple[str, ...]) -> pandera.polars.DataFrameSchema:
-    """The raw-row schema of a plant: ``RAW_ROW_FIELDS`` with ``tag`` an Enum of its tags."""
-    fields = tuple(replace(f, dtype=pl.Enum(list(tags))) if f.name == "tag" else f for f in RAW_ROW_FIELDS)
-    return pandera_schema(fields, "raw_rows")
+    """The raw-row schema of a plant (:func:`raw_row_fields`)."""
+    return pandera_schema(raw_row_fields(tags), "raw_rows")
 
 
 def validate_raw_rows(accepted: pl.DataFrame) -> None:
@@ -156,7 +170,13 @@ def validate_raw_rows(accepted: pl.DataFrame) -> None:
     """
     frame = accepted.select([f.name for f in RAW_ROW_FIELDS])
     tag_dtype = frame.schema["tag"]
-    schema = raw_row_schema(tuple(tag_dtype.categories.to_list())) if isinstance(tag_dtype, pl.Enum) else RAW_ROW_SCHEMA
+    tags = tuple(tag_dtype.categories.to_list()) if isinstance(tag_dtype, pl.Enum) else None
+    fields = RAW_ROW_FIELDS if tags is None else raw_row_fields(tags)
+    if conforms(frame, fields):  # one pass; pandera (imported only then) names a failure
+        return
+    import pandera.errors  # noqa: PLC0415
+
+    schema = pandera_schema(fields, "raw_rows") if tags is None else raw_row_schema(tags)
     try:
         schema.validate(frame, lazy=True)
     except pandera.errors.SchemaErrors as err:

@@ -132,6 +132,9 @@ class Samples:
     """Tags (columns) no valve has → their samples, in the order of the frame (read past)."""
     truncated: bool = False
     """The frame ends with a text file's last line that has no line end (a cut file)."""
+    blocks: tuple[int, ...] | None = None
+    """Wide layout: ``accepted`` is one block of rows per tag, of these heights, in order (each
+    block's columns are read without a copy); None: rows in file order (long)."""
 
 
 def _require_columns(df: pl.DataFrame, wanted: dict[str, str]) -> None:
@@ -156,9 +159,8 @@ def _value_checks(col: pl.Series, decimal: str) -> tuple[pl.Series, pl.Series | 
         values = text.cast(pl.Float64, strict=False)
         missing = text.is_null() | (text.str.len_bytes() == 0)
         non_numeric = values.is_null() & ~missing
-    non_finite = ~values.is_finite().fill_null(True)
-    if not non_finite.any():
-        non_finite = None
+    finite = values.is_finite()
+    non_finite = None if finite.all() else ~finite.fill_null(True)  # (all() passes nulls)
     return values, missing, non_numeric, non_finite
 
 
@@ -534,9 +536,9 @@ def wide_samples(
     df, lines, broken, broken_lines = _take_broken(df, lines)
     n = df.height
     ts_raw = df[export.timestamp_column]
-    ts = parse_timestamps(ts_raw, export.timestamp_format, timezone, lines=lines, unreadable="null", origin_ns=origin_ns)
+    ts = parse_timestamps(ts_raw, export.timestamp_format, timezone, lines=lines, unreadable="null", origin_ns=origin_ns).cast(UTC_NS)  # once, not per tag
     bad_ts = ts.is_null() if ts.null_count() else None
-    after_step = None if clock is None else clock.after_step(ts.cast(UTC_NS).to_physical(), lines)
+    after_step = None if clock is None else clock.after_step(ts.to_physical(), lines)
     faults = _Faults(tags, time.time_ns() if now_ns is None else now_ns)
     bad_quality = _bad_quality(df[export.quality_column], export.good_quality) if export.quality_column else None
     accepted, quarantined = [], []
@@ -593,8 +595,9 @@ def wide_samples(
             col_lines, col_ts, value_si = col_lines.filter(pl.Series(ok)), col_ts.filter(pl.Series(ok)), value_si[ok]
             tag = tag.head(len(value_si))
         accepted.append(_accepted(col_lines, tag, col_ts, value_si))
-    acc = pl.concat(accepted) if accepted else _empty_accepted(tags)
-    return Samples(acc, _concat(quarantined), rows_in, samples_in, frozenset(tag_columns), tag_samples, faults.counts, faults.first, other, _cut(broken))
+    acc = pl.concat(accepted, rechunk=False) if accepted else _empty_accepted(tags)
+    blocks = tuple(a.height for a in accepted)
+    return Samples(acc, _concat(quarantined), rows_in, samples_in, frozenset(tag_columns), tag_samples, faults.counts, faults.first, other, _cut(broken), blocks)
 
 
 def samples_of(
@@ -649,6 +652,26 @@ def _deinterleave(tag_id: np.ndarray, t_ns: np.ndarray, values: np.ndarray, k: i
             t_cols[j, i] = t_ns[r]
             v_cols[j, i] = values[r]
     return t_cols, v_cols, True
+
+
+def tag_blocks(accepted: pl.DataFrame, blocks: tuple[int, ...]) -> list[tuple[int, np.ndarray, np.ndarray, np.ndarray]]:
+    """A wide layout's accepted samples (:attr:`Samples.blocks`) → each tag's ``(tag id, t_ns,
+    values, lines)``, each block's columns as they are (no copy of the whole frame's columns)."""
+    out = []
+    a = 0
+    for n in blocks:
+        if n:
+            part = accepted.slice(a, n)
+            out.append(
+                (
+                    int(part["tag"][:1].to_physical()[0]),
+                    part["timestamp_utc"].to_physical().to_numpy(),
+                    part["value_si"].to_numpy(),
+                    part["line"].to_numpy(),
+                )
+            )
+        a += n
+    return out
 
 
 def split_by_tag(tag_id: np.ndarray, t_ns: np.ndarray, values: np.ndarray) -> list[tuple[int, np.ndarray, np.ndarray, slice | np.ndarray]]:

@@ -37,7 +37,7 @@ from transforms.ingest.errors import IngestError
 from transforms.ingest.frames import assemble_valve, validate_raw_rows, validate_sensor_frame
 from transforms.ingest.grid import Grid, Gridded, prepare_tag, to_grid
 from transforms.ingest.clock import ClockSteps
-from transforms.ingest.samples import FUTURE_TOLERANCE_NS, QUARANTINE_COLUMNS, TagTable, check_required_signals, empty_quarantine, samples_of, split_by_tag
+from transforms.ingest.samples import FUTURE_TOLERANCE_NS, QUARANTINE_COLUMNS, TagTable, check_required_signals, empty_quarantine, samples_of, split_by_tag, tag_blocks
 
 GAP_COLUMNS = {
     "valve_id": pl.String,
@@ -242,15 +242,21 @@ class ExportStream:
             self._refuse_if_mostly_faulty()
         acc = samples.accepted
         validate_raw_rows(acc)
-        tag_id = acc["tag"].to_physical().to_numpy()
-        t_all = acc["timestamp_utc"].to_physical().to_numpy()
-        v_all = acc["value_si"].to_numpy()
-        line_all = acc["line"].to_numpy()
         local = not export.relative_time  # relative times are counted from a start in UTC: never ambiguous
-        if local and not (final and self._batches == 1) and len(t_all) and near_clock_change(int(t_all.min()), int(t_all.max()), self.config.timezone):
-            raise NotStreamable("local times near a change of the clocks")
+        if local and not (final and self._batches == 1) and acc.height and self.config.timezone != "UTC":
+            ts = acc["timestamp_utc"].to_physical()
+            if near_clock_change(int(ts.min()), int(ts.max()), self.config.timezone):
+                raise NotStreamable("local times near a change of the clocks")
+        if samples.blocks is not None:  # wide: a block per tag, its columns without a copy
+            per_tag = [(tid, t, v, lines, slice(0, len(t))) for tid, t, v, lines in tag_blocks(acc, samples.blocks)]
+        else:
+            line_all = acc["line"].to_numpy()
+            per_tag = [
+                (tid, t, v, line_all, sel)
+                for tid, t, v, sel in split_by_tag(acc["tag"].to_physical().to_numpy(), acc["timestamp_utc"].to_physical().to_numpy(), acc["value_si"].to_numpy())
+            ]
         seen = set()
-        for tid, t, v, sel in split_by_tag(tag_id, t_all, v_all):
+        for tid, t, v, line_all, sel in per_tag:
             seen.add(tid)
             carry = self._carry.get(tid)
             head = _NONE
@@ -262,9 +268,9 @@ class ExportStream:
         if final:
             for tid in [k for k in self._carry if k not in seen]:
                 carry = self._carry[tid]
-                self._tag(tid, carry.held_t, carry.held_v, _Lines(carry.held_line, line_all, slice(0, 0)), carry, True)
+                self._tag(tid, carry.held_t, carry.held_v, _Lines(carry.held_line, _NONE, slice(0, 0)), carry, True)
         frames = self._give(final)
-        if frames:  # every valve in one pass (one pandera call per valve costs more)
+        if frames:  # every valve in one check (one call per valve costs more)
             validate_sensor_frame(pl.concat(frames), {f["valve_id"][0]: tags_by_column(self.config, f["valve_id"][0]) for f in frames})
         if final and self._span:
             c.time_start, c.time_end = pl.Series([min(self._span), max(self._span)], dtype=pl.Int64).cast(pl.Datetime("ns", "UTC")).to_list()
@@ -330,10 +336,10 @@ class ExportStream:
         anchor = carry.anchor if carry is not None else None
         t_ns, values = series.t_ns, series.values
         if anchor is not None:
-            t_ns, values = np.r_[anchor[0], t_ns], np.r_[anchor[1], values]
+            t_ns, values = np.concatenate(([anchor[0]], t_ns)), np.concatenate(([anchor[1]], values))
         g = to_grid(t_ns, values, self.grid)
         if anchor is not None:  # instants up to the anchor were given with the previous batch
-            first = int(np.searchsorted(g.t_us * 1000, anchor[0], side="right"))
+            first = int(np.searchsorted(g.t_us, anchor[0] // 1000, side="right"))  # t_us * 1000 <= anchor ns
             g = Gridded(g.t_us[first:], g.values[first:], g.gap_start_ns, g.gap_end_ns)
         if held is not None:
             held.anchor = (int(series.t_ns[-1]), float(series.values[-1]))

@@ -1,7 +1,9 @@
 """Parquet exports (long or wide; typed or text columns), read by record batches.
 
-``iload`` reads with ``ParquetFile.iter_batches`` (without pre-buffering, which would read the whole
-file) and joins record batches up to the batch size. The tag and quality columns, when they hold
+``iload`` reads a file of typed columns with polars, a slice of the batch size at a time (only the
+row groups of the slice are read; polars decodes numbers and timestamps ~1.3× faster than Arrow), and
+one with text tag or quality columns with ``ParquetFile.iter_batches`` (without pre-buffering, which
+would read the whole file), joining record batches up to the batch size. The tag and quality columns, when they hold
 text, are read dictionary-encoded (as Parquet stores such columns) and become polars Enum columns
 from their codes, without decoding a string per row (:func:`enum_column`): the tag column an Enum
 of the plant's tags (when every tag of the file is one, else text, so that the error names the
@@ -84,6 +86,13 @@ def iload(src, export: ExportSpec, tags: TagTable | None, batch_samples: int, bl
     pf = pq.ParquetFile(path, read_dictionary=coded, pre_buffer=False, buffer_size=8 << 20)  # pre-buffering reads the whole file
     first = 1
     rows = max(batch_samples // per_row, 1024)
+    n = pf.metadata.num_rows
+    if not coded and n:  # typed columns only: polars decodes them faster than Arrow, slice by slice
+        scan = pl.scan_parquet(path, hive_partitioning=False)
+        for a in range(0, n, rows):
+            df = scan.slice(a, rows).collect().rechunk()
+            yield df, a + 1, a + rows >= n
+        return
     empty = True
     for batch, final in lookahead(_coalesced(pf.iter_batches(batch_size=min(rows, 1 << 31), use_threads=False), rows)):
         empty = False

@@ -1,0 +1,79 @@
+"""A long window evaluated on every k-th row (``MonitorParams.window_rows``): the points are exactly
+those of evaluating every row, at the evaluated rows; both engines agree; the counts add up."""
+
+import dataclasses
+
+import numpy as np
+import polars as pl
+import pytest
+import synth_valve as sv
+
+from transforms.derivatives import savgol_arrays, savgol_at
+from transforms.monitor import monitor_points
+from transforms.windows import evaluated_rows
+
+WINDOW_ROWS = 700
+"""The 6 s windows of ``sv.chamber_data`` (6,000 rows) every 8th row."""
+
+
+@pytest.fixture(scope="module")
+def lake():
+    """Two valves, one window each plus V1's second, shorter window after a gap (every row)."""
+    t, xc, x, p1, p2, *_ = sv.chamber_data()
+    rng = np.random.default_rng(3)
+    n = t.shape[0]
+    v1 = sv.lake_frame(t, sv.PS, sv.PR, p1, p2, x, xc, valve_id="V1")
+    v1b = sv.lake_frame(t[:1000], sv.PS, sv.PR, p1[:1000], p2[:1000], x[:1000], xc[:1000], valve_id="V1",
+                        start=sv.T0 + np.timedelta64(1, "h").item())  # fmt: skip
+    v2 = sv.lake_frame(t, sv.PS, sv.PR, p1 + rng.normal(0, 5e3, n), p2 + rng.normal(0, 5e3, n), x, xc, valve_id="V2")
+    return pl.concat([v1, v1b, v2])
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+def test_savgol_at_equals_the_full_pass_bit_for_bit(dtype):
+    x = np.random.default_rng(1).normal(size=500).cumsum().astype(dtype)
+    rows = np.array([0, 3, 9, 10, 11, 17, 250, 489, 490, 499])
+    sm, de = savgol_arrays(x, window=21, order=3, sample_period_s=1e-3)
+    sm_at, de_at = savgol_at(x, rows, window=21, order=3, sample_period_s=1e-3)
+    np.testing.assert_array_equal(sm_at, sm[rows])
+    np.testing.assert_array_equal(de_at, de[rows])
+
+
+def test_evaluated_rows_every_kth_row_of_each_long_window():
+    first, count = np.array([0, 100, 120]), np.array([100, 20, 35])
+    assert evaluated_rows(first, count, None) is None
+    assert evaluated_rows(first, count, 100) is None  # every window ≤ 2 × 100 rows long: k = 1
+    np.testing.assert_array_equal(evaluated_rows(first, count, 30), [0, 3, 6, *range(9, 100, 3), *range(100, 120), *range(120, 155)])
+
+
+def test_points_are_those_of_every_row_at_the_evaluated_rows(lake):
+    params = sv.params()
+    full = monitor_points(lake, params)
+    part = monitor_points(lake, dataclasses.replace(params, window_rows=WINDOW_ROWS))
+    assert part.windows.equals(full.windows)
+    k = full.windows.select("valve_id", "window_id", (pl.col("n_samples") // WINDOW_ROWS).clip(lower_bound=1).alias("k"))
+    assert sorted(k["k"].to_list()) == [1, 8, 8]
+    kept = (
+        full.points.join(k, on=["valve_id", "window_id"])
+        .filter(((pl.col("timestamp_utc") - pl.col("window_start")).dt.total_milliseconds() % pl.col("k")) == 0)
+        .drop("k")
+    )
+    assert part.points.height < full.points.height // 4
+    assert part.points.equals(kept)
+    # the counts are those of the evaluated rows and add up
+    per = part.selection.group_by("valve_id", "window_id", "edge").agg(
+        pl.col("n_removed").sum() + pl.col("n_selected").first() - pl.col("n_samples").first()
+    )
+    assert (per["n_removed"] == 0).all()
+    n_eval = part.selection.group_by("valve_id", "window_id").agg(pl.col("n_samples").first()).join(full.windows, on=["valve_id", "window_id"])
+    np.testing.assert_array_equal(n_eval["n_samples"], -(-n_eval["n_samples_right"] // np.maximum(n_eval["n_samples_right"] // WINDOW_ROWS, 1)))
+
+
+def test_engines_agree_with_window_rows(lake):
+    params = sv.params(window_rows=WINDOW_ROWS)
+    a = monitor_points(lake, params, engine="numba")
+    b = monitor_points(lake, params, engine="polars")
+    assert a.windows.equals(b.windows)
+    assert a.selection.equals(b.selection)
+    assert a.points.drop("area_m2").equals(b.points.drop("area_m2"))
+    np.testing.assert_allclose(a.points["area_m2"].to_numpy(), b.points["area_m2"].to_numpy(), rtol=1e-12)
