@@ -34,11 +34,7 @@ parameters as (
     left join marks using (valve_id)
     where stg_fit_parameters.window_start >= coalesce(marks.raw_from, '-infinity'::timestamptz)
         -- a constant bound, so that the scan skips the closed history's row groups
-        and stg_fit_parameters.window_start >= (
-            select coalesce(min(coalesce(marks.raw_from, '-infinity'::timestamptz)), '-infinity'::timestamptz)
-            from stg_condition_bounds
-            left join marks using (valve_id)
-        )
+        and stg_fit_parameters.window_start >= (select coalesce(min(raw_from), '-infinity'::timestamptz) from marks)
 ),
 
 bounds as (

@@ -20,11 +20,7 @@ fits as (
     join valves using (valve_id)
     left join marks using (valve_id)
     where stg_edge_fits.window_start >= coalesce(marks.summarised_before, '-infinity'::timestamptz)
-        and stg_edge_fits.window_start >= (
-            select coalesce(min(coalesce(marks.summarised_before, '-infinity'::timestamptz)), '-infinity'::timestamptz)
-            from stg_condition_bounds
-            left join marks using (valve_id)
-        )
+        and stg_edge_fits.window_start >= (select coalesce(min(summarised_before), '-infinity'::timestamptz) from marks)
 ),
 
 alarms as (

@@ -9,15 +9,11 @@ closed as (
 ),
 
 open as (
-    select * from window_alarms where is_alarm
+    select * exclude (is_alarm) from window_alarms where is_alarm
 ),
 
 alarms as (
-    select
-        valve_id, edge, window_start, window_end, operating_hours,
-        alpha_hat, x_hat_pct, e_mm2, alpha_z, x_hat_pct_z, e_mm2_z,
-        beyond_fault_bound, change_alarm, reason
-    from open
+    select * from open
     union all by name
     select * from closed
 ),
