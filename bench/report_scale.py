@@ -8,6 +8,8 @@ drift, every edge of every valve on a nominal baseline. Then the night is replay
 of fits is inserted (what the nightly monitor adds) and ``valvemon report`` runs, pinned to one
 core (``taskset -c CORE``), under ``/usr/bin/time`` (CPU = user + sys, peak resident memory);
 then every view is read whole from the published snapshot, each in its own process, the same way.
+The first report on the history builds the daily summaries of all of it (``flows/report/summaries.py``);
+the night's closes one day.
 The bench warehouse is deleted at the end (``--keep`` keeps it).
 
     .venv/bin/python bench/report_scale.py --valves 500 --days 7 [--core 1] [--views] [--detail 20] [--tmp DIR] [--src DIR]

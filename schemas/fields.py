@@ -685,3 +685,83 @@ RETENTION_LOG_FIELDS: tuple[Field, ...] = (
     Field("state", pl.Utf8, "", "intent: recorded before the data change, which a killed run may have left part-done (the next run completes it); done: completed.", isin=("intent", "done")),
 )
 """Every applied retention action, one row per partition and action (table ``retention_log``)."""
+
+_DAY_UTC = Field("day_utc", pl.Date, "", "UTC day of the windows' window_start.")
+_PARAMETER = Field("parameter", pl.Utf8, "", "Condition parameter: alpha_hat, x_hat_pct (%) or e_mm2 (mm²).", isin=("alpha_hat", "x_hat_pct", "e_mm2"))
+
+EDGE_DAY_FIELDS: tuple[Field, ...] = (
+    _VALVE_ID,
+    _EDGE,
+    _DAY_UTC,
+    Field("baseline_version", pl.Int32, "", "The edge's current baseline version the day was summarised against.", nullable=True),
+    Field("n_windows", pl.Int64, "", "Windows of the day (every status).", ge=0),
+    Field("n_ok", pl.Int64, "", "Ok windows of the day.", ge=0),
+    Field("n_alarms", pl.Int64, "", "Ok windows of the day that raised a short-term alarm.", ge=0),
+    Field("last_window_start", UTC_US, "", "The day's latest window."),
+    Field("last_status", pl.Utf8, "", "Status of the day's latest window."),
+    Field("last_ok_window_start", UTC_US, "", "The day's latest ok window (null: none).", nullable=True),
+    Field("last_ok_operating_hours", pl.Float64, "h", "Operating hours of the day's latest ok window.", nullable=True),
+    Field("alpha_hat", pl.Float64, "", "alpha_hat of the day's latest ok window.", nullable=True),
+    Field("x_hat_window_start", UTC_US, "", "The day's latest ok window that determined x_hat.", nullable=True),
+    Field("x_hat_pct", pl.Float64, "%", "x_hat_pct of that window.", nullable=True),
+    Field("e_mm2", pl.Float64, "mm²", "e_mm2 of the day's latest ok window.", nullable=True),
+    Field("leak_n", pl.Int64, "", "Ok windows of the day with a closed-edge leakage estimate.", ge=0),
+    Field("leak_scale_median", pl.Float64, "", "Median of their leak_scale.", nullable=True),
+    Field("leak_scale_min", pl.Float64, "", "Minimum of their leak_scale.", nullable=True),
+    Field("leak_scale_max", pl.Float64, "", "Maximum of their leak_scale.", nullable=True),
+    Field("leak_operating_hours", pl.Float64, "h", "Operating hours of the latest of them.", nullable=True),
+)
+"""One row per valve, edge and closed UTC day of ``edge_fits`` (table ``edge_day_summaries``,
+written by :func:`flows.report.summaries.update_summaries`)."""
+
+PARAMETER_DAY_FIELDS: tuple[Field, ...] = (
+    _VALVE_ID,
+    _EDGE,
+    _DAY_UTC,
+    _PARAMETER,
+    Field("n_values", pl.Int64, "", "Ok windows of the day with the parameter.", ge=0),
+    Field("median_value", pl.Float64, "", "Median of the day's values (unit of the parameter)."),
+    Field("min_value", pl.Float64, "", "Minimum of the day's values."),
+    Field("max_value", pl.Float64, "", "Maximum of the day's values."),
+    Field("operating_hours", pl.Float64, "h", "Operating hours of the day's latest value."),
+    Field("last_window_start", UTC_US, "", "The day's latest window with a value."),
+    Field("n_clean", pl.Int64, "", "Values of alarm-free windows (what the trend is fitted on).", ge=0),
+    Field("clean_first_hours", pl.Float64, "h", "Operating hours of the earliest of them.", nullable=True),
+    Field("clean_last_hours", pl.Float64, "h", "Operating hours of the latest of them.", nullable=True),
+    Field("clean_mean_hours", pl.Float64, "h", "Their mean operating hours.", nullable=True),
+    Field("clean_mean_value", pl.Float64, "", "Their mean value.", nullable=True),
+    Field("clean_sxx", pl.Float64, "h²", "Their centred sum of squares of operating hours.", nullable=True),
+    Field("clean_syy", pl.Float64, "", "Their centred sum of squares of the values.", nullable=True),
+    Field("clean_sxy", pl.Float64, "h", "Their centred sum of products of hours and values.", nullable=True),
+)
+"""One row per valve, edge, closed UTC day and parameter (table ``parameter_day_summaries``): the
+daily points of the pictures, and the alarm-free windows' sums that merge exactly into the
+trend's least squares."""
+
+ALARM_WINDOW_FIELDS: tuple[Field, ...] = (
+    _VALVE_ID,
+    _EDGE,
+    _WINDOW_START,
+    _WINDOW_END,
+    _OPERATING_HOURS,
+    Field("alpha_hat", pl.Float64, "", "alpha_hat of the window.", nullable=True),
+    Field("x_hat_pct", pl.Float64, "%", "x_hat_pct of the window (null: not determined).", nullable=True),
+    Field("e_mm2", pl.Float64, "mm²", "e_mm2 of the window.", nullable=True),
+    Field("alpha_z", pl.Float64, "", "Robust z-score of alpha_hat against the history.", nullable=True),
+    Field("x_hat_pct_z", pl.Float64, "", "Robust z-score of x_hat_pct.", nullable=True),
+    Field("e_mm2_z", pl.Float64, "", "Robust z-score of e_mm2.", nullable=True),
+    Field("beyond_fault_bound", pl.Boolean, "", "A parameter lies beyond its fault bound."),
+    Field("change_alarm", pl.Boolean, "", "A parameter departs significantly from its recent history."),
+    Field("reason", pl.Utf8, "", "Which parameter and by how much."),
+)
+"""Every alarm window of the closed days (table ``alarm_windows``), as view ``window_alarms`` gave it."""
+
+SUMMARY_WATERMARK_FIELDS: tuple[Field, ...] = (
+    Field("valve_id", pl.Utf8, "", "Valve identifier; the table's key."),
+    Field("summarised_before", UTC_US, "", "The valve's days before this UTC midnight are summarised (closed); its windows from it on are computed by the views."),
+    Field("raw_from", UTC_US, "", "The earliest window the views read raw: the change detector's history of the first open window and the level's."),
+    Field("bounds_hash", pl.Utf8, "", "Hash of the valve's condition_bounds the summaries were computed with; another rebuilds them."),
+    Field("monitored_through", UTC_US, "", "Latest edge_fits.monitored_at seen; rows monitored from it on mark their days changed."),
+    Field("updated_at", UTC_US, "", "When the summaries last moved."),
+)
+"""How far each valve's daily summaries reach (table ``summary_watermarks``)."""

@@ -191,11 +191,9 @@ def run_report(config_path: str | Path, warehouse: str | Path, *, detail: int = 
             "SELECT * FROM trend_daily WHERE list_contains(?, valve_id)",
             "SELECT * FROM parameter_trends WHERE list_contains(?, valve_id)",
             "SELECT * FROM stg_condition_bounds WHERE list_contains(?, valve_id)",
-            "SELECT f.valve_id, f.edge, max(f.operating_hours) AS operating_hours, median(f.leak_scale) AS median_leak_scale, "
-            "min(f.leak_scale) AS min_leak_scale, max(f.leak_scale) AS max_leak_scale, any_value(c.leak_scale_baseline) AS leak_scale_baseline "
-            "FROM stg_edge_fits f JOIN valve_condition c USING (valve_id, edge) "
-            "WHERE list_contains(?, f.valve_id) AND f.is_ok AND f.leak_scale IS NOT NULL "
-            "GROUP BY f.valve_id, f.edge, CAST(timezone('UTC', f.window_start) AS DATE)",
+            "SELECT d.valve_id, d.edge, d.leak_operating_hours AS operating_hours, d.leak_scale_median AS median_leak_scale, "
+            "d.leak_scale_min AS min_leak_scale, d.leak_scale_max AS max_leak_scale, c.leak_scale_baseline "
+            "FROM edge_days d JOIN valve_condition c USING (valve_id, edge) WHERE list_contains(?, d.valve_id) AND d.leak_n > 0",
         ))  # fmt: skip
         for vid in chosen:
             cond = conditions.filter(pl.col("valve_id") == vid)

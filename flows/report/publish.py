@@ -10,7 +10,9 @@ run, ``discrepancy``, ``report``) ends with :func:`publish`, so ``valvemon query
    ``valve_condition`` and ``fleet_ranking`` have a row per configured valve as soon as there
    are fits (the Eq. 9 standstill columns stay empty until ``valvemon report`` checks the lake);
 3. creates or refreshes the views (:func:`flows.report.views.create_views`);
-4. publishes the read-only snapshot readers open (:func:`flows.report.views.publish_snapshot`:
+4. brings the daily summaries the condition views read up to the latest day
+   (:func:`flows.report.summaries.update_summaries`);
+5. publishes the read-only snapshot readers open (:func:`flows.report.views.publish_snapshot`:
    a byte copy of the checkpointed file, replaced atomically, so a reader never waits for the
    writer nor the writer for a reader).
 
@@ -28,6 +30,7 @@ import polars as pl
 from flows.common.config import load_plant_config
 from flows.common.warehouse_db import connect, insert_frame, transaction
 from flows.report.standstill import expected_residual
+from flows.report.summaries import update_summaries
 from flows.report.views import create_views, ensure_report_tables, publish_snapshot
 from schemas.fields import CONDITION_BOUNDS_FIELDS, polars_schema
 from schemas.plant_config import BOUND_KEYS, PlantConfig
@@ -62,5 +65,6 @@ def publish(config: PlantConfig | str | Path, warehouse: str | Path, now: dateti
             con.execute("DELETE FROM condition_bounds")
             insert_frame(con, "condition_bounds", bounds)
         views = create_views(con)
+        update_summaries(con, now)
         snapshot = publish_snapshot(con, warehouse)
     return views, snapshot

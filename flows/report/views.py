@@ -37,7 +37,15 @@ import duckdb
 
 from flows.common.errors import ValvemonError
 from flows.common.warehouse_db import DB_NAME, add_missing_columns, db_path, ensure_tables, transaction
-from schemas.fields import CONDITION_BOUNDS_FIELDS, STANDSTILL_FIELDS, STANDSTILL_PROGRESS_FIELDS
+from schemas.fields import (
+    ALARM_WINDOW_FIELDS,
+    CONDITION_BOUNDS_FIELDS,
+    EDGE_DAY_FIELDS,
+    PARAMETER_DAY_FIELDS,
+    STANDSTILL_FIELDS,
+    STANDSTILL_PROGRESS_FIELDS,
+    SUMMARY_WATERMARK_FIELDS,
+)
 
 SQL_DIR = Path(__file__).resolve().parents[2] / "sql"
 """The repository's ``sql/`` folder."""
@@ -48,8 +56,16 @@ LAYERS: tuple[str, ...] = ("staging", "core", "report")
 SNAPSHOT_DIR = "snapshot"
 """Folder of the published read-only copy of the database inside the warehouse."""
 
-REPORT_TABLES = {"condition_bounds": CONDITION_BOUNDS_FIELDS, "standstill_checks": STANDSTILL_FIELDS, "standstill_progress": STANDSTILL_PROGRESS_FIELDS}
-"""Tables the report writes (besides the monitor's), created empty if missing so the views bind."""
+REPORT_TABLES = {
+    "condition_bounds": CONDITION_BOUNDS_FIELDS,
+    "standstill_checks": STANDSTILL_FIELDS,
+    "standstill_progress": STANDSTILL_PROGRESS_FIELDS,
+    "edge_day_summaries": EDGE_DAY_FIELDS,
+    "parameter_day_summaries": PARAMETER_DAY_FIELDS,
+    "alarm_windows": ALARM_WINDOW_FIELDS,
+    "summary_watermarks": SUMMARY_WATERMARK_FIELDS,
+}
+"""Tables the report and the publish write (besides the monitor's), created empty if missing so the views bind."""
 
 
 @dataclass(frozen=True)
@@ -118,7 +134,7 @@ def ordered_views(views: dict[str, ViewFile]) -> list[ViewFile]:
 
 
 def ensure_report_tables(con: duckdb.DuckDBPyConnection) -> None:
-    """Create ``condition_bounds``, ``standstill_checks``, ``standstill_progress`` (and the monitor's tables) if missing."""
+    """Create the tables of :data:`REPORT_TABLES` (and the monitor's tables) if missing."""
     from flows.monitor.flow import ensure_monitor_tables
 
     ensure_monitor_tables(con)

@@ -1,5 +1,7 @@
--- fit_checks: step 5b short-term assessment of every ok window and parameter.
--- One row per valve, edge, window and parameter.
+-- fit_checks: step 5b short-term assessment of every open ok window and parameter: the windows
+-- from the valve's watermark on (stg_summary_watermarks; every window of a valve without one).
+-- The closed days' verdicts were computed by this view when they were summarised; their alarm
+-- windows are in stg_alarm_windows. One row per valve, edge, open window and parameter.
 --
 -- Two independent tests:
 --   * bounds: the value lies beyond the parameter's fault bounds (one window is enough);
@@ -19,8 +21,20 @@
 --     with a sort tree, ~4x faster than its windowed MAD on 1,440-window histories.)
 with
 
+marks as (
+    select * from stg_summary_watermarks
+),
+
 parameters as (
-    select * from stg_fit_parameters
+    -- the open windows and the history before them that the first of them is judged against
+    select
+        stg_fit_parameters.*,
+        stg_fit_parameters.window_start >= coalesce(marks.summarised_before, '-infinity'::timestamptz) as is_open
+    from stg_fit_parameters
+    left join marks using (valve_id)
+    where stg_fit_parameters.window_start >= coalesce(marks.raw_from, '-infinity'::timestamptz)
+        -- a constant bound, so that the scan skips the closed history's row groups
+        and stg_fit_parameters.window_start >= (select coalesce(min(raw_from), '-infinity'::timestamptz) from marks)
 ),
 
 bounds as (
@@ -79,6 +93,7 @@ final as (
         (coalesce(value < fault_low, false) or coalesce(value > fault_high, false)
             or coalesce(case when two_sided then abs(z) > change_z else z > change_z end, false)) as is_alarm
     from scored
+    where is_open
 )
 
 select * from final

@@ -1,12 +1,17 @@
 -- parameter_trends: the long-term trend of each parameter and where it meets its wear bounds.
 -- One row per valve, edge, parameter and wear bound (side low or high).
 --
--- Trend: ordinary least squares of the parameter over operating hours (regr_slope,
--- regr_intercept) on the ok windows without an alarm (window_alarms) of the last
--- trend_span_hours before the edge's latest ok window: all of them, however many a
--- continuous recording gives. Level: the median of those of them within change_history_hours
--- before the edge's latest ok window, or of the latest change_history_windows of them if those
--- reach further back; what "the long-term trend exceeds a bound" is judged on.
+-- Trend: ordinary least squares of the parameter over operating hours on the ok windows without
+-- an alarm of the UTC days within trend_span_hours of the edge's latest ok window (the days whose
+-- latest alarm-free window lies within it: the span counted in whole days): all of them, however
+-- many a continuous recording gives. The sums come a day at a time (parameter_days: count, means,
+-- centred sums of squares and products of the alarm-free windows of the day), merged exactly:
+-- Sxx = sum(Sxx_day + n_day (mean_day - mean)^2), and so on; slope Sxy / Sxx, intercept
+-- mean_value - slope mean_hours. Level: the median of the alarm-free windows of those days within
+-- change_history_hours before the edge's latest ok window, or of the latest change_history_windows
+-- of them if those reach further back; what "the long-term trend exceeds a bound" is judged on.
+-- The level's windows are read raw: the open ones (open_values) and the closed ones
+-- from the valve's raw_from on (stg_summary_watermarks; its alarms in stg_alarm_windows).
 --
 -- End of life: the hour at which the trend line reaches the bound, mean_hours + (bound -
 -- mean_value) / slope, with its 95 % confidence interval by Fieller's theorem: the hours x at
@@ -19,66 +24,126 @@
 -- crossing_status: predicted | away_from_bound | not_significant | too_little_data.
 with
 
-checks as (
-    select * from fit_checks
-),
-
-alarms as (
-    select valve_id, edge, window_start, is_alarm from window_alarms
+days as (
+    select * from parameter_days
 ),
 
 bounds as (
     select * from stg_condition_bounds
 ),
 
+marks as (
+    select * from stg_summary_watermarks
+),
+
 latest as (
-    select valve_id, edge, max(operating_hours) as latest_hours, max(window_start) as latest_start
-    from stg_edge_fits
-    where is_ok
+    -- the edge's latest ok window: every ok window has an alpha_hat
+    select valve_id, edge, max(operating_hours) as latest_hours, max(last_window_start) as latest_start
+    from days
+    where parameter = 'alpha_hat'
     group by valve_id, edge
 ),
 
-clean as (
-    select checks.*
-    from checks
-    join alarms using (valve_id, edge, window_start)
-    where not alarms.is_alarm
-),
-
-in_span as (
-    select
-        clean.valve_id, clean.edge, clean.parameter, clean.window_start, clean.operating_hours,
-        clean.value, latest.latest_hours,
-        row_number() over (
-            partition by clean.valve_id, clean.edge, clean.parameter order by clean.window_start desc
-        ) <= bounds.change_history_windows
-            or clean.window_start > latest.latest_start
-                                    - to_microseconds(cast(bounds.change_history_hours * 3600e6 as bigint)) as in_level
-    from clean
+span_days as (
+    select days.*, latest.latest_hours
+    from days
     join latest using (valve_id, edge)
     join bounds using (valve_id, parameter)
-    where clean.operating_hours >= latest.latest_hours - bounds.trend_span_hours
+    where days.n_clean > 0 and days.clean_last_hours >= latest.latest_hours - bounds.trend_span_hours
+),
+
+pool_reference as (
+    -- one day's means as the reference the others are pooled relative to: exact for a constant parameter
+    select valve_id, edge, parameter, min(clean_mean_hours) as ref_hours, min(clean_mean_value) as ref_value
+    from span_days
+    group by valve_id, edge, parameter
+),
+
+pooled as (
+    select
+        valve_id, edge, parameter,
+        sum(n_clean) as n_fits,
+        max(clean_last_hours) - min(clean_first_hours) as span_hours,
+        any_value(latest_hours) as latest_hours,
+        any_value(ref_hours) + sum(n_clean * (clean_mean_hours - ref_hours)) / sum(n_clean) as mean_hours,
+        any_value(ref_value) + sum(n_clean * (clean_mean_value - ref_value)) / sum(n_clean) as mean_value
+    from span_days
+    join pool_reference using (valve_id, edge, parameter)
+    group by valve_id, edge, parameter
+),
+
+merged as (
+    select
+        pooled.*,
+        sum(span_days.clean_sxx + span_days.n_clean * (span_days.clean_mean_hours - pooled.mean_hours) ** 2) as sxx,
+        -- a parameter constant over the span has no variance: exactly, not the day means' round-off
+        case when min(span_days.min_value) < max(span_days.max_value) then
+            sum(span_days.clean_syy + span_days.n_clean * (span_days.clean_mean_value - pooled.mean_value) ** 2) else 0 end as syy,
+        case when min(span_days.min_value) < max(span_days.max_value) then
+            sum(span_days.clean_sxy + span_days.n_clean * (span_days.clean_mean_hours - pooled.mean_hours)
+                                                       * (span_days.clean_mean_value - pooled.mean_value)) else 0 end as sxy
+    from pooled
+    join span_days using (valve_id, edge, parameter)
+    group by all
+),
+
+closed_recent as (
+    -- the closed alarm-free windows from raw_from on (the constant bound lets the scan skip older row groups)
+    select stg_fit_parameters.valve_id, stg_fit_parameters.edge, stg_fit_parameters.parameter,
+           stg_fit_parameters.window_start, stg_fit_parameters.value
+    from stg_fit_parameters
+    join marks using (valve_id)
+    anti join stg_alarm_windows using (valve_id, edge, window_start)
+    where stg_fit_parameters.window_start >= marks.raw_from
+        and stg_fit_parameters.window_start < marks.summarised_before
+        and stg_fit_parameters.window_start >= (select coalesce(min(raw_from), 'infinity'::timestamptz) from marks)
+),
+
+open_recent as (
+    select valve_id, edge, parameter, window_start, value from open_values where is_clean
+),
+
+recent as (
+    select * from closed_recent
+    union all
+    select * from open_recent
+),
+
+level_windows as (
+    select
+        recent.valve_id, recent.edge, recent.parameter, recent.value,
+        row_number() over (
+            partition by recent.valve_id, recent.edge, recent.parameter order by recent.window_start desc
+        ) <= bounds.change_history_windows
+            or recent.window_start > latest.latest_start
+                                     - to_microseconds(cast(bounds.change_history_hours * 3600e6 as bigint)) as in_level
+    from recent
+    join latest using (valve_id, edge)
+    join bounds using (valve_id, parameter)
+    semi join span_days
+        on span_days.valve_id = recent.valve_id and span_days.edge = recent.edge
+        and span_days.parameter = recent.parameter
+        and span_days.day_utc = cast(timezone('UTC', recent.window_start) as date)
+),
+
+levels as (
+    select
+        valve_id, edge, parameter,
+        median(value) filter (where in_level) as level,
+        count(*) filter (where in_level) as level_n
+    from level_windows
+    group by valve_id, edge, parameter
 ),
 
 fitted as (
     select
-        in_span.valve_id,
-        in_span.edge,
-        in_span.parameter,
-        count(*) as n_fits,
-        max(in_span.operating_hours) - min(in_span.operating_hours) as span_hours,
-        any_value(in_span.latest_hours) as latest_hours,
-        regr_slope(in_span.value, in_span.operating_hours) as slope_per_hour,
-        regr_intercept(in_span.value, in_span.operating_hours) as intercept,
-        regr_avgx(in_span.value, in_span.operating_hours) as mean_hours,
-        regr_avgy(in_span.value, in_span.operating_hours) as mean_value,
-        regr_sxx(in_span.value, in_span.operating_hours) as sxx,
-        regr_syy(in_span.value, in_span.operating_hours) as syy,
-        regr_sxy(in_span.value, in_span.operating_hours) as sxy,
-        median(in_span.value) filter (where in_span.in_level) as level,
-        count(*) filter (where in_span.in_level) as level_n
-    from in_span
-    group by in_span.valve_id, in_span.edge, in_span.parameter
+        merged.valve_id, merged.edge, merged.parameter, merged.n_fits, merged.span_hours, merged.latest_hours,
+        case when merged.sxx > 0 then merged.sxy / merged.sxx end as slope_per_hour,
+        case when merged.sxx > 0 then merged.mean_value - merged.sxy / merged.sxx * merged.mean_hours end as intercept,
+        merged.mean_hours, merged.mean_value, merged.sxx, merged.syy, merged.sxy,
+        levels.level, coalesce(levels.level_n, 0) as level_n
+    from merged
+    left join levels using (valve_id, edge, parameter)
 ),
 
 stats as (

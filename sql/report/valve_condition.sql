@@ -23,8 +23,9 @@
 --                   no figure (a linear extrapolation that far is no forecast), null;
 --   no_trend        healthy, no trend heads significantly toward a bound: null;
 --   too_little_data unknown: null.
--- leak_scale: the edge's closed-edge leakage over Eq. 3's, median over its ok windows (a
--- growing leakage is a wear signal; the trend picture shows it per window), leak_scale_baseline
+-- leak_scale: the edge's closed-edge leakage over Eq. 3's, median over the ok windows of the
+-- latest UTC day that has one (a growing leakage is a wear signal; the trend picture shows it a
+-- point a day), leak_scale_baseline
 -- the commissioning value (1 for a nominal baseline: Eq. 3 assumed).
 -- edge_law: the edge law the baseline's shape follows; where the commissioning window shows
 -- another than the configured area_law, edge_law_note says so and is appended to the reason.
@@ -50,39 +51,38 @@ grid as (
     select valves.*, edges.edge, edges.edge_order from valves cross join edges
 ),
 
-fits as (
-    select * from stg_edge_fits
+days as (
+    select * from edge_days
 ),
 
 windows as (
     select
         valve_id, edge,
-        count(*) as n_windows,
-        count(*) filter (where is_ok) as n_ok_windows,
-        max(window_start) as last_window_start,
-        arg_max(status, window_start) as last_status,
-        max(window_start) filter (where is_ok) as last_ok_window_start,
-        max(operating_hours) filter (where is_ok) as operating_hours,
-        arg_max(alpha_hat, window_start) filter (where is_ok) as alpha_hat,
-        arg_max(x_hat_pct, window_start) filter (where is_ok and x_hat_determined) as x_hat_pct,
-        arg_max(e_mm2, window_start) filter (where is_ok) as e_mm2,
-        median(leak_scale) filter (where is_ok and leak_scale is not null) as leak_scale
-    from fits
+        sum(n_windows) as n_windows,
+        sum(n_ok) as n_ok_windows,
+        max(last_window_start) as last_window_start,
+        arg_max(last_status, last_window_start) as last_status,
+        max(last_ok_window_start) as last_ok_window_start,
+        max(last_ok_operating_hours) as operating_hours,
+        arg_max(alpha_hat, last_ok_window_start) filter (where last_ok_window_start is not null) as alpha_hat,
+        arg_max(x_hat_pct, x_hat_window_start) filter (where x_hat_window_start is not null) as x_hat_pct,
+        arg_max(e_mm2, last_ok_window_start) filter (where last_ok_window_start is not null) as e_mm2,
+        arg_max(leak_scale_median, day_utc) filter (where leak_n > 0) as leak_scale
+    from days
     group by valve_id, edge
 ),
 
 recent_alarms as (
     select
-        window_alarms.valve_id, window_alarms.edge,
+        fault_alarms.valve_id, fault_alarms.edge,
         count(*) as n_recent_alarms,
-        arg_max(window_alarms.reason, window_alarms.window_start) as last_alarm_reason,
-        max(window_alarms.window_start) as last_alarm_start
-    from window_alarms
+        arg_max(fault_alarms.reason, fault_alarms.window_start) as last_alarm_reason,
+        max(fault_alarms.window_start) as last_alarm_start
+    from fault_alarms
     join windows using (valve_id, edge)
     join valves using (valve_id)
-    where window_alarms.is_alarm
-        and window_alarms.operating_hours >= windows.operating_hours - valves.fault_hold_hours
-    group by window_alarms.valve_id, window_alarms.edge
+    where fault_alarms.operating_hours >= windows.operating_hours - valves.fault_hold_hours
+    group by fault_alarms.valve_id, fault_alarms.edge
 ),
 
 trends as (

@@ -186,7 +186,10 @@ def test_bi_export_reads_the_same_in_duckdb_polars_pandas_pyarrow(built):
     _, warehouse, result, fits = built
     root = warehouse / "export"
     fits_dir = root / "edge_fits"
-    assert sorted(p.name for p in fits_dir.iterdir()) == [f"valve_id={v}" for v in VALVES]
+    assert sorted(p.name for p in fits_dir.iterdir()) == ["_exported_through", *(f"valve_id={v}" for v in VALVES)]
+    days = fits.select(valve_id="valve_id", day=pl.col("window_start").dt.date()).unique()
+    assert sorted(p.relative_to(fits_dir).parts[:2] for p in fits_dir.glob("*/*/part-0.parquet")) == sorted(
+        (f"valve_id={v}", f"date={d.isoformat()}") for v, d in days.iter_rows())  # a partition per valve and UTC day
     names = [f.name for f in EDGE_FIT_FIELDS]
     glob = str(fits_dir / "**" / "*.parquet")
 
@@ -204,7 +207,7 @@ def test_bi_export_reads_the_same_in_duckdb_polars_pandas_pyarrow(built):
 
     import pandas as pd
 
-    pdf = pd.read_parquet(fits_dir / "valve_id=VB" / "part-0.parquet")
+    pdf = pd.read_parquet(next((fits_dir / "valve_id=VB").glob("date=*/part-0.parquet")))
     assert list(pdf.columns) == names and set(pdf["valve_id"]) == {"VB"}
     assert str(pdf["window_start"].dtype) == "datetime64[us, UTC]"
 
@@ -213,7 +216,7 @@ def test_bi_export_reads_the_same_in_duckdb_polars_pandas_pyarrow(built):
 
     table = ds.dataset(fits_dir, format="parquet", partitioning="hive").to_table()
     assert table.num_rows == fits.height
-    schema = pq.read_schema(fits_dir / "valve_id=VA" / "part-0.parquet")
+    schema = pq.read_schema(next((fits_dir / "valve_id=VA").glob("date=*/part-0.parquet")))
     assert schema.names == names
     assert str(schema.field("window_start").type) == "timestamp[us, tz=UTC]"
     assert schema.field("x_hat_mm").metadata[b"unit"] == b"mm"

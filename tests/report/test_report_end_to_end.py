@@ -46,4 +46,6 @@ def test_simulated_plant_through_report_and_query(tmp_path):
     alarms = _cli("query", "SELECT DISTINCT valve_id, edge FROM fault_alarms ORDER BY ALL", "--format", "csv",
                   "--warehouse", str(warehouse), cwd=tmp_path)  # fmt: skip
     assert alarms.stdout.split() == ["valve_id,edge", "V002,1r"]
-    assert sorted(p.name for p in (warehouse / "export" / "edge_fits").iterdir()) == ["valve_id=V001", "valve_id=V002"]
+    exported = warehouse / "export" / "edge_fits"
+    assert sorted(p.name for p in exported.iterdir()) == ["_exported_through", "valve_id=V001", "valve_id=V002"]
+    assert {p.parent.parent.name for p in exported.glob("valve_id=*/date=*/part-0.parquet")} == {"valve_id=V001", "valve_id=V002"}

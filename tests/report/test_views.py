@@ -7,6 +7,7 @@ import html
 import numpy as np
 import polars as pl
 import pytest
+from polars.testing import assert_frame_equal
 
 from flows.common.errors import ValvemonError
 from flows.report.export import export_bi
@@ -106,7 +107,7 @@ def test_one_faulty_window_among_normal_ones_is_caught(wh, tmp_path):
         assert (first["valve_id"], first["state"], first["worst_edge"], first["limiting_edge"]) == ("F1", "faulty", "1r", "1r")
         assert (first["remaining_hours"], first["remaining_hours_low"], first["remaining_hours_high"]) == (0.0, 0.0, 0.0)
         assert first["remaining_basis"] == "faulty" and first["reason"].startswith("fault: ")
-        assert rank["valve_id"].to_list() == ["F1", "D"] and rank["remaining_hours"][1] == pytest.approx(100.0, abs=1.0)
+        assert rank["valve_id"].to_list() == ["F1", "D"] and rank["remaining_hours"][1] == pytest.approx(101.0, abs=1e-6)  # 1.30 at 300 h, latest 199 h
 
 
 def test_a_departure_inside_the_bounds_is_caught_by_the_change_detector(wh):
@@ -334,6 +335,6 @@ def test_materialised_views_give_the_views_rows(wh):
     assert "stg_edge_fits" not in done  # staging views stay views
     temp = {r[0] for r in wh.con.execute("SELECT table_name FROM duckdb_tables() WHERE temporary").fetchall()}
     assert set(names) <= temp
-    for n in names:
-        assert wh.q(f"SELECT * FROM {n}").equals(before[n]), n
+    for n in names:  # the trend's sums are merged in an order DuckDB's threads choose: equal to rounding
+        assert_frame_equal(wh.q(f"SELECT * FROM {n}"), before[n], check_exact=False, rel_tol=1e-6)
     assert before["fault_alarms"].height == 1 and wh.condition("M1", "s1")["state"] == "healthy"

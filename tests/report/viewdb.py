@@ -40,7 +40,7 @@ class Warehouse:
         insert_frame(self.con, "condition_bounds", pl.DataFrame([row], schema=polars_schema(CONDITION_BOUNDS_FIELDS)))
 
     def add_fits(self, valve_id: str, edge: str, hours, alpha, x_pct, e, status="ok", baseline_version: int = 1,
-                 x_determined=None) -> None:
+                 x_determined=None, leak=None, monitored_at: datetime = COMMISSIONED) -> None:
         hours = np.asarray(hours, float)
         n = hours.size
         col = lambda v: np.broadcast_to(np.asarray(v, float), (n,)).copy()  # noqa: E731
@@ -64,8 +64,8 @@ class Warehouse:
                 "alpha_ci_low": None, "alpha_ci_high": None, "x_hat_ci_low_mm": None, "x_hat_ci_high_mm": None,
                 "u_min_mm": None, "u_max_mm": None,
                 "baseline_version": [baseline_version] * n,
-                "monitored_at": [COMMISSIONED] * n,
-                "leak_scale": None, "leak_scale_ci_low": None, "leak_scale_ci_high": None,
+                "monitored_at": [monitored_at] * n,
+                "leak_scale": None if leak is None else np.where(ok, col(leak), np.nan), "leak_scale_ci_low": None, "leak_scale_ci_high": None,
                 "u_spread_mm": None,
                 "x_hat_determined": None if x_determined is None else np.broadcast_to(np.asarray(x_determined, bool), (n,)).tolist(),
             },
