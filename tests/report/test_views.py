@@ -145,7 +145,9 @@ def test_remaining_life_of_an_exactly_linear_trend_is_its_crossing(wh):
     assert c["state"] == "healthy" and c["limiting_parameter"] == "x_hat_pct"
     assert c["end_of_life_hours"] == pytest.approx(590.0, abs=1e-6)
     assert c["remaining_hours"] == pytest.approx(391.0, abs=1e-6)
-    assert c["remaining_hours_low"] <= c["remaining_hours"] <= c["remaining_hours_high"]
+    # the interval holds the point (to rounding: an exact line has a zero-width interval, and its
+    # pooled sums vary in the last bits with DuckDB's thread order)
+    assert c["remaining_hours_low"] - 1e-9 <= c["remaining_hours"] <= c["remaining_hours_high"] + 1e-9
     assert c["remaining_hours_high"] - c["remaining_hours_low"] < 1e-3
 
 
