@@ -1,7 +1,8 @@
 """The demo's outcome with the identified closed-edge leakage: its commissioning days (twelve
 10 s snapshots each) identify the leakage, and V012 (Table 2's broken edge 1r halfway through
 the span) is still faulty and V010 (past the x̂ wear bound) still worn — on those two valves of
-the demo plant alone, with the demo's own data (``run_demo(valves=…)``), not the whole demo."""
+the demo plant alone, with the demo's own data (``run_demo(valves=…)``), not the whole demo, and
+its report without pictures (``detail=0``: the report's own tests draw them)."""
 
 from __future__ import annotations
 
@@ -11,10 +12,13 @@ from flows.common.warehouse_db import connect, query_frame
 
 
 @pytest.mark.slow
-def test_demo_ranks_v012_faulty_and_v010_worn(tmp_path):
-    from flows.demo import run_demo
+def test_demo_ranks_v012_faulty_and_v010_worn(tmp_path, monkeypatch):
+    import functools
 
-    run_demo(tmp_path, show_progress=False, valves=("V010", "V012"))
+    import flows.demo
+
+    monkeypatch.setattr(flows.demo, "run_report", functools.partial(flows.demo.run_report, detail=0))
+    flows.demo.run_demo(tmp_path, show_progress=False, valves=("V010", "V012"))
     with connect(tmp_path) as con:
         cond = query_frame(con, "SELECT valve_id, edge, state, leak_scale, leak_scale_baseline FROM valve_condition")
         base = query_frame(con, "SELECT valve_id, edge, source, leak_scale, leak_scale_ci_low FROM baselines")
