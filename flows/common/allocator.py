@@ -12,7 +12,7 @@ after ``free``, ready for the next chunk.
 The price: the process keeps its high-water mark of heap memory until it exits, which a batch
 run (``valvemon monitor``, a backfill worker) reaches anyway. polars allocates with its own
 allocator (jemalloc), which :func:`retain_polars_memory` asks the same before polars is imported
-(the ``valvemon monitor`` command does). Elsewhere than on glibc :func:`retain_freed_memory` does
+(the ``valvemon monitor`` and ``valvemon ingest`` commands do). Elsewhere than on glibc :func:`retain_freed_memory` does
 nothing.
 """
 
