@@ -77,6 +77,23 @@ def step_filter(f: np.ndarray, w: int) -> np.ndarray:
     return out
 
 
+@lru_cache(maxsize=8)
+def _kink_kernel(w: int) -> tuple[float, ...]:
+    t = np.arange(-w, w + 1, dtype=float)
+    A = np.column_stack([np.ones_like(t), t, np.maximum(t, 0.0)])
+    return tuple(float(v) for v in np.linalg.pinv(A)[2])
+
+
+def _kink_filter(f: np.ndarray, w: int) -> np.ndarray:
+    """Change of slope [per sample] at each sample of ``f`` between a straight line over ±w samples
+    and the same bent at the sample (NaN within w of the ends or of a NaN)."""
+    k = np.array(_kink_kernel(int(w)))
+    out = np.full(f.shape, np.nan)
+    if f.size >= 2 * w + 1:
+        out[w:-w] = np.convolve(f, k[::-1], mode="valid")
+    return out
+
+
 def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
     """(start, stop) of the True runs of a boolean array."""
     m = np.r_[False, mask, False].astype(np.int8)
@@ -121,15 +138,23 @@ class LoadEstimate:
     knot_samples: int = 0
     """Knot spacing of the piecewise-linear load within segments (samples); 0: one constant per
     segment (module docstring, step 3)."""
+    corners: tuple = ()
+    """Per segment, the knots (sample positions) of its piecewise-linear load: its first and last
+    valid sample and the ramps' corners found between them (:func:`ramp_knots`); empty: the
+    regular grid of ``knot_samples``."""
 
     def knots(self, s: int) -> np.ndarray:
         """Knots (sample positions) of segment ``s``'s piecewise-linear load; empty: a constant."""
+        if not self.knot_samples:
+            return np.zeros(0)
+        if self.corners:
+            return self.corners[s]
         return segment_knots(self.valid, self.segment, s, self.knot_samples)
 
 
-    def with_steps(self, steps: np.ndarray, f_hat: np.ndarray, motion: tuple | None = None) -> "LoadEstimate":
+    def with_steps(self, steps: np.ndarray, f_hat: np.ndarray, settings: DiscrepancySettings, motion: tuple | None = None) -> "LoadEstimate":
         """The same estimate with the steps moved to ``steps`` (same count, increasing) and the
-        levels (and a piecewise-linear load, with the ``motion`` columns of
+        levels (and a piecewise-linear load on its ramps' corners, with the ``motion`` columns of
         :func:`piecewise_linear_load`) re-estimated from ``f_hat``."""
         steps = np.asarray(steps, dtype=np.int64)
         segment = np.zeros(self.segment.size, dtype=np.int64)
@@ -137,9 +162,11 @@ class LoadEstimate:
             segment[s:] += 1
         levels = segment_levels(f_hat, self.valid, segment, len(steps) + 1)
         load = levels[segment]
+        corners = ()
         if self.knot_samples:
-            load = piecewise_linear_load(f_hat, self.valid, segment, len(steps) + 1, self.knot_samples, levels, motion)
-        return LoadEstimate(segment, steps, levels, load, self.brackets, self.valid, self.usable, self.hold_until, self.knot_samples)
+            corners = tuple(ramp_knots(f_hat, self.valid, segment, len(steps) + 1, self.knot_samples, settings, motion))
+            load = piecewise_linear_load(f_hat, self.valid, segment, len(steps) + 1, list(corners), levels, motion)
+        return LoadEstimate(segment, steps, levels, load, self.brackets, self.valid, self.usable, self.hold_until, self.knot_samples, corners)
 
     def with_added_step(self, k: int, guard: int) -> "LoadEstimate":
         """The same estimate with one more step at sample ``k`` (found while moving), the samples
@@ -154,7 +181,14 @@ class LoadEstimate:
         away = np.ones(self.segment.size, dtype=bool)
         away[max(0, k - guard):k + guard] = False
         brackets = np.insert(self.brackets, i, (-1, -1), axis=0)
-        return LoadEstimate(segment, steps, levels, self.load, brackets, self.valid & away, self.usable & away, self.hold_until, self.knot_samples)
+        valid = self.valid & away
+        corners = self.corners
+        if corners:  # the split segment's knots: its corners on either side, between its new ends
+            kn = corners[i]
+            ends = [np.flatnonzero(valid & (segment == s)) for s in (i, i + 1)]
+            halves = tuple(np.unique(np.r_[e[0], kn[(kn > e[0]) & (kn < e[-1])], e[-1]]) if e.size > 1 else np.zeros(0) for e in ends)
+            corners = corners[:i] + halves + corners[i + 1:]
+        return LoadEstimate(segment, steps, levels, self.load, brackets, valid, self.usable & away, self.hold_until, self.knot_samples, corners)
 
 
 def segment_knots(valid: np.ndarray, segment: np.ndarray, s: int, knot_samples: int) -> np.ndarray:
@@ -191,11 +225,15 @@ SMOOTHING = 1e-3
 weight): it only bridges knots without valid samples (a standstill) linearly."""
 
 
-def _ramp_fit(f_hat, valid, segment, n_segments, knot_samples, motion):
-    """Least squares of ``f_hat`` over the valid samples on the segments' load (constant per
-    segment for ``knot_samples`` 0, else piecewise linear) and the ``motion`` columns; returns
-    (load at every sample or None where a segment has no knots, RMS residual, coefficients of the
-    load columns per segment)."""
+def _grid_knots(valid, segment, n_segments, knot_samples) -> list[np.ndarray]:
+    """Each segment's regular knots (:func:`segment_knots`; empty for ``knot_samples`` 0)."""
+    return [segment_knots(valid, segment, s, knot_samples) for s in range(n_segments)]
+
+
+def _ramp_fit(f_hat, valid, segment, knots: list[np.ndarray], motion):
+    """Least squares of ``f_hat`` over the valid samples on the segments' load (piecewise linear on
+    each segment's ``knots``, a constant where they are empty) and the ``motion`` columns; returns
+    (load at every sample, RMS residual, the motion columns' coefficients)."""
     n = f_hat.size
     m = valid & np.isfinite(f_hat)
     if motion is not None:
@@ -204,8 +242,7 @@ def _ramp_fit(f_hat, valid, segment, n_segments, knot_samples, motion):
     idx = np.flatnonzero(m)
     cols, spans = [], []
     off = 0
-    for s in range(n_segments):
-        kn = segment_knots(valid, segment, s, knot_samples)
+    for s, kn in enumerate(knots):
         if kn.size == 0:
             kn = np.zeros(1)
         cols.append(hat_basis(kn, idx) * (segment[idx] == s)[:, None])
@@ -230,16 +267,60 @@ def _ramp_fit(f_hat, valid, segment, n_segments, knot_samples, motion):
     for s, (o, kn) in enumerate(spans):
         sel = segment == s
         load[sel] = hat_basis(kn, np.flatnonzero(sel)) @ c[o:o + kn.size] if kn.size > 1 else c[o]
-    return load, rms, c[:k]
+    return load, rms, c[k:]
 
 
-def piecewise_linear_load(f_hat: np.ndarray, valid: np.ndarray, segment: np.ndarray, n_segments: int, knot_samples: int, levels: np.ndarray,
+def ramp_knots(f_hat: np.ndarray, valid: np.ndarray, segment: np.ndarray, n_segments: int, knot_samples: int, settings: DiscrepancySettings,
+               motion: tuple | None = None) -> list[np.ndarray]:
+    """Per segment, the knots of a piecewise-linear load that bends only at the ramps' corners:
+    its first and last valid sample and the corners found between them.
+
+    1. The load on the regular grid of ``knot_samples`` jointly with the ``motion`` columns gives
+       the friction and mass mismatch (a grid that coarse cannot follow them); that part is taken
+       off ``f_hat``.
+    2. The rest is fitted piecewise linear on a fine grid (``settings.corner_grid_s``), which
+       follows a ramp's corner within a few samples. A corner is a change of that fit's slope
+       summed over ±2 fine knots (a corner between two knots bends both), a local maximum of its
+       magnitude, at least ``settings.corner_min_n_s`` and ``settings.corner_sigmas`` robust σ of
+       those sums; it sits at the centroid of the slope changes around it."""
+    k = knot_samples
+    motion_part = 0.0
+    if motion is not None:
+        _, _, cm = _ramp_fit(f_hat, valid, segment, _grid_knots(valid, segment, n_segments, k), motion)
+        mcols = np.column_stack(motion)
+        motion_part = np.where(np.all(np.isfinite(mcols), axis=1), mcols @ cm, 0.0)
+    W = max(2, int(round(settings.corner_half_width_s * k / settings.load_knot_s)))
+    dt = settings.load_knot_s / k
+    rest = np.where(valid, f_hat - motion_part, np.nan)
+    kink = _kink_filter(rest, W) / dt  # slope change at every sample [N/s]
+    ok = np.isfinite(kink)
+    sig = 1.4826 * float(np.median(np.abs(kink[ok] - np.median(kink[ok])))) if ok.sum() > 10 else 0.0
+    thr = max(settings.corner_min_n_s, settings.corner_sigmas * sig)
+    ak = np.where(ok, np.abs(kink), 0.0)
+    out = []
+    for s in range(n_segments):
+        idx = np.flatnonzero(valid & (segment == s))
+        if idx.size < 2:
+            out.append(np.zeros(0))
+            continue
+        # the load bends where the cylinder stood still (unobserved): knots at the ends of every gap
+        # of the valid samples longer than the kink filter
+        gap = np.flatnonzero(np.diff(idx) > 1)
+        corners = np.r_[idx[gap], idx[gap + 1]].tolist()
+        for j in idx[ak[idx] > thr]:
+            if ak[j] >= ak[max(0, j - W):j + W + 1].max() and not (ak[max(0, j - W):j] == ak[j]).any():
+                corners.append(int(j))
+        out.append(np.unique(np.r_[idx[0], [c for c in corners if idx[0] < c < idx[-1]], idx[-1]]).astype(float))
+    return out
+
+
+def piecewise_linear_load(f_hat: np.ndarray, valid: np.ndarray, segment: np.ndarray, n_segments: int, knots: list[np.ndarray], levels: np.ndarray,
                           motion: tuple | None = None) -> np.ndarray:
-    """The load at every sample, piecewise linear within segments (:func:`segment_knots`), fitted
+    """The load at every sample, piecewise linear within segments on their ``knots``, fitted
     to ``f_hat`` [N] over the valid samples jointly with the ``motion`` columns (velocity and
     acceleration, whose coefficients are a friction and mass mismatch, not load); a segment
     without valid samples keeps its ``levels`` value."""
-    load, _, _ = _ramp_fit(f_hat, valid, segment, n_segments, knot_samples, motion)
+    load, _, _ = _ramp_fit(f_hat, valid, segment, knots, motion)
     for s in range(n_segments):
         if not np.any(valid[segment == s]):
             load[segment == s] = levels[s]
@@ -248,14 +329,14 @@ def piecewise_linear_load(f_hat: np.ndarray, valid: np.ndarray, segment: np.ndar
 
 def follows_ramps(f_hat: np.ndarray, valid: np.ndarray, segment: np.ndarray, n_segments: int, knot_samples: int, settings: DiscrepancySettings,
                   motion: tuple | None = None) -> bool:
-    """Does the load vary within its segments? The piecewise-linear fit (jointly with the
-    ``motion`` columns) leaves at most 1/``settings.ramp_ratio`` of the residual RMS of one
-    constant per segment (jointly with the same columns), and that is above
-    ``settings.ramp_min_n``."""
+    """Does the load vary within its segments? The piecewise-linear fit on the regular grid of
+    ``knot_samples`` (jointly with the ``motion`` columns) leaves at most 1/``settings.ramp_ratio``
+    of the residual RMS of one constant per segment (jointly with the same columns), and that is
+    above ``settings.ramp_min_n``."""
     if knot_samples <= 0:
         return False
-    _, rms_const, _ = _ramp_fit(f_hat, valid, segment, n_segments, 0, motion)
-    _, rms_ramp, _ = _ramp_fit(f_hat, valid, segment, n_segments, knot_samples, motion)
+    _, rms_const, _ = _ramp_fit(f_hat, valid, segment, _grid_knots(valid, segment, n_segments, 0), motion)
+    _, rms_ramp, _ = _ramp_fit(f_hat, valid, segment, _grid_knots(valid, segment, n_segments, knot_samples), motion)
     return rms_const > settings.ramp_min_n and rms_ramp * settings.ramp_ratio <= rms_const
 
 
@@ -424,4 +505,5 @@ def estimate_load(f_hat: np.ndarray, v: np.ndarray, settings: DiscrepancySetting
     motion = (v, accel)
     if not follows_ramps(f_hat, valid, segment, len(steps_arr) + 1, k, settings, motion):
         return est
-    return replace(est, knot_samples=k, load=piecewise_linear_load(f_hat, valid, segment, len(steps_arr) + 1, k, levels, motion))
+    corners = ramp_knots(f_hat, valid, segment, len(steps_arr) + 1, k, settings, motion)
+    return replace(est, knot_samples=k, corners=tuple(corners), load=piecewise_linear_load(f_hat, valid, segment, len(steps_arr) + 1, corners, levels, motion))

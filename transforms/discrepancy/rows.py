@@ -221,7 +221,7 @@ def _refine_rest_steps(rec: Record, load: LoadEstimate, f_hat: np.ndarray, plant
             if err < best_err:
                 best, best_err = int(c), err
         steps[i] = best
-    return load.with_steps(steps, f_hat, _load_motion(rec, settings))
+    return load.with_steps(steps, f_hat, settings, _load_motion(rec, settings))
 
 
 # --- step 2: regression data ---------------------------------------------------------------
@@ -345,9 +345,10 @@ def _replay_record(p: _Prepared, plant, condition, effects, settings) -> dict[st
     hyd = replay(*args, starts, states, condition=condition, effects=effects, drive=DRIVE_HYDRAULIC, given=rec.raw["X"])
     _, p1_rec, p2_rec = true_signals(x_src, rec.raw["p1"], rec.raw["p2"], effects)
     given_p = np.vstack([np.where(np.isfinite(p1_true), p1_true, p1_rec), np.where(np.isfinite(p2_true), p2_true, p2_rec)])
-    # the mechanical replay restarts every mechanical_segment_s and where a move begins: while the
-    # cylinder sticks the load does not show, so when it breaks away is not the motion's to judge
-    moving = np.abs(v_all) > settings.v_standstill_m_s
+    # the mechanical replay restarts every mechanical_segment_s and where a move leaves the
+    # breakaway (|v_X| rises past v_move_m_s): while the cylinder sticks or creeps the load does not
+    # show, so when and how it breaks away is not the motion's to judge; X is judged at speed
+    moving = np.abs(v_all) > settings.v_move_m_s
     begins = np.flatnonzero(moving[1:] & ~moving[:-1]) + 1
     mstarts = np.union1d(np.arange(h, n - h - 1, max(2, int(round(settings.mechanical_segment_s / rec.dt)))), begins[(begins > h) & (begins < n - h - 1)])
     vm = v_all[mstarts]
@@ -359,7 +360,7 @@ def _replay_record(p: _Prepared, plant, condition, effects, settings) -> dict[st
            "p1_hydraulic": np.asarray(p1h, float).copy(), "p2_hydraulic": np.asarray(p2h, float).copy(), "X_mechanical": mech.X_m.copy()}
     for k in out:
         out[k][n - h:] = np.nan  # the record's tail has no Savitzky–Golay regions
-    out["X_mechanical"][~moving] = np.nan  # judged on moves only (above)
+    out["X_mechanical"][~moving] = np.nan  # judged at speed only (above)
     return out
 
 

@@ -65,6 +65,13 @@ class DiscrepancySettings:
         Knot spacing of the piecewise-linear load where the load ramps within segments
         (:mod:`transforms.discrepancy.load`, step 3): a rolling force reaches a new level over
         0.1–0.4 s. [s]
+    corner_half_width_s : float
+        Half-width of the filter that finds the ramps' corners: the slope change between a
+        straight line and one bent at the sample, fitted over ±this
+        (:func:`transforms.discrepancy.load.ramp_knots`). [s]
+    corner_min_n_s, corner_sigmas : float
+        A corner is a slope change of the load of at least ``corner_min_n_s`` and
+        ``corner_sigmas`` robust σ of that filter's output. [N/s], [–]
     ramp_ratio, ramp_min_n : float
         The piecewise-linear load is used where it leaves at most 1/``ramp_ratio`` of the
         residual RMS of one constant per segment, and that RMS is above ``ramp_min_n``. [–], [N]
@@ -111,6 +118,9 @@ class DiscrepancySettings:
     step_threshold_sigmas: float = 8.0
     step_guard_samples: int = 40
     load_knot_s: float = 0.1
+    corner_half_width_s: float = 0.05
+    corner_min_n_s: float = 5000.0
+    corner_sigmas: float = 6.0
     ramp_ratio: float = 3.0
     ramp_min_n: float = 250.0
     replay_segment_s: float = 2.5
