@@ -165,7 +165,7 @@ class LoadEstimate:
         corners = ()
         if self.knot_samples:
             corners = tuple(ramp_knots(f_hat, self.valid, segment, len(steps) + 1, self.knot_samples, settings, motion))
-            load = piecewise_linear_load(f_hat, self.valid, segment, len(steps) + 1, list(corners), levels, motion)
+            load = piecewise_linear_load(f_hat, self.usable, segment, len(steps) + 1, list(corners), levels, motion)
         return LoadEstimate(segment, steps, levels, load, self.brackets, self.valid, self.usable, self.hold_until, self.knot_samples, corners)
 
     def with_added_step(self, k: int, guard: int) -> "LoadEstimate":
@@ -506,4 +506,4 @@ def estimate_load(f_hat: np.ndarray, v: np.ndarray, settings: DiscrepancySetting
     if not follows_ramps(f_hat, valid, segment, len(steps_arr) + 1, k, settings, motion):
         return est
     corners = ramp_knots(f_hat, valid, segment, len(steps_arr) + 1, k, settings, motion)
-    return replace(est, knot_samples=k, corners=tuple(corners), load=piecewise_linear_load(f_hat, valid, segment, len(steps_arr) + 1, corners, levels, motion))
+    return replace(est, knot_samples=k, corners=tuple(corners), load=piecewise_linear_load(f_hat, usable, segment, len(steps_arr) + 1, corners, levels, motion))
