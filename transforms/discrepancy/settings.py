@@ -68,7 +68,7 @@ class DiscrepancySettings:
     corner_half_width_s : float
         Half-width of the filter that finds the ramps' corners: the slope change between a
         straight line and one bent at the sample, fitted over ±this
-        (:func:`transforms.discrepancy.load.ramp_knots`). [s]
+        (:func:`transforms.discrepancy.load.ramp_load`). [s]
     corner_min_n_s, corner_sigmas : float
         A corner is a slope change of the load of at least ``corner_min_n_s`` and
         ``corner_sigmas`` robust σ of that filter's output. [N/s], [–]
@@ -119,8 +119,8 @@ class DiscrepancySettings:
     step_guard_samples: int = 40
     load_knot_s: float = 0.1
     corner_half_width_s: float = 0.05
-    corner_min_n_s: float = 5000.0
-    corner_sigmas: float = 6.0
+    corner_min_n_s: float = 3000.0
+    corner_sigmas: float = 4.0
     ramp_ratio: float = 3.0
     ramp_min_n: float = 250.0
     replay_segment_s: float = 2.5
