@@ -29,8 +29,9 @@ def test_clean_reference_valve_replays_at_the_noise_floor_and_is_none():
     d = _diagnose(None)
     assert d.pressure_delay_samples == 2  # 1 ms transmitter lag + one sample of skew
     assert d.split_gaps[0]["hydraulic"] <= 2.0 * d.noise_floors["hydraulic"], (d.split_gaps, d.noise_floors)
-    # X on the recorded pressures: 0.16 mm with the ramping load followed, 2-4 mm with one constant per segment
-    assert d.split_gaps[0]["mechanical"] < 0.3, d.split_gaps
+    # X on the recorded pressures, at speed: ~0.02 mm with the load on the ramps' corners (the true load: 0.014 mm),
+    # 0.16 mm with a load on a 0.1 s grid, 2-4 mm with one constant per segment
+    assert d.split_gaps[0]["mechanical"] < 0.05, d.split_gaps
     assert d.verdict.verdict == "none", d.verdict.reason
 
 

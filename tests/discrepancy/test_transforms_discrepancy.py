@@ -144,6 +144,16 @@ def test_load_follows_ramps_and_keeps_mass_and_friction_apart():
     kn = est.knots(int(group[0]))
     pwl = np.where(group == group[0], np.interp(rows, kn, np.cos(np.arange(kn.size))), 0.0)  # piecewise linear on its knots
     assert np.max(np.abs(project_out(pwl, proj))) < 1e-9
+    # a step added inside a segment (the calibration's split) gives each side the corners on its side, between its new ends
+    g = int(np.argmax([k.size for k in est.corners]))
+    kn = est.knots(g)
+    k = int((kn[0] + kn[-1]) / 2)
+    split = est.with_added_step(k, s.step_guard_samples)
+    for side in (g, g + 1):
+        idx = np.flatnonzero(split.valid & (split.segment == side))
+        kside = split.knots(side)
+        assert kside[0] == idx[0] and kside[-1] == idx[-1], (kside, idx[[0, -1]])
+        assert np.all(np.isin(kside[1:-1], kn)) and np.all((kside[1:-1] < k) if side == g else (kside[1:-1] > k))
 
 
 def test_demean_by_group():
