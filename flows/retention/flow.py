@@ -16,9 +16,9 @@ killed at any point leaves a record of what it was removing, and the next run co
   deleted; done. Killed before the rename, the partition is whole and the intent is withdrawn
   (nothing was removed; the run decides the partition again); after it, the hidden folder is
   deleted and the intent completed.
-* **thin**: intent; each file of the partition is streamed batch by batch (memory holds one
-  batch, never a day) and replaced atomically by its kept rows
-  (:func:`flows.common.lake.write_partition_pieces`); done. Killed in between, some files are
+* **thin**: intent; each file of the partition is replaced atomically by its kept rows, read
+  range by range (:func:`count_kept` finds them as row ranges; memory holds one range, never a
+  day) and written with :func:`flows.common.lake.write_partition_pieces`; done. Killed in between, some files are
   thinned and some not, never a mix within a file; the next run thins the partition again
   (thinning a thinned file keeps it as it is) and completes the intent, whose ``rows_before``
   is the partition's before the first run touched it.
