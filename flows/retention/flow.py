@@ -272,8 +272,12 @@ def count_kept(folder: Path, scan: PartitionScan, keep_s: float) -> dict[Path, F
         spans = row_group_spans(f)
         offsets = np.r_[0, np.cumsum([n for n, _, _ in spans])]
         before = scan.rows_kept
-        ranges = [scan.count_kept(batch[TIME].to_physical().to_numpy(), keep_s) + offsets[g]
-                  for g in kept_row_groups(spans, scan.firsts, keep_s) for batch in iter_file_batches(f, [TIME], row_groups=[g])]  # fmt: skip
+        ranges = []
+        for g in kept_row_groups(spans, scan.firsts, keep_s):
+            at = int(offsets[g])  # the file's row of the batch's first (a large row group of an older file comes in batches)
+            for batch in iter_file_batches(f, [TIME], row_groups=[g]):
+                ranges.append(scan.count_kept(batch[TIME].to_physical().to_numpy(), keep_s) + at)
+                at += batch.height
         per_file[f] = FileThinning(int(offsets[-1]), scan.rows_kept - before, np.concatenate(ranges) if ranges else np.zeros((0, 2), np.int64))
     return per_file
 
