@@ -223,6 +223,7 @@ def test_too_little_data_is_unknown(wh):
     wh.add_valve("U1")
     wh.add_fits("U1", "s1", HOURS[:5], 1.0, 0.2, 0.1)  # 5 ok windows, 10 needed
     wh.add_fits("U1", "1r", HOURS[:30], 1.0, 0.2, 0.1, status="too_few_points")
+    materialise_views(wh.con, ("valve_condition", "fleet_ranking"))  # once, as the report does
     c = {e: wh.condition("U1", e) for e in EDGES}
     assert [c[e]["state"] for e in EDGES] == ["unknown"] * 4
     assert "too little data: 5" in c["s1"]["reason"]
@@ -273,6 +274,7 @@ def test_configured_bounds_are_used(wh):
     wh.add_valve("K2", alpha_wear_high=1.10)
     for v in ("K1", "K2"):
         wh.add_fits(v, "s1", HOURS, 1.15, 0.2, 0.1)
+    materialise_views(wh.con, ("valve_condition",))  # once, as the report does
     assert wh.condition("K1", "s1")["state"] == "healthy"
     assert wh.condition("K2", "s1")["state"] == "worn"
 
