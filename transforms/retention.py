@@ -110,9 +110,8 @@ def hour_firsts(t_us: np.ndarray, *, sorted_: bool | None = None) -> dict[int, i
     if sorted_ if sorted_ is not None else is_sorted(t):  # the lake's files are time-sorted: a binary search per hour
         hours = np.arange(t[0] // HOUR_US, t[-1] // HOUR_US + 1)
         if hours.size <= t.size:
-            at = np.searchsorted(t, hours * HOUR_US, side="left")
-            have = at < t.size
-            have[have] = t[at[have]] // HOUR_US == hours[have]
+            at = np.searchsorted(t, hours * HOUR_US, side="left")  # < t.size: every hour starts by t[-1]
+            have = t[at] // HOUR_US == hours
             return dict(zip(hours[have].tolist(), t[at[have]].tolist()))
         hours = t // HOUR_US
         at = np.r_[0, np.flatnonzero(np.diff(hours)) + 1]

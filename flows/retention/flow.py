@@ -282,7 +282,7 @@ def count_kept(folder: Path, scan: PartitionScan, keep_s: float) -> dict[Path, F
     return per_file
 
 
-def thin_partition(scan: PartitionScan, per_file: dict[Path, FileThinning], keep_s: float) -> int:
+def thin_partition(per_file: dict[Path, FileThinning]) -> int:
     """Replace each file of the partition by its kept rows, read range by range (only the pages
     holding them are decoded; memory holds one range and one row group of kept rows), atomically
     per file; a file that keeps all its rows is left alone, one that keeps none is deleted.
@@ -395,7 +395,7 @@ def complete_interrupted(warehouse: Path, spec: RetentionSpec, as_of: date, valv
         with partition_lock(warehouse, folder / PART_NAME):
             scan = scan_partition(folder, (np.zeros(0, np.int64), np.zeros(0, np.int64)), True)
             per_file = count_kept(folder, scan, spec.thin_keep_s_per_hour)
-            complete(warehouse, action_id, thin_partition(scan, per_file, spec.thin_keep_s_per_hour), partition_bytes(folder))
+            complete(warehouse, action_id, thin_partition(per_file), partition_bytes(folder))
     return begun
 
 
@@ -508,7 +508,7 @@ def _one_partition(
         if not dry_run:
             action_id = uuid.uuid4().hex
             record(warehouse, _log_row(action_id, o, spec, as_of, INTENT))  # rows after exact, bytes after estimated
-            o.rows_after = thin_partition(scan, per_file, spec.thin_keep_s_per_hour)
+            o.rows_after = thin_partition(per_file)
             o.bytes_after = partition_bytes(folder)
             complete(warehouse, action_id, o.rows_after, o.bytes_after)
     return o
