@@ -51,7 +51,7 @@ from model.effects import EffectSpec
 from transforms.discrepancy.gaps import GAP_SCALES, NOISE_GAP, SPLIT_GAPS
 from transforms.discrepancy.nuisance import NUISANCE_UNITS
 
-__all__ = ["GAP_SHRINK", "SEPARATE_BY", "Verdict", "Z_AMBIGUOUS", "Z_NAMED", "acting_gap", "confirmed", "nuisance_verdict", "unexplained"]
+__all__ = ["GAP_SHRINK", "SEPARATE_BY", "Verdict", "Z_AMBIGUOUS", "Z_NAMED", "acting_gap", "confirmed", "lagging_transmitter", "nuisance_verdict", "unexplained"]
 
 Z_AMBIGUOUS = 3.0
 """Prior σ (along an effect's nuisance pattern) above which the nuisance reading is reported as doubtful."""
@@ -117,6 +117,24 @@ def unexplained(spec: EffectSpec, value: float, before: float, after: float, kin
                                 f"but adding it leaves the {kind} gap at {before:.3g} → {after:.3g} (needs ≥ {GAP_SHRINK:g}× or ≤ "
                                 f"{FLOOR_FACTOR:g}× the noise floor {floor:.2g})"),
         gap_before=before, gap_after=after, where=where, gap_kind=kind, floor=floor, **kw)
+
+
+def lagging_transmitter(verdict: "Verdict | None", named: bool, finding: str, gap: float, floor: float) -> "Verdict | None":
+    """The verdict when a chamber pressure transmitter lags the others (``finding``:
+    :meth:`transforms.discrepancy.alignment.PressureDelays.finding`). The records were aligned for
+    it, so the library effects were judged as on a healthy transmitter; where they explain nothing
+    (``none``, or no verdict and nothing ``named`` of the model taken as exact) the verdict is
+    ``unexplained`` with the lag as where the data disagree (``gap``: the hydraulic gap of the
+    base model on the aligned records, ``floor`` its noise floor); otherwise the lag is added to
+    the verdict's reason."""
+    if (verdict is None and not named) or (verdict is not None and verdict.verdict == "none"):
+        kw = dict(nuisances=verdict.nuisances, scores=verdict.scores) if verdict is not None else {}
+        return Verdict("unexplained", MAX_CONFIDENCE, None, float("nan"), separate_by="the transmitter's step response, or a reference transmitter on the same port",
+                       reason=f"the data disagree with the model in a way no library effect explains: {finding}", gap_before=gap, gap_after=gap,
+                       where=finding, gap_kind="hydraulic", floor=floor, **kw)
+    if verdict is not None:
+        verdict.reason += f"; besides, {finding}"
+    return verdict
 
 
 SEPARATE_BY: dict[str, str] = {
