@@ -58,7 +58,7 @@ from transforms.selection import (
     selection_stats,
     stats_frame,
 )
-from transforms.windows import assign_windows, evaluated_rows, infer_sample_period_s, window_arrays, window_table
+from transforms.windows import UnsortedTimes, WindowLayout, assign_windows, infer_sample_period_s, window_layout, window_table
 
 __all__ = [
     "LAKE_COLUMNS",
@@ -224,33 +224,41 @@ def _float64(col: pl.Series) -> np.ndarray:
     return col.to_numpy()
 
 
-def _valve_numba(lake_v, valve_id, p, leakage, with_ratio, want_points):
-    lake_v = _time_sorted(lake_v)
+def _layout(lake_v: pl.DataFrame, p: MonitorParams) -> tuple[pl.DataFrame, float, np.ndarray, WindowLayout]:
+    """The valve's rows (sorted by time if they were not), sample period, time stamps (µs) and
+    :func:`transforms.windows.window_layout` (which checks the order in its pass)."""
     dt = p.sample_period_s or infer_sample_period_s(lake_v)
-    n = lake_v.height
-    ts = lake_v["timestamp_utc"].cast(_UTC_US).to_physical().to_numpy()
-    lake_win, valid, n_windows = window_arrays(
-        ts, sample_period_s=dt, gap_limit_s=p.gap_limit_periods * dt, step_tolerance=p.step_tolerance,
-        half_window=p.half_window, window_s=p.window_s,
-    )
-    first = np.concatenate([[0], np.flatnonzero(lake_win[1:] != lake_win[:-1]) + 1]) if n else np.zeros(0, dtype=np.int64)
-    last = np.append(first[1:] - 1, n - 1) if n else first
+    for _ in range(2):
+        ts = lake_v["timestamp_utc"].cast(_UTC_US).to_physical().to_numpy()
+        try:
+            lay = window_layout(ts, sample_period_s=dt, gap_limit_s=p.gap_limit_periods * dt, step_tolerance=p.step_tolerance,
+                                half_window=p.half_window, window_s=p.window_s, window_rows=p.window_rows)  # fmt: skip
+            return lake_v, dt, ts, lay
+        except UnsortedTimes:
+            lake_v = lake_v.sort("timestamp_utc", maintain_order=True)
+    raise AssertionError("unreachable: sorted rows")
+
+
+def _valve_numba(lake_v, valve_id, p, leakage, with_ratio, want_points):
+    lake_v, dt, ts, lay = _layout(lake_v, p)
+    n_windows, first = lay.n_windows, lay.first
+    last = first + lay.count - 1
     windows = pl.DataFrame(
         {
             "valve_id": pl.repeat(valve_id, n_windows, eager=True, dtype=pl.Utf8),
             "window_id": pl.Series(np.arange(n_windows), dtype=pl.UInt32),
             "window_start": pl.Series(ts[first]).cast(_UTC_US),
             "window_end": pl.Series(ts[last]).cast(_UTC_US),
-            "n_samples": pl.Series(last - first + 1, dtype=pl.Int64),
+            "n_samples": pl.Series(lay.count, dtype=pl.Int64),
         }
     )
     # the signals as float arrays (float32 from the lake as it is; nulls become NaN), then
-    # Savitzky–Golay as plain weighted sums over the whole column in one compiled pass per
-    # signal; the validity comes from window_arrays and is applied in the selection kernel
+    # Savitzky–Golay as plain weighted sums in one compiled pass per signal; the validity comes
+    # from window_layout and is applied in the selection kernel. A long window is evaluated on
+    # every k-th row (MonitorParams.window_rows): the Savitzky–Golay sums at those rows only,
+    # the other signals gathered there
+    rows = None if lay.every_row else lay.rows
     arrays = {c: _float64(lake_v[c]) for c in _SIGNALS_F64}
-    # a long window is evaluated on every k-th row (MonitorParams.window_rows): the
-    # Savitzky–Golay sums at those rows only, the other signals gathered there
-    rows = evaluated_rows(first, last - first + 1, p.window_rows)
     sg = savgol_arrays if rows is None else partial(savgol_at, rows=rows)
     for column, (smooth_name, deriv_name) in _SG_OUTPUTS.items():
         sm, de = sg(arrays[column], window=p.savgol_window, order=p.savgol_order, sample_period_s=dt,
@@ -258,11 +266,10 @@ def _valve_numba(lake_v, valve_id, p, leakage, with_ratio, want_points):
         if smooth_name is not None:
             arrays[smooth_name] = sm
         arrays[deriv_name] = de
-    win = lake_win
+    win, valid = lay.window, lay.valid
     if rows is not None:
         for c in _GATHERED:
             arrays[c] = arrays[c][rows]
-        win, valid = lake_win[rows], valid[rows]
     codes, flagged, removed, selected, n_evaluated = selection_codes(arrays, win, n_windows, p, valid=valid)
     # the counts are those of the evaluated rows (n_samples too, so removed + selected = n_samples)
     stats = stats_frame(valve_id, windows if rows is None else windows.with_columns(n_samples=n_evaluated), flagged, removed, selected)
@@ -271,11 +278,11 @@ def _valve_numba(lake_v, valve_id, p, leakage, with_ratio, want_points):
         arrays, codes, SELECTED_CODE, selected.sum(axis=0), p, leakage=None if leakage is None else leakage.get(valve_id),
         with_ratio=with_ratio,
     )
-    if rows is not None:
-        idx = rows[idx]  # lake rows of the points
     points = None
     if want_points:
-        pw = lake_win[idx]
+        pw = win[idx]  # windows of the points
+        if rows is not None:
+            idx = rows[idx]  # lake rows of the points
         points = pl.DataFrame(
             {
                 "valve_id": pl.repeat(valve_id, idx.shape[0], eager=True, dtype=pl.Utf8),

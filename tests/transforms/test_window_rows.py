@@ -10,7 +10,7 @@ import synth_valve as sv
 
 from transforms.derivatives import savgol_arrays, savgol_at
 from transforms.monitor import monitor_points
-from transforms.windows import evaluated_rows
+from transforms.windows import window_layout
 
 WINDOW_ROWS = 700
 """The 6 s windows of ``sv.chamber_data`` (6,000 rows) every 8th row."""
@@ -40,10 +40,21 @@ def test_savgol_at_equals_the_full_pass_bit_for_bit(dtype):
 
 
 def test_evaluated_rows_every_kth_row_of_each_long_window():
-    first, count = np.array([0, 100, 120]), np.array([100, 20, 35])
-    assert evaluated_rows(first, count, None) is None
-    assert evaluated_rows(first, count, 100) is None  # every window ≤ 2 × 100 rows long: k = 1
-    np.testing.assert_array_equal(evaluated_rows(first, count, 30), [0, 3, 6, *range(9, 100, 3), *range(100, 120), *range(120, 155)])
+    # windows of 100, 20 and 35 rows at 1 ms (gaps of 10 ms between them)
+    t_us = np.concatenate([np.arange(100), 200 + np.arange(20), 400 + np.arange(35)]) * 1000
+
+    def layout(window_rows):
+        return window_layout(t_us, sample_period_s=1e-3, half_window=10, window_rows=window_rows)
+
+    assert layout(None).every_row and layout(100).every_row  # every window ≤ 2 × 100 rows long: k = 1
+    lay = layout(30)
+    assert not lay.every_row
+    np.testing.assert_array_equal(lay.first, [0, 100, 120])
+    np.testing.assert_array_equal(lay.count, [100, 20, 35])
+    np.testing.assert_array_equal(lay.rows, [0, 3, 6, *range(9, 100, 3), *range(100, 120), *range(120, 155)])
+    every = layout(None)
+    np.testing.assert_array_equal(lay.window, every.window[lay.rows])
+    np.testing.assert_array_equal(lay.valid, every.valid[lay.rows])
 
 
 def test_points_are_those_of_every_row_at_the_evaluated_rows(lake):
