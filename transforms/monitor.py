@@ -39,7 +39,7 @@ from transforms.baseline import (
     recognise_edge_law,
 )
 from transforms.characteristic import Characteristic, scaled_shifted
-from transforms.derivatives import add_savgol, savgol_arrays, savgol_at
+from transforms.derivatives import add_savgol, savgol_arrays, savgol_at, take_rows
 from transforms.fit import fit_arrays, fit_groups, sorted_fits, walk_segment
 from transforms.leakage import closed_leakage, effective_scale, inflation, leak_columns, leak_scale_step
 from transforms.params import EDGES, MonitorParams
@@ -212,16 +212,26 @@ _GATHERED = ("ps_pa", "pr_pa", "x_spool_m", "x_cyl_m")
 """The raw signals steps 3 and Eq. 7 read at the evaluated rows (p1, p2 enter smoothed)."""
 
 
-def _float64(col: pl.Series) -> np.ndarray:
-    """A signal as a float array, nulls as NaN: a float32 lake column stays float32 (no copy;
+def _float_series(col: pl.Series) -> pl.Series:
+    """A signal as a float series, nulls as NaN: a float32 lake column stays float32 (no copy;
     the kernels compute in float64), anything else becomes float64."""
     if col.null_count():
         col = col.cast(pl.Float64).fill_null(float("nan"))
     if col.dtype not in (pl.Float32, pl.Float64):
         col = col.cast(pl.Float64)
-    if col.n_chunks() > 1:  # each chunk as a view, joined in one copy (polars' own rechunk is ~2x slower)
-        return np.concatenate([c.to_numpy() for c in col.get_chunks()])
-    return col.to_numpy()
+    return col
+
+
+def _float_chunks(col: pl.Series) -> list[np.ndarray]:
+    """:func:`_float_series` as its chunks, each a view."""
+    return [c.to_numpy() for c in _float_series(col).get_chunks()]
+
+
+def _float64(col: pl.Series) -> np.ndarray:
+    """:func:`_float_series` as one array: the chunks joined in one copy (polars' own rechunk is
+    ~2x slower), a single chunk as a view."""
+    chunks = _float_chunks(col)
+    return chunks[0] if len(chunks) == 1 else np.concatenate(chunks)
 
 
 def _layout(lake_v: pl.DataFrame, p: MonitorParams) -> tuple[pl.DataFrame, float, np.ndarray, WindowLayout]:
@@ -258,18 +268,20 @@ def _valve_numba(lake_v, valve_id, p, leakage, with_ratio, want_points):
     # every k-th row (MonitorParams.window_rows): the Savitzky–Golay sums at those rows only,
     # the other signals gathered there
     rows = None if lay.every_row else lay.rows
-    arrays = {c: _float64(lake_v[c]) for c in _SIGNALS_F64}
-    sg = savgol_arrays if rows is None else partial(savgol_at, rows=rows)
+    if rows is None:
+        arrays = {c: _float64(lake_v[c]) for c in _SIGNALS_F64}
+        sg = savgol_arrays
+    else:  # the columns' chunks as they are (not joined): read at the rows only
+        chunks = {c: _float_chunks(lake_v[c]) for c in _SIGNALS_F64}
+        arrays = {c: take_rows(chunks[c], rows) for c in _GATHERED}
+        sg = partial(savgol_at, rows=rows)
     for column, (smooth_name, deriv_name) in _SG_OUTPUTS.items():
-        sm, de = sg(arrays[column], window=p.savgol_window, order=p.savgol_order, sample_period_s=dt,
+        sm, de = sg(arrays[column] if rows is None else chunks[column], window=p.savgol_window, order=p.savgol_order, sample_period_s=dt,
                     smooth=smooth_name is not None)  # fmt: skip
         if smooth_name is not None:
             arrays[smooth_name] = sm
         arrays[deriv_name] = de
     win, valid = lay.window, lay.valid
-    if rows is not None:
-        for c in _GATHERED:
-            arrays[c] = arrays[c][rows]
     codes, flagged, removed, selected, n_evaluated = selection_codes(arrays, win, n_windows, p, valid=valid)
     # the counts are those of the evaluated rows (n_samples too, so removed + selected = n_samples)
     stats = stats_frame(valve_id, windows if rows is None else windows.with_columns(n_samples=n_evaluated), flagged, removed, selected)

@@ -8,7 +8,7 @@ import polars as pl
 import pytest
 import synth_valve as sv
 
-from transforms.derivatives import savgol_arrays, savgol_at
+from transforms.derivatives import savgol_arrays, savgol_at, take_rows
 from transforms.monitor import monitor_points
 from transforms.windows import window_layout
 
@@ -37,6 +37,20 @@ def test_savgol_at_equals_the_full_pass_bit_for_bit(dtype):
     sm_at, de_at = savgol_at(x, rows, window=21, order=3, sample_period_s=1e-3)
     np.testing.assert_array_equal(sm_at, sm[rows])
     np.testing.assert_array_equal(de_at, de[rows])
+
+
+@pytest.mark.parametrize("sizes", [[500], [3, 250, 7, 1, 239], [100, 400], [20, 21, 459]])
+def test_savgol_at_over_chunks_equals_the_joined_array_bit_for_bit(sizes):
+    """A column in chunks (row groups, as polars hands them over) is read where it is: the
+    stencils that reach across a chunk's end (or over several short chunks) give the same values."""
+    x = np.random.default_rng(2).normal(size=500).cumsum().astype(np.float32)
+    chunks = np.split(x, np.cumsum(sizes)[:-1])
+    rows = np.unique(np.r_[0:500:3, 5, 9, 10, 11, 99, 100, 101, 489, 490, 499])
+    sm, de = savgol_at(x, rows, window=21, order=3, sample_period_s=1e-3)
+    sm_c, de_c = savgol_at(chunks, rows, window=21, order=3, sample_period_s=1e-3)
+    np.testing.assert_array_equal(sm_c, sm)
+    np.testing.assert_array_equal(de_c, de)
+    np.testing.assert_array_equal(take_rows(chunks, rows), x[rows])
 
 
 def test_evaluated_rows_every_kth_row_of_each_long_window():
