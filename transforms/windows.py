@@ -29,7 +29,7 @@ A frame sorted by ``valve_id, timestamp_utc`` gets
   the neighbouring window, so a window's values depend on its own samples only.
 
 Everything is a column expression (diff, cumulative sum, forward/backward fill; the span of a run
-is a ``min``/``max`` over the run): no Python loop. :func:`window_arrays` does the same for one
+is a ``min``/``max`` over the run): no Python loop. :func:`window_layout` does the same for one
 valve in one compiled pass over the time stamps, with the Savitzky–Golay validity (what the
 monitor's fast path uses; the tests hold the two equal).
 """
@@ -43,7 +43,7 @@ import numpy as np
 import polars as pl
 
 __all__ = [
-    "LONG_RUN_FRACTION", "WINDOW_COLUMNS", "UnsortedTimes", "WindowLayout", "assign_windows", "infer_sample_period_s", "window_arrays", "window_layout",
+    "LONG_RUN_FRACTION", "WINDOW_COLUMNS", "UnsortedTimes", "WindowLayout", "assign_windows", "infer_sample_period_s", "window_layout",
     "window_length_us", "window_starts", "window_table",
 ]  # fmt: skip
 
@@ -168,10 +168,10 @@ def window_starts(t_us: np.ndarray, gap_us: float, window_s: float | None = None
 
 def _gap_rows(t_us: np.ndarray, lo_us: float, hi_us: float, gap_us: float) -> tuple[np.ndarray, np.ndarray]:
     """(rows after a step outside [lo_us, hi_us], rows after a gap) of :func:`_steps_kernel`;
-    ValueError if the time stamps are not sorted."""
+    :class:`UnsortedTimes` if a step is negative and below ``lo_us``."""
     pos, gap, ok = _steps_kernel(t_us, lo_us, hi_us, gap_us)
     if not ok:
-        raise ValueError("time stamps are not sorted")
+        raise UnsortedTimes("time stamps are not sorted")
     return pos, pos[gap]
 
 
@@ -350,27 +350,7 @@ def window_layout(
         raise ValueError("gap_limit_s must exceed the sample period (plus tolerance)")
     period_us = sample_period_s * 1e6
     t_us = np.ascontiguousarray(timestamp_us, dtype=np.int64)
-    try:
-        irregular, gaps = _gap_rows(t_us, period_us * (1.0 - step_tolerance), period_us * (1.0 + step_tolerance), float(gap_limit_s * 1e6))
-    except ValueError:
-        raise UnsortedTimes("time stamps are not sorted") from None
+    irregular, gaps = _gap_rows(t_us, period_us * (1.0 - step_tolerance), period_us * (1.0 + step_tolerance), float(gap_limit_s * 1e6))
     starts = _starts_kernel(t_us, gaps, window_length_us(window_s))
     count, rows, win, valid = _layout_kernel(t_us.shape[0], starts, irregular, int(half_window), int(window_rows or 0))
     return WindowLayout(starts, count, rows, win, valid)
-
-
-def window_arrays(
-    timestamp_us: np.ndarray,
-    *,
-    sample_period_s: float,
-    gap_limit_s: float | None = None,
-    step_tolerance: float = 0.1,
-    half_window: int,
-    window_s: float | None = None,
-) -> tuple[np.ndarray, np.ndarray, int]:
-    """:func:`window_layout` on every row, as ``(window_id, valid, n_windows)``: window ids
-    0 … n_windows − 1 (int64) and, per row, whether a centred stencil of ``2·half_window + 1``
-    samples stays inside one uniform run."""
-    lay = window_layout(timestamp_us, sample_period_s=sample_period_s, gap_limit_s=gap_limit_s, step_tolerance=step_tolerance,
-                        half_window=half_window, window_s=window_s)  # fmt: skip
-    return lay.window, lay.valid, lay.n_windows
