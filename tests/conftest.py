@@ -10,9 +10,11 @@ os.environ.setdefault("PREFECT_LOGGING_TO_API_ENABLED", "false")
 import pytest  # noqa: E402
 
 
+@pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(items):
     """Every test that starts the Prefect API runs on one xdist worker (``--dist loadgroup``), so
-    a run of the whole suite starts that server once, not once per worker."""
+    a run of the whole suite starts that server once, not once per worker. ``tryfirst``: xdist
+    reads the group marks in its own hook of this name, which must see them."""
     for item in items:
         names = getattr(item, "fixturenames", ())
         callspec = getattr(item, "callspec", None)
