@@ -195,7 +195,8 @@ def run_cell(key: str, magnitude: str, commissioning: bool, seed: int, n_windows
         rel_err = abs(got_value - value) / abs(value - spec.neutral)
     return {
         "effect": key, "magnitude": magnitude, "commissioning": commissioning, "seed": seed, "value": value, "method": method, "family": family, "declared": declared,
-        "plant": plant_source, "pressure_delay_samples": d.pressure_delay_samples,
+        "plant": plant_source, "pressure_delay_samples": d.pressure_delay_samples, "pressure_delays": d.pressure_delays,
+        "lag_finding": d.lag_finding, "reason": d.verdict.reason if d.verdict is not None else "",
         "verdict": verdict, "got": got, "got_value": got_value, "alternatives": alts, "confidence": conf, "outcome": outcome,
         "rel_err": rel_err, "gap_nominal": d.gap_nominal, "gap_before": d.stage_gaps[0], "gap_after": d.stage_gaps[-1],
         "split_before": d.split_gaps[0], "split_after": d.split_gaps[-1], "floors": d.noise_floors,

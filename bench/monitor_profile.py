@@ -38,7 +38,7 @@ PHASES = {
 }
 # inside steps 2–4b: the compiled kernels (the first call of each loads it from numba's cache)
 KERNELS = {
-    "windows": [("transforms.windows", "_window_kernel"), ("transforms.windows", "_evaluated_kernel")],
+    "windows": [("transforms.windows", "_steps_kernel"), ("transforms.windows", "_starts_kernel"), ("transforms.windows", "_layout_kernel")],
     "Savitzky–Golay": [("transforms.derivatives", "_savgol_kernel"), ("transforms.derivatives", "_savgol_at_kernel")],
     "step 3 selection": [("transforms.selection", "_selection_kernel")],
     "Eq. 7 points": [("transforms.points", "_points_kernel")],

@@ -180,6 +180,9 @@ def report(
     valves: Annotated[Optional[list[str]], typer.Option("--valves", help="Show these valves in detail instead (repeat the option).")] = None,
 ) -> None:
     """Refresh the views, write the pictures and the HTML report."""
+    from flows.common.allocator import retain_polars_memory
+
+    retain_polars_memory()  # before polars is imported: the standstill check's lake chunks reuse freed pages
     import flows.report.flow as report_flows
     from flows.common.prefect_run import run_flow
 

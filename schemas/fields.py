@@ -592,7 +592,7 @@ DISCREPANCY_FINDING_FIELDS = DISCREPANCY_FINDING_FIELDS + (
     Field("gap_kind_before", pl.Float64, "", "That gap (RMS on the 1 bar / 1 mm scales) of the model before the effect is added.", ge=0.0, nullable=True),
     Field("gap_kind_after", pl.Float64, "", "... and with it: named needs ≥ 1.5× less, or ≤ 2× gap_kind_floor.", ge=0.0, nullable=True),
     Field("gap_kind_floor", pl.Float64, "", "That gap's noise floor: what the recorded sensor noise alone leaves.", ge=0.0, nullable=True),
-    Field("disagreement", pl.Utf8, "", "unexplained: which equation, signal and operating region disagree, and how much.", nullable=True),
+    Field("disagreement", pl.Utf8, "", "unexplained: which equation, signal and operating region disagree, and how much; with any verdict, a pressure transmitter lagging the others (which, how many ms).", nullable=True),
 )
 
 DISCREPANCY_CANDIDATE_FIELDS: tuple[Field, ...] = _RUN_FIELDS + (

@@ -37,6 +37,8 @@ __all__ = [
     "savgol_exprs",
     "savgol_valid",
     "savgol_weights",
+    "take_range",
+    "take_rows",
 ]
 
 DEFAULT_OUTPUTS: dict[str, tuple[str | None, str | None]] = {
@@ -266,17 +268,74 @@ def _savgol_at_kernel(x, rows, w0, w1, scale1, smooth, deriv, want_smooth):
                 smooth[b0 + r] = acc0[r] if inside else np.nan
 
 
-def savgol_at(x: np.ndarray, rows: np.ndarray, *, window: int, order: int, sample_period_s: float, smooth: bool = True):
-    """:func:`savgol_arrays` evaluated at ``rows`` only (sorted or not; int64 indices into ``x``):
-    (smoothed or None, first derivative), one entry per row, equal bit for bit to the full pass's
-    entries at those rows. What the monitor runs when it evaluates every k-th row of a window."""
+def savgol_at(x, rows: np.ndarray, *, window: int, order: int, sample_period_s: float, smooth: bool = True):
+    """:func:`savgol_arrays` evaluated at ``rows`` only (int64 indices into ``x``): (smoothed or
+    None, first derivative), one entry per row, equal bit for bit to the full pass's entries at
+    those rows. What the monitor runs when it evaluates every k-th row of a window.
+
+    ``x``: an array, or the chunks of one (a sequence of arrays, in order; ``rows`` then sorted):
+    each chunk is read where it is, and only the stencils that reach across a chunk's end are
+    summed over a joined copy of their few samples (a column decoded from Parquet comes in row
+    groups: this spares joining them)."""
     if sample_period_s <= 0:
         raise ValueError("sample_period_s must be > 0")
-    x = _float_array(x)
     rows = np.ascontiguousarray(rows, dtype=np.int64)
     w0 = np.array(_weights(window, order, 0))
     w1 = np.array(_weights(window, order, 1))
     out0 = np.empty(rows.shape[0]) if smooth else np.empty(0)
     out1 = np.empty(rows.shape[0])
-    _savgol_at_kernel(x, rows, w0, w1, 1.0 / sample_period_s, out0, out1, bool(smooth))
+
+    def run(xs, rs, lo, hi):  # the rows rows[lo:hi], at rs in the array xs
+        _savgol_at_kernel(_float_array(xs), rs, w0, w1, 1.0 / sample_period_s, out0[lo:hi] if smooth else out0, out1[lo:hi], bool(smooth))
+
+    chunks = [x] if isinstance(x, np.ndarray) else list(x)
+    if len(chunks) == 1:
+        run(chunks[0], rows, 0, rows.shape[0])
+        return (out0 if smooth else None), out1
+    h = window // 2
+    offsets = np.concatenate([[0], np.cumsum([c.shape[0] for c in chunks])])
+    n = int(offsets[-1])
+    inside = np.zeros(rows.shape[0], dtype=np.bool_)
+    for j, c in enumerate(chunks):
+        # the rows whose stencil stays in chunk j (at the array's own ends the kernel's rule holds)
+        a = offsets[j] + (h if j > 0 else 0)
+        b = offsets[j + 1] - (h if j + 1 < len(chunks) else 0)
+        lo, hi = np.searchsorted(rows, [a, b])
+        if hi > lo:
+            run(c, rows[lo:hi] - offsets[j], lo, hi)
+            inside[lo:hi] = True
+    rest = np.flatnonzero(~inside)
+    # the others in clusters of rows less than a stencil apart, each over a copy of its samples
+    cuts = np.flatnonzero(np.diff(rows[rest]) > 2 * h + 1) + 1
+    for part in np.split(rest, cuts):
+        if part.size:
+            a, b = max(0, int(rows[part[0]]) - h), min(n, int(rows[part[-1]]) + h + 1)
+            lo, hi = int(part[0]), int(part[-1]) + 1  # rest is sorted and the cluster contiguous in rows
+            run(take_range(chunks, offsets, a, b), rows[lo:hi] - a, lo, hi)
     return (out0 if smooth else None), out1
+
+
+def take_range(chunks, offsets: np.ndarray, a: int, b: int) -> np.ndarray:
+    """Rows [a, b) of the array made of ``chunks`` (``offsets``: their first rows and the total), joined."""
+    j0 = int(np.searchsorted(offsets, a, side="right")) - 1
+    parts = []
+    j = j0
+    while j < len(chunks) and offsets[j] < b:
+        parts.append(chunks[j][max(a - offsets[j], 0) : min(b - offsets[j], chunks[j].shape[0])])
+        j += 1
+    return np.concatenate(parts)
+
+
+def take_rows(chunks, rows: np.ndarray) -> np.ndarray:
+    """``x[rows]`` of the array ``x`` made of ``chunks`` (a sequence of arrays; ``rows`` sorted
+    int64), without joining them."""
+    if len(chunks) == 1:
+        return chunks[0][rows]
+    offsets = np.concatenate([[0], np.cumsum([c.shape[0] for c in chunks])])
+    out = np.empty(rows.shape[0], dtype=chunks[0].dtype)
+    bounds = np.searchsorted(rows, offsets)
+    for j, c in enumerate(chunks):
+        lo, hi = bounds[j], bounds[j + 1]
+        if hi > lo:
+            out[lo:hi] = c[rows[lo:hi] - offsets[j]]
+    return out

@@ -39,7 +39,7 @@ from transforms.baseline import (
     recognise_edge_law,
 )
 from transforms.characteristic import Characteristic, scaled_shifted
-from transforms.derivatives import add_savgol, savgol_arrays, savgol_at
+from transforms.derivatives import add_savgol, savgol_arrays, savgol_at, take_rows
 from transforms.fit import fit_arrays, fit_groups, sorted_fits, walk_segment
 from transforms.leakage import closed_leakage, effective_scale, inflation, leak_columns, leak_scale_step
 from transforms.params import EDGES, MonitorParams
@@ -58,7 +58,7 @@ from transforms.selection import (
     selection_stats,
     stats_frame,
 )
-from transforms.windows import assign_windows, evaluated_rows, infer_sample_period_s, window_arrays, window_table
+from transforms.windows import UnsortedTimes, WindowLayout, assign_windows, infer_sample_period_s, window_layout, window_table
 
 __all__ = [
     "LAKE_COLUMNS",
@@ -212,57 +212,76 @@ _GATHERED = ("ps_pa", "pr_pa", "x_spool_m", "x_cyl_m")
 """The raw signals steps 3 and Eq. 7 read at the evaluated rows (p1, p2 enter smoothed)."""
 
 
-def _float64(col: pl.Series) -> np.ndarray:
-    """A signal as a float array, nulls as NaN: a float32 lake column stays float32 (no copy;
+def _float_series(col: pl.Series) -> pl.Series:
+    """A signal as a float series, nulls as NaN: a float32 lake column stays float32 (no copy;
     the kernels compute in float64), anything else becomes float64."""
     if col.null_count():
         col = col.cast(pl.Float64).fill_null(float("nan"))
     if col.dtype not in (pl.Float32, pl.Float64):
         col = col.cast(pl.Float64)
-    if col.n_chunks() > 1:  # each chunk as a view, joined in one copy (polars' own rechunk is ~2x slower)
-        return np.concatenate([c.to_numpy() for c in col.get_chunks()])
-    return col.to_numpy()
+    return col
+
+
+def _float_chunks(col: pl.Series) -> list[np.ndarray]:
+    """:func:`_float_series` as its chunks, each a view."""
+    return [c.to_numpy() for c in _float_series(col).get_chunks()]
+
+
+def _float64(col: pl.Series) -> np.ndarray:
+    """:func:`_float_series` as one array: the chunks joined in one copy (polars' own rechunk is
+    ~2x slower), a single chunk as a view."""
+    chunks = _float_chunks(col)
+    return chunks[0] if len(chunks) == 1 else np.concatenate(chunks)
+
+
+def _layout(lake_v: pl.DataFrame, p: MonitorParams) -> tuple[pl.DataFrame, float, np.ndarray, WindowLayout]:
+    """The valve's rows (sorted by time if they were not), sample period, time stamps (µs) and
+    :func:`transforms.windows.window_layout` (which checks the order in its pass)."""
+    dt = p.sample_period_s or infer_sample_period_s(lake_v)
+    for _ in range(2):
+        ts = lake_v["timestamp_utc"].cast(_UTC_US).to_physical().to_numpy()
+        try:
+            lay = window_layout(ts, sample_period_s=dt, gap_limit_s=p.gap_limit_periods * dt, step_tolerance=p.step_tolerance,
+                                half_window=p.half_window, window_s=p.window_s, window_rows=p.window_rows)  # fmt: skip
+            return lake_v, dt, ts, lay
+        except UnsortedTimes:
+            lake_v = lake_v.sort("timestamp_utc", maintain_order=True)
+    raise AssertionError("unreachable: sorted rows")
 
 
 def _valve_numba(lake_v, valve_id, p, leakage, with_ratio, want_points):
-    lake_v = _time_sorted(lake_v)
-    dt = p.sample_period_s or infer_sample_period_s(lake_v)
-    n = lake_v.height
-    ts = lake_v["timestamp_utc"].cast(_UTC_US).to_physical().to_numpy()
-    lake_win, valid, n_windows = window_arrays(
-        ts, sample_period_s=dt, gap_limit_s=p.gap_limit_periods * dt, step_tolerance=p.step_tolerance,
-        half_window=p.half_window, window_s=p.window_s,
-    )
-    first = np.concatenate([[0], np.flatnonzero(lake_win[1:] != lake_win[:-1]) + 1]) if n else np.zeros(0, dtype=np.int64)
-    last = np.append(first[1:] - 1, n - 1) if n else first
+    lake_v, dt, ts, lay = _layout(lake_v, p)
+    n_windows, first = lay.n_windows, lay.first
+    last = first + lay.count - 1
     windows = pl.DataFrame(
         {
             "valve_id": pl.repeat(valve_id, n_windows, eager=True, dtype=pl.Utf8),
             "window_id": pl.Series(np.arange(n_windows), dtype=pl.UInt32),
             "window_start": pl.Series(ts[first]).cast(_UTC_US),
             "window_end": pl.Series(ts[last]).cast(_UTC_US),
-            "n_samples": pl.Series(last - first + 1, dtype=pl.Int64),
+            "n_samples": pl.Series(lay.count, dtype=pl.Int64),
         }
     )
     # the signals as float arrays (float32 from the lake as it is; nulls become NaN), then
-    # Savitzky–Golay as plain weighted sums over the whole column in one compiled pass per
-    # signal; the validity comes from window_arrays and is applied in the selection kernel
-    arrays = {c: _float64(lake_v[c]) for c in _SIGNALS_F64}
-    # a long window is evaluated on every k-th row (MonitorParams.window_rows): the
-    # Savitzky–Golay sums at those rows only, the other signals gathered there
-    rows = evaluated_rows(first, last - first + 1, p.window_rows)
-    sg = savgol_arrays if rows is None else partial(savgol_at, rows=rows)
+    # Savitzky–Golay as plain weighted sums in one compiled pass per signal; the validity comes
+    # from window_layout and is applied in the selection kernel. A long window is evaluated on
+    # every k-th row (MonitorParams.window_rows): the Savitzky–Golay sums at those rows only,
+    # the other signals gathered there
+    rows = None if lay.every_row else lay.rows
+    if rows is None:
+        arrays = {c: _float64(lake_v[c]) for c in _SIGNALS_F64}
+        sg = savgol_arrays
+    else:  # the columns' chunks as they are (not joined): read at the rows only
+        chunks = {c: _float_chunks(lake_v[c]) for c in _SIGNALS_F64}
+        arrays = {c: take_rows(chunks[c], rows) for c in _GATHERED}
+        sg = partial(savgol_at, rows=rows)
     for column, (smooth_name, deriv_name) in _SG_OUTPUTS.items():
-        sm, de = sg(arrays[column], window=p.savgol_window, order=p.savgol_order, sample_period_s=dt,
+        sm, de = sg(arrays[column] if rows is None else chunks[column], window=p.savgol_window, order=p.savgol_order, sample_period_s=dt,
                     smooth=smooth_name is not None)  # fmt: skip
         if smooth_name is not None:
             arrays[smooth_name] = sm
         arrays[deriv_name] = de
-    win = lake_win
-    if rows is not None:
-        for c in _GATHERED:
-            arrays[c] = arrays[c][rows]
-        win, valid = lake_win[rows], valid[rows]
+    win, valid = lay.window, lay.valid
     codes, flagged, removed, selected, n_evaluated = selection_codes(arrays, win, n_windows, p, valid=valid)
     # the counts are those of the evaluated rows (n_samples too, so removed + selected = n_samples)
     stats = stats_frame(valve_id, windows if rows is None else windows.with_columns(n_samples=n_evaluated), flagged, removed, selected)
@@ -271,11 +290,11 @@ def _valve_numba(lake_v, valve_id, p, leakage, with_ratio, want_points):
         arrays, codes, SELECTED_CODE, selected.sum(axis=0), p, leakage=None if leakage is None else leakage.get(valve_id),
         with_ratio=with_ratio,
     )
-    if rows is not None:
-        idx = rows[idx]  # lake rows of the points
     points = None
     if want_points:
-        pw = lake_win[idx]
+        pw = win[idx]  # windows of the points
+        if rows is not None:
+            idx = rows[idx]  # lake rows of the points
         points = pl.DataFrame(
             {
                 "valve_id": pl.repeat(valve_id, idx.shape[0], eager=True, dtype=pl.Utf8),

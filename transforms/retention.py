@@ -78,27 +78,45 @@ def fitted_cover(starts_us: np.ndarray, ends_us: np.ndarray) -> tuple[np.ndarray
     return s[order], np.maximum.accumulate(e[order]) if e.size else e
 
 
-def uncovered_samples(t_us: np.ndarray, cover: tuple[np.ndarray, np.ndarray]) -> int:
-    """How many of the time stamps (µs, any order) lie in no fitted window of ``cover``
-    (:func:`fitted_cover`)."""
+def is_sorted(t: np.ndarray) -> bool:
+    """Whether the time stamps never decrease (a lake file's do: it is sorted by time)."""
+    return bool(np.all(t[1:] >= t[:-1]))
+
+
+def uncovered_samples(t_us: np.ndarray, cover: tuple[np.ndarray, np.ndarray], *, sorted_: bool | None = None) -> int:
+    """How many of the time stamps (µs, any order; ``sorted_``: whether they are sorted, None:
+    look) lie in no fitted window of ``cover`` (:func:`fitted_cover`). Sorted time stamps are
+    counted per run of overlapping windows by two binary searches, not looked up one by one."""
     starts, max_ends = cover
     t = np.asarray(t_us, dtype=np.int64)
     if starts.size == 0:
         return int(t.size)
+    if sorted_ if sorted_ is not None else is_sorted(t):
+        # windows overlapping the ones before them (start <= the running maximum of the ends) join their run
+        first = np.flatnonzero(np.r_[True, starts[1:] > max_ends[:-1]])
+        lo, hi = starts[first], max_ends[np.r_[first[1:] - 1, starts.size - 1]]
+        return int(t.size - (np.searchsorted(t, hi, side="right") - np.searchsorted(t, lo, side="left")).sum())
     i = np.searchsorted(starts, t, side="right") - 1
     inside = (i >= 0) & (t <= max_ends[np.maximum(i, 0)])
     return int(t.size - np.count_nonzero(inside))
 
 
-def hour_firsts(t_us: np.ndarray) -> dict[int, int]:
-    """UTC hour (µs since the epoch // 1 h) → its earliest time stamp, of time stamps in any order."""
+def hour_firsts(t_us: np.ndarray, *, sorted_: bool | None = None) -> dict[int, int]:
+    """UTC hour (µs since the epoch // 1 h) → its earliest time stamp, of time stamps in any order
+    (``sorted_``: whether they are sorted, None: look)."""
     t = np.asarray(t_us, dtype=np.int64)
     if t.size == 0:
         return {}
-    hours = t // HOUR_US
-    if np.all(t[1:] >= t[:-1]):  # the lake's files are time-sorted: the first of each run of equal hours
+    if sorted_ if sorted_ is not None else is_sorted(t):  # the lake's files are time-sorted: a binary search per hour
+        hours = np.arange(t[0] // HOUR_US, t[-1] // HOUR_US + 1)
+        if hours.size <= t.size:
+            at = np.searchsorted(t, hours * HOUR_US, side="left")  # < t.size: every hour starts by t[-1]
+            have = t[at] // HOUR_US == hours
+            return dict(zip(hours[have].tolist(), t[at[have]].tolist()))
+        hours = t // HOUR_US
         at = np.r_[0, np.flatnonzero(np.diff(hours)) + 1]
         return dict(zip(hours[at].tolist(), t[at].tolist()))
+    hours = t // HOUR_US
     hours, inverse = np.unique(hours, return_inverse=True)
     firsts = np.full(hours.size, np.iinfo(np.int64).max, dtype=np.int64)
     np.minimum.at(firsts, inverse, t)
@@ -124,6 +142,27 @@ def thin_mask(t_us: np.ndarray, firsts: dict[int, int], keep_s: float) -> np.nda
     if known.size == 0 or not np.array_equal(known[j], hours):
         raise ValueError("thin_mask: a time stamp's hour is missing from firsts")
     return t - first[j] < round(keep_s * 1e6)
+
+
+def kept_ranges(t_us: np.ndarray, firsts: dict[int, int], keep_s: float) -> np.ndarray:
+    """The rows :func:`thin_mask` keeps, as ``[start, stop)`` index ranges (an ``(n, 2)`` array,
+    in order): for sorted time stamps one binary search per hour (at most a range an hour), for
+    others the runs of the mask."""
+    t = np.asarray(t_us, dtype=np.int64)
+    if t.size == 0:
+        return np.zeros((0, 2), np.int64)
+    if not is_sorted(t):
+        keep = np.r_[False, thin_mask(t, firsts, keep_s), False].astype(np.int8)
+        edges = np.flatnonzero(np.diff(keep))
+        return edges.reshape(-1, 2).astype(np.int64)
+    hours = np.array(sorted(hour_firsts(t, sorted_=True)), dtype=np.int64)
+    if any(h not in firsts for h in hours.tolist()):
+        raise ValueError("kept_ranges: a time stamp's hour is missing from firsts")
+    first = np.array([firsts[h] for h in hours.tolist()], dtype=np.int64)
+    # an hour's samples are the partition's from its first on, so it keeps [hour start, first + keep_s) of them
+    stop = np.minimum(first + round(keep_s * 1e6), (hours + 1) * HOUR_US)
+    ranges = np.stack([np.searchsorted(t, hours * HOUR_US, side="left"), np.searchsorted(t, stop, side="left")], axis=1)
+    return ranges[ranges[:, 1] > ranges[:, 0]]
 
 
 def kept_row_groups(spans: list[tuple[int, int, int]], firsts: dict[int, int], keep_s: float) -> list[int]:
@@ -160,16 +199,20 @@ class PartitionScan:
         t = np.asarray(t_us, dtype=np.int64)
         if t.size == 0:
             return
+        ordered = is_sorted(t)
         self.rows += int(t.size)
-        self.uncovered += uncovered_samples(t, self.cover)
-        top = int(t.max())
+        self.uncovered += uncovered_samples(t, self.cover, sorted_=ordered)
+        top = int(t[-1] if ordered else t.max())
         self.last_us = top if self.last_us is None else max(self.last_us, top)
         if self.hours:
-            self.firsts = merge_hour_firsts(self.firsts, hour_firsts(t))
+            self.firsts = merge_hour_firsts(self.firsts, hour_firsts(t, sorted_=ordered))
 
-    def count_kept(self, t_us: np.ndarray, keep_s: float) -> None:
-        """Second pass: count the rows of a batch that thinning keeps."""
-        self.rows_kept = (self.rows_kept or 0) + int(np.count_nonzero(thin_mask(t_us, self.firsts, keep_s)))
+    def count_kept(self, t_us: np.ndarray, keep_s: float) -> np.ndarray:
+        """Second pass: count the rows of a batch that thinning keeps; returns them as index
+        ranges into the batch (:func:`kept_ranges`)."""
+        ranges = kept_ranges(t_us, self.firsts, keep_s)
+        self.rows_kept = (self.rows_kept or 0) + int((ranges[:, 1] - ranges[:, 0]).sum())
+        return ranges
 
 
 def decide_unscanned(day: date, as_of: date, spec: RetentionSpec, protected: frozenset[date]) -> Decision | None:

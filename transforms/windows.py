@@ -2,7 +2,7 @@
 
 A *run* is a stretch of one valve's samples without a time step longer than the gap limit: a
 snapshot (10 s every hour) is one run, a continuous recording (back-to-back samples for minutes
-to hours) is one long run. With a window length ``window_s`` = L (:func:`window_flags`):
+to hours) is one long run. With a window length ``window_s`` = L (:func:`window_starts`):
 
 * a run whose span (last − first time stamp) is shorter than L/2 is one window, whole, wherever
   it lies on the clock (a 10 s snapshot is never cut, whatever its offset in the hour);
@@ -29,19 +29,21 @@ A frame sorted by ``valve_id, timestamp_utc`` gets
   the neighbouring window, so a window's values depend on its own samples only.
 
 Everything is a column expression (diff, cumulative sum, forward/backward fill; the span of a run
-is a ``min``/``max`` over the run): no Python loop. :func:`window_arrays` does the same for one
+is a ``min``/``max`` over the run): no Python loop. :func:`window_layout` does the same for one
 valve in one compiled pass over the time stamps, with the Savitzky–Golay validity (what the
 monitor's fast path uses; the tests hold the two equal).
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numba
 import numpy as np
 import polars as pl
 
 __all__ = [
-    "LONG_RUN_FRACTION", "WINDOW_COLUMNS", "assign_windows", "evaluated_rows", "infer_sample_period_s", "window_arrays", "window_flags",
+    "LONG_RUN_FRACTION", "WINDOW_COLUMNS", "UnsortedTimes", "WindowLayout", "assign_windows", "infer_sample_period_s", "window_layout",
     "window_length_us", "window_starts", "window_table",
 ]  # fmt: skip
 
@@ -81,47 +83,96 @@ def window_length_us(window_s: float | None) -> int:
 
 
 @numba.njit(cache=True)
-def _flags_kernel(t_us, gap_us, length_us):
+def _steps_kernel(t_us, lo_us, hi_us, gap_us):
+    """One pass over the time stamps: the rows whose step from the previous row lies outside
+    [lo_us, hi_us] (row 0 included), and which of them follow a step longer than ``gap_us`` (or
+    are row 0); False as the third value if a step is negative (not sorted; the rest is then
+    meaningless). Sparse: the arrays are allocated for every row, but only the pages written are
+    touched."""
     n = t_us.shape[0]
-    new = np.zeros(n, dtype=np.bool_)
+    pos = np.empty(n + 1, dtype=np.int64)
+    gap = np.empty(n + 1, dtype=np.bool_)
     if n == 0:
-        return new
-    new[0] = True
+        return pos[:0], gap[:0], True
+    pos[0] = 0
+    gap[0] = True
+    m = 1
+    ok = True
+    prev = t_us[0]
     for i in range(1, n):
-        new[i] = t_us[i] - t_us[i - 1] > gap_us
-    if length_us <= 0:
-        return new
-    # runs at least LONG_RUN_FRACTION of the length long: a new window at each clock cell
+        t = t_us[i]
+        step = t - prev
+        prev = t
+        if step < lo_us or step > hi_us:
+            if step < 0:
+                ok = False
+            pos[m] = i
+            gap[m] = step > gap_us
+            m += 1
+    return pos[:m], gap[:m], ok
+
+
+@numba.njit(cache=True)
+def _starts_kernel(t_us, gaps, length_us):
+    """The window starts (sorted row indices) from the rows after a gap ``gaps`` (row 0 first):
+    each run from one to the next is a window, or, at least LONG_RUN_FRACTION of the length long,
+    cut at the first sample of every clock cell (found by bisection: one per cut)."""
+    n = t_us.shape[0]
+    if length_us <= 0 or n == 0:
+        return gaps.copy()
     min_span = LONG_RUN_FRACTION * length_us
-    a = 0
-    while a < n:
-        b = a + 1
-        while b < n and not new[b]:
-            b += 1
-        if t_us[b - 1] - t_us[a] >= min_span:
-            # t is sorted: t_i // L differs from t_{i-1} // L where t_i reaches the next
-            # multiple of L after t_{i-1} (one division per cut, not two per sample)
-            nxt = (t_us[a] // length_us + 1) * length_us
-            for i in range(a + 1, b):
-                if t_us[i] >= nxt:
-                    new[i] = True
-                    nxt = (t_us[i] // length_us + 1) * length_us
-        a = b
-    return new
+    out = np.empty(16 + 2 * gaps.shape[0], dtype=np.int64)
+    m = 0
+    for g in range(gaps.shape[0]):
+        a = gaps[g]
+        b = gaps[g + 1] if g + 1 < gaps.shape[0] else n
+        if m + 1 > out.shape[0]:
+            out = _grown(out, m)
+        out[m] = a
+        m += 1
+        if t_us[b - 1] - t_us[a] < min_span:
+            continue
+        nxt = (t_us[a] // length_us + 1) * length_us
+        i = a + 1
+        while i < b:
+            i += np.searchsorted(t_us[i:b], nxt)  # the first sample at or after the next cut
+            if i >= b:
+                break
+            if m + 1 > out.shape[0]:
+                out = _grown(out, m)
+            out[m] = i
+            m += 1
+            nxt = (t_us[i] // length_us + 1) * length_us
+            i += 1
+    return out[:m]
 
 
-def window_flags(t_us: np.ndarray, gap_us: float, window_s: float | None = None) -> np.ndarray:
-    """Per sample of one valve's sorted time stamps (µs since the epoch, int64): True where a
-    window starts (module doc): the first sample, every sample after a step longer than
-    ``gap_us`` and, with a length ``window_s``, the first sample of every clock cell of a run at
-    least :data:`LONG_RUN_FRACTION` · ``window_s`` long. One compiled pass."""
-    return _flags_kernel(np.ascontiguousarray(t_us, dtype=np.int64), float(gap_us), window_length_us(window_s))
+@numba.njit(cache=True)
+def _grown(a, m):
+    b = np.empty(2 * a.shape[0], dtype=a.dtype)
+    b[:m] = a[:m]
+    return b
 
 
 def window_starts(t_us: np.ndarray, gap_us: float, window_s: float | None = None) -> np.ndarray:
-    """Index of the first sample of each window of one valve's sorted time stamps (µs): the rule
-    of :func:`assign_windows` (:func:`window_flags`)."""
-    return np.flatnonzero(window_flags(t_us, gap_us, window_s))
+    """Index of the first sample of each window of one valve's sorted time stamps (µs since the
+    epoch, int64), the rule of :func:`assign_windows` (module doc): the first sample, every
+    sample after a step longer than ``gap_us`` and, with a length ``window_s``, the first sample
+    of every clock cell of a run at least :data:`LONG_RUN_FRACTION` · ``window_s`` long. One
+    compiled pass over the time stamps, one bisection per clock cut."""
+    t_us = np.ascontiguousarray(t_us, dtype=np.int64)
+    length_us = window_length_us(window_s)
+    _, gaps = _gap_rows(t_us, -np.inf, float(gap_us), float(gap_us))
+    return _starts_kernel(t_us, gaps, length_us)
+
+
+def _gap_rows(t_us: np.ndarray, lo_us: float, hi_us: float, gap_us: float) -> tuple[np.ndarray, np.ndarray]:
+    """(rows after a step outside [lo_us, hi_us], rows after a gap) of :func:`_steps_kernel`;
+    :class:`UnsortedTimes` if a step is negative and below ``lo_us``."""
+    pos, gap, ok = _steps_kernel(t_us, lo_us, hi_us, gap_us)
+    if not ok:
+        raise UnsortedTimes("time stamps are not sorted")
+    return pos, pos[gap]
 
 
 def assign_windows(
@@ -198,41 +249,83 @@ def window_table(framed: pl.DataFrame | pl.LazyFrame) -> pl.DataFrame:
 
 
 @numba.njit(cache=True)
-def _window_kernel(ts_us, lo_us, hi_us, gap_us, length_us, h):
-    n = ts_us.shape[0]
-    win = np.empty(n, dtype=np.int64)
-    valid = np.zeros(n, dtype=np.bool_)
-    run_start = np.empty(n, dtype=np.bool_)
-    new = _flags_kernel(ts_us, gap_us, length_us)
-    w = -1
-    for i in range(n):
-        new_w = new[i]
-        if i == 0:
-            new_r = True
+def _layout_kernel(n, starts, irregular, h, window_rows):
+    """Windows ``starts`` (sorted rows) of n rows → each window's first row and length, the
+    evaluated rows (every k-th of a window from its first, k = max(1, length // window_rows);
+    window_rows 0: every row), their window and their Savitzky–Golay validity: no uniform-run
+    start (a window start or an ``irregular`` step's row) in (i − h, i] nor in (i, i + h], and
+    i + h < n."""
+    nw = starts.shape[0]
+    count = np.empty(nw, dtype=np.int64)
+    stride = np.empty(nw, dtype=np.int64)
+    total = 0
+    for w in range(nw):
+        count[w] = (starts[w + 1] if w + 1 < nw else n) - starts[w]
+        k = max(1, count[w] // window_rows) if window_rows > 0 else 1
+        stride[w] = k
+        total += (count[w] + k - 1) // k
+    # the uniform-run starts: both sorted lists merged
+    runs = np.empty(nw + irregular.shape[0], dtype=np.int64)
+    m = 0
+    a = 0
+    b = 0
+    while a < nw or b < irregular.shape[0]:
+        if b >= irregular.shape[0] or (a < nw and starts[a] <= irregular[b]):
+            v = starts[a]
+            a += 1
         else:
-            step = ts_us[i] - ts_us[i - 1]
-            new_r = new_w or step < lo_us or step > hi_us
-        if new_w:
-            w += 1
-        win[i] = w
-        run_start[i] = new_r
-    # valid: no run start in (i − h, i] and none in (i, i + h], i + h < n
-    nxt = n
-    for i in range(n - 1, -1, -1):
-        if nxt - i > h:
-            valid[i] = True
-        if run_start[i]:
-            nxt = i
-    last = 0
-    for i in range(n):
-        if run_start[i]:
-            last = i
-        if i - last < h:
-            valid[i] = False
-    return win, valid, w + 1
+            v = irregular[b]
+            b += 1
+        if m == 0 or runs[m - 1] != v:
+            runs[m] = v
+            m += 1
+    rows = np.empty(total, dtype=np.int64)
+    win = np.empty(total, dtype=np.int64)
+    valid = np.empty(total, dtype=np.bool_)
+    j = 0  # runs[j]: the last run start at or before the row
+    r = 0
+    for w in range(nw):
+        for i in range(starts[w], starts[w] + count[w], stride[w]):
+            while j + 1 < m and runs[j + 1] <= i:
+                j += 1
+            nxt = runs[j + 1] if j + 1 < m else n
+            rows[r] = i
+            win[r] = w
+            valid[r] = nxt - i > h and i - runs[j] >= h
+            r += 1
+    return count, rows, win, valid
 
 
-def window_arrays(
+class UnsortedTimes(ValueError):
+    """The time stamps are not sorted."""
+
+
+@dataclass(frozen=True)
+class WindowLayout:
+    """One valve's windows and the rows steps 2–3 evaluate (:func:`window_layout`)."""
+
+    first: np.ndarray
+    """Each window's first row (int64, sorted)."""
+    count: np.ndarray
+    """Each window's number of rows (int64)."""
+    rows: np.ndarray
+    """The evaluated rows, sorted (int64): every k-th row of each window from its first."""
+    window: np.ndarray
+    """The window (0 … n_windows − 1) of each evaluated row (int64)."""
+    valid: np.ndarray
+    """Per evaluated row: whether a centred Savitzky–Golay stencil stays inside one uniform run."""
+
+    @property
+    def n_windows(self) -> int:
+        return int(self.first.shape[0])
+
+    @property
+    def every_row(self) -> bool:
+        """Whether every row is evaluated (``rows`` is 0 … n − 1)."""
+        return int(self.rows.shape[0]) == int(self.count.sum())
+
+
+def window_layout(
     timestamp_us: np.ndarray,
     *,
     sample_period_s: float,
@@ -240,13 +333,14 @@ def window_arrays(
     step_tolerance: float = 0.1,
     half_window: int,
     window_s: float | None = None,
-) -> tuple[np.ndarray, np.ndarray, int]:
+    window_rows: int | None = None,
+) -> WindowLayout:
     """:func:`assign_windows` and the Savitzky–Golay validity of
-    :func:`transforms.derivatives.savgol_valid` in one compiled pass, for the sorted time stamps
-    (µs since the epoch, int64) of **one valve**.
-
-    Returns ``(window_id, valid, n_windows)``: window ids 0 … n_windows − 1 (int64) and, per row,
-    whether a centred stencil of ``2·half_window + 1`` samples stays inside one uniform run.
+    :func:`transforms.derivatives.savgol_valid` for the time stamps (µs since the epoch, int64) of
+    **one valve**, at the rows a window of n samples is evaluated on: every k-th row from its
+    first, k = max(1, n // ``window_rows``) (:class:`transforms.params.MonitorParams`
+    ``window_rows``; None: every row). One compiled pass over the time stamps (which also checks
+    their order: :class:`UnsortedTimes` if they are not sorted), the rest over the evaluated rows.
     """
     if sample_period_s <= 0:
         raise ValueError("sample_period_s must be > 0")
@@ -255,38 +349,8 @@ def window_arrays(
     if gap_limit_s < sample_period_s * (1.0 + step_tolerance):
         raise ValueError("gap_limit_s must exceed the sample period (plus tolerance)")
     period_us = sample_period_s * 1e6
-    return _window_kernel(
-        np.ascontiguousarray(timestamp_us, dtype=np.int64),
-        period_us * (1.0 - step_tolerance),
-        period_us * (1.0 + step_tolerance),
-        float(gap_limit_s * 1e6),
-        window_length_us(window_s),
-        int(half_window),
-    )
-
-
-@numba.njit(cache=True)
-def _evaluated_kernel(first, count, stride):
-    total = 0
-    for w in range(first.shape[0]):
-        total += (count[w] + stride[w] - 1) // stride[w]
-    rows = np.empty(total, dtype=np.int64)
-    k = 0
-    for w in range(first.shape[0]):
-        for i in range(first[w], first[w] + count[w], stride[w]):
-            rows[k] = i
-            k += 1
-    return rows
-
-
-def evaluated_rows(first: np.ndarray, count: np.ndarray, window_rows: int | None) -> np.ndarray | None:
-    """The rows steps 2–3 evaluate when a window of n samples is evaluated on every k-th row
-    from its first, k = max(1, n // ``window_rows``) (:class:`transforms.params.MonitorParams`
-    ``window_rows``): sorted int64 row indices, or None when every row is (no window has k > 1).
-    ``first``, ``count``: each window's first row and number of rows, in row order."""
-    if window_rows is None or count.shape[0] == 0:
-        return None
-    stride = np.maximum(np.asarray(count, dtype=np.int64) // int(window_rows), 1)
-    if int(stride.max()) == 1:
-        return None
-    return _evaluated_kernel(np.ascontiguousarray(first, dtype=np.int64), np.ascontiguousarray(count, dtype=np.int64), stride)
+    t_us = np.ascontiguousarray(timestamp_us, dtype=np.int64)
+    irregular, gaps = _gap_rows(t_us, period_us * (1.0 - step_tolerance), period_us * (1.0 + step_tolerance), float(gap_limit_s * 1e6))
+    starts = _starts_kernel(t_us, gaps, window_length_us(window_s))
+    count, rows, win, valid = _layout_kernel(t_us.shape[0], starts, irregular, int(half_window), int(window_rows or 0))
+    return WindowLayout(starts, count, rows, win, valid)

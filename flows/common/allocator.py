@@ -1,6 +1,6 @@
 """Keep freed heap memory in the process for the next chunk's arrays (glibc only).
 
-Used by monitoring, the ingest and the backfill. Monitoring runs its compiled kernels chunk
+Used by monitoring, the ingest, the backfill and the report's standstill check. Monitoring runs its compiled kernels chunk
 after chunk (a valve-week, ~1.7 M rows), and each chunk allocates the same ~100 bytes per row
 of temporary arrays again (Savitzky–Golay values, selection codes, points). glibc serves
 allocations above its mmap threshold (at most 32 MB, adapted upwards as blocks are freed) with
@@ -12,7 +12,7 @@ after ``free``, ready for the next chunk.
 The price: the process keeps its high-water mark of heap memory until it exits, which a batch
 run (``valvemon monitor``, a backfill worker) reaches anyway. polars allocates with its own
 allocator (jemalloc), which :func:`retain_polars_memory` asks the same before polars is imported
-(the ``valvemon monitor`` and ``valvemon ingest`` commands do). Elsewhere than on glibc :func:`retain_freed_memory` does
+(the ``valvemon monitor``, ``ingest`` and ``report`` commands do). Elsewhere than on glibc :func:`retain_freed_memory` does
 nothing.
 """
 

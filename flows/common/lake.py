@@ -389,6 +389,14 @@ def iter_file_batches(
         yield pl.from_arrow(batch).cast(schema)
 
 
+def read_file_ranges(path: Path, ranges: np.ndarray) -> Iterator[pl.DataFrame]:
+    """The rows ``[start, stop)`` of each of ``ranges`` of one lake file, in the canonical schema,
+    a range at a time: only the pages holding them are decoded (polars' slice of a scan)."""
+    scan = pl.scan_parquet(path, hive_partitioning=False, schema=SENSOR_POLARS_SCHEMA)
+    for start, stop in np.asarray(ranges, dtype=np.int64).tolist():
+        yield scan.slice(start, stop - start).collect()
+
+
 def row_group_spans(path: Path) -> list[tuple[int, int, int]]:
     """``(rows, first, last)`` of each row group of a lake file: its rows and the range of its
     ``timestamp_utc`` (µs since the epoch) from the footer's statistics (no data is read); a

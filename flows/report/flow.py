@@ -35,6 +35,8 @@ from pathlib import Path
 import numpy as np
 import polars as pl
 
+from flows.common.allocator import retain_freed_memory
+from flows.common.batches import WriteBatch
 from flows.common.config import load_plant_config, plant_valves
 from flows.common.prefect_run import flow
 from flows.common.warehouse_db import connect, insert_frame, query_frame, transaction
@@ -43,11 +45,11 @@ from flows.report.figures import characteristics_figure, fleet_figure, render_fi
 from flows.report.html import render_report
 from flows.report.publish import publish
 from flows.report.quality import data_quality
-from flows.report.standstill import STANDSTILL_COLUMNS, standstill_rows
 from flows.report.views import connect_snapshot, ensure_report_tables, materialise_views
 from model.area import edge_area
 from schemas.fields import EDGES
 from schemas.plant_config import PlantConfig
+from transforms.standstill import STANDSTILL_COLUMNS, standstill_rows
 
 REPORTS_DIR = "reports"
 REPORT_NAME = "report.html"
@@ -76,26 +78,38 @@ class ReportResult:
 
 
 def update_standstill(config: PlantConfig, warehouse: Path, now: datetime) -> int:
-    """Add Eq. 9 rows for the lake's windows not yet checked (from each valve's latest on)."""
+    """Add Eq. 9 rows for the lake's windows not yet checked (from each valve's latest on); the
+    chunks' rows and progress are written together a few seconds' work at a time
+    (:class:`flows.common.batches.WriteBatch`: one transaction, not one per chunk)."""
     from flows.monitor.flow import lake_chunks  # the monitor's gap-aligned chunks of the lake
 
+    retain_freed_memory()  # each chunk's arrays reuse the last one's heap (flows/common/allocator.py)
     with connect(warehouse) as con:
         ensure_report_tables(con)
         last = dict(con.execute("SELECT valve_id, max(window_start) FROM standstill_checks GROUP BY 1").fetchall())
     added = 0
+    checked: WriteBatch[tuple[str, datetime, datetime, pl.DataFrame]] = WriteBatch(lambda batch: store_standstill(warehouse, batch, now))
     for v in config.valves:
         start = last.get(v.id)
         window_s = config.monitor.window_s
         for rows in lake_chunks(warehouse, v.id, config.export.max_gap_s, start, None, columns=("valve_id", *STANDSTILL_COLUMNS), window_s=window_s):
             frame = standstill_rows(rows, max_gap_s=config.export.max_gap_s, commissioned=v.commissioned, computed_at=now, window_s=window_s)
-            lo, hi = rows["timestamp_utc"][0], rows["timestamp_utc"][-1]
-            with connect(warehouse) as con:
-                with transaction(con):
-                    con.execute("DELETE FROM standstill_checks WHERE valve_id = ? AND window_start BETWEEN ? AND ?", [v.id, lo, hi])
-                    insert_frame(con, "standstill_checks", frame)
-                    mark_standstill_progress(con, v.id, hi, now)
+            checked.add((v.id, rows["timestamp_utc"][0], rows["timestamp_utc"][-1], frame))
             added += frame.height
+    checked.flush()
     return added
+
+
+def store_standstill(warehouse: Path, chunks: list[tuple[str, datetime, datetime, pl.DataFrame]], now: datetime) -> None:
+    """Replace each chunk's ``standstill_checks`` rows of (valve, first to last sample read) by
+    its new rows and record the progress, in one transaction: a rerun replaces, never
+    duplicates, and a crash leaves every chunk as before or complete."""
+    with connect(warehouse) as con:
+        with transaction(con):
+            for valve_id, lo, hi, _ in chunks:
+                con.execute("DELETE FROM standstill_checks WHERE valve_id = ? AND window_start BETWEEN ? AND ?", [valve_id, lo, hi])
+                mark_standstill_progress(con, valve_id, hi, now)
+            insert_frame(con, "standstill_checks", pl.concat([c[3] for c in chunks]))
 
 
 def mark_standstill_progress(con, valve_id: str, checked_through: datetime, now: datetime) -> None:

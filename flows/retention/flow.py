@@ -16,9 +16,9 @@ killed at any point leaves a record of what it was removing, and the next run co
   deleted; done. Killed before the rename, the partition is whole and the intent is withdrawn
   (nothing was removed; the run decides the partition again); after it, the hidden folder is
   deleted and the intent completed.
-* **thin**: intent; each file of the partition is streamed batch by batch (memory holds one
-  batch, never a day) and replaced atomically by its kept rows
-  (:func:`flows.common.lake.write_partition_pieces`); done. Killed in between, some files are
+* **thin**: intent; each file of the partition is replaced atomically by its kept rows, read
+  range by range (:func:`count_kept` finds them as row ranges; memory holds one range, never a
+  day) and written with :func:`flows.common.lake.write_partition_pieces`; done. Killed in between, some files are
   thinned and some not, never a mix within a file; the next run thins the partition again
   (thinning a thinned file keeps it as it is) and completes the intent, whose ``rows_before``
   is the partition's before the first run touched it.
@@ -57,6 +57,7 @@ from flows.common.lake import (
     partition_path,
     partition_folders,
     partition_rows,
+    read_file_ranges,
     remove_dropped,
     remove_partition_file,
     row_group_spans,
@@ -78,7 +79,6 @@ from transforms.retention import (
     fitted_cover,
     kept_row_groups,
     protected_days,
-    thin_mask,
 )
 
 RETENTION_TABLES = {"retention_log": (RETENTION_LOG_FIELDS, "action_id")}
@@ -254,42 +254,46 @@ def scan_partition(folder: Path, cover: tuple[np.ndarray, np.ndarray], hours: bo
 
 @dataclass(frozen=True)
 class FileThinning:
-    """One file of a partition in thin mode: its rows, the rows kept, the row groups holding them."""
+    """One file of a partition in thin mode: its rows, the rows kept, as ``[start, stop)`` row
+    ranges of the file."""
 
     rows: int
     kept: int
-    row_groups: list[int]
+    ranges: np.ndarray
 
 
 def count_kept(folder: Path, scan: PartitionScan, keep_s: float) -> dict[Path, FileThinning]:
-    """Second pass (thin mode): the rows thinning keeps (into ``scan``), per file; only the row
-    groups whose time range can hold kept samples are read (:func:`kept_row_groups`)."""
+    """Second pass (thin mode): the rows thinning keeps (into ``scan``), per file, as row ranges;
+    only the time stamps of the row groups whose time range can hold kept samples are read
+    (:func:`kept_row_groups`), one row group at a time."""
     scan.rows_kept = 0
     per_file = {}
     for f in day_files(folder):
         spans = row_group_spans(f)
-        groups = kept_row_groups(spans, scan.firsts, keep_s)
+        offsets = np.r_[0, np.cumsum([n for n, _, _ in spans])]
         before = scan.rows_kept
-        for batch in iter_file_batches(f, [TIME], row_groups=groups):
-            scan.count_kept(batch[TIME].to_physical().to_numpy(), keep_s)
-        per_file[f] = FileThinning(sum(n for n, _, _ in spans), scan.rows_kept - before, groups)
+        ranges = []
+        for g in kept_row_groups(spans, scan.firsts, keep_s):
+            at = int(offsets[g])  # the file's row of the batch's first (a large row group of an older file comes in batches)
+            for batch in iter_file_batches(f, [TIME], row_groups=[g]):
+                ranges.append(scan.count_kept(batch[TIME].to_physical().to_numpy(), keep_s) + at)
+                at += batch.height
+        per_file[f] = FileThinning(int(offsets[-1]), scan.rows_kept - before, np.concatenate(ranges) if ranges else np.zeros((0, 2), np.int64))
     return per_file
 
 
-def thin_partition(scan: PartitionScan, per_file: dict[Path, FileThinning], keep_s: float) -> int:
-    """Replace each file of the partition by its kept rows, streamed batch by batch from the row
-    groups that hold them (memory holds one batch and one row group of kept rows), atomically per
-    file; a file that keeps all its rows is left alone, one that keeps none is deleted. Returns
-    the rows kept."""
+def thin_partition(per_file: dict[Path, FileThinning]) -> int:
+    """Replace each file of the partition by its kept rows, read range by range (only the pages
+    holding them are decoded; memory holds one range and one row group of kept rows), atomically
+    per file; a file that keeps all its rows is left alone, one that keeps none is deleted.
+    Returns the rows kept."""
     for f, ft in per_file.items():
         if ft.kept == ft.rows:
             continue
         if ft.kept == 0:
             remove_partition_file(f)
             continue
-        batches = iter_file_batches(f, row_groups=ft.row_groups)
-        pieces = (b.filter(pl.Series(thin_mask(b[TIME].to_physical().to_numpy(), scan.firsts, keep_s))) for b in batches)
-        write_partition_pieces(f, (p for p in pieces if p.height))
+        write_partition_pieces(f, read_file_ranges(f, ft.ranges))
     return sum(ft.kept for ft in per_file.values())
 
 
@@ -391,7 +395,7 @@ def complete_interrupted(warehouse: Path, spec: RetentionSpec, as_of: date, valv
         with partition_lock(warehouse, folder / PART_NAME):
             scan = scan_partition(folder, (np.zeros(0, np.int64), np.zeros(0, np.int64)), True)
             per_file = count_kept(folder, scan, spec.thin_keep_s_per_hour)
-            complete(warehouse, action_id, thin_partition(scan, per_file, spec.thin_keep_s_per_hour), partition_bytes(folder))
+            complete(warehouse, action_id, thin_partition(per_file), partition_bytes(folder))
     return begun
 
 
@@ -504,7 +508,7 @@ def _one_partition(
         if not dry_run:
             action_id = uuid.uuid4().hex
             record(warehouse, _log_row(action_id, o, spec, as_of, INTENT))  # rows after exact, bytes after estimated
-            o.rows_after = thin_partition(scan, per_file, spec.thin_keep_s_per_hour)
+            o.rows_after = thin_partition(per_file)
             o.bytes_after = partition_bytes(folder)
             complete(warehouse, action_id, o.rows_after, o.bytes_after)
     return o

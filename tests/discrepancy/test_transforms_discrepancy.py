@@ -211,3 +211,31 @@ def test_operating_regions_partition_motion():
     level = reg["pressure_low"].astype(int) + reg["pressure_mid"] + reg["pressure_high"]
     assert np.array_equal(level, reg["all"].astype(int))
     assert reg["extending"].any() and reg["retracting"].any() and reg["standstill"].any()
+
+
+def test_each_pressure_channel_is_aligned_for_its_own_delay_and_a_lagging_one_is_reported():
+    """p1 recorded 3 samples late, p2, ps and pr 1 sample late (exact model, Table 1): the delays
+    are found per channel, the supply and return take the shared one, the records aligned for
+    them show none left, and p1's extra 2 samples are the finding (which channel, how many ms)."""
+    from transforms.discrepancy.alignment import align_records, pressure_delays, shifted
+    from transforms.discrepancy.rows import prepare_records
+
+    res = simulate_windows(TABLE1, [TABLE1.nominal_condition], 4.0, seed=3)
+    m = measure(res, TABLE1.sensors, np.random.default_rng(3))
+    late = {"ps": 1, "pr": 1, "p1": 3, "p2": 1}
+    raw = {c: np.concatenate([np.full(k, getattr(m, c)[0][0]), getattr(m, c)[0][:-k]]) for c, k in late.items()}
+    rec = Record("V", 0, 3_999_000, 1e-3, {**raw, "x": m.x_spool[0], "X": m.x_cyl[0]})
+    s, cond = DiscrepancySettings(), TABLE1.nominal_condition
+    # shifting by per-channel delays takes each channel its own number of samples later
+    sh = shifted(rec, late)
+    assert sh.n == rec.n - 3 and sh.end_us == rec.end_us - 3000
+    assert np.array_equal(sh.raw["p1"], rec.raw["p1"][3:]) and np.array_equal(sh.raw["p2"], rec.raw["p2"][1:-2])
+    assert np.array_equal(sh.raw["X"], rec.raw["X"][:-3])
+    d = pressure_delays(prepare_records([rec], TABLE1, cond, s), TABLE1, cond, s)
+    assert d.samples == {"p1": 3, "p2": 1} and d.shared == 1 and d.of("ps") == d.of("pr") == 1
+    assert d.lagging == ["p1"] and abs(d.fine["p1"] - d.fine["p2"] - 2.0) < 0.3
+    assert "the p1 transmitter lags the other pressures by 2" in d.finding()
+    aligned, d1 = align_records([rec], TABLE1, cond, s)
+    assert d1.samples == d.samples and aligned[0].n == rec.n - 3
+    again = pressure_delays(prepare_records(aligned, TABLE1, cond, s), TABLE1, cond, s)
+    assert again.samples == {"p1": 0, "p2": 0} and again.finding() == ""

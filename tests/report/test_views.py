@@ -89,6 +89,8 @@ def test_one_faulty_window_among_normal_ones_is_caught(wh, tmp_path):
     a, x, e = np.full(HOURS.size, 0.98), np.full(HOURS.size, 0.23), np.full(HOURS.size, 0.10)
     a[-1], x[-1], e[-1] = 2.53, 11.8, 1.13
     wh.add_fits("F1", "1r", HOURS, a, x, e)
+    # computed once, as the report does (test_materialised_views_give_the_views_rows: the same rows as the views)
+    materialise_views(wh.con, ("valve_condition", "fleet_ranking", "fault_alarms", "threshold_breaches"))
     alarms = wh.q("SELECT * FROM fault_alarms")
     assert alarms.height == 1 and alarms["edge"][0] == "1r" and alarms["operating_hours"][0] == HOURS[-1]
     assert alarms["beyond_fault_bound"][0] and alarms["change_alarm"][0]
@@ -157,6 +159,7 @@ def test_a_crossing_beyond_the_horizon_is_no_forecast(wh, tmp_path):
     wh.add_valve("H1")
     for edge in EDGES:
         wh.add_fits("H1", edge, HOURS, 1.0 + 0.0001 * HOURS, 0.2, 0.1)
+    materialise_views(wh.con, ("parameter_trends", "valve_condition", "fleet_ranking"))  # once, as the report does
     trend = wh.q("SELECT * FROM parameter_trends WHERE valve_id = 'H1' AND edge = 's1' AND parameter = 'alpha_hat' AND side = 'high'")
     assert trend["crossing_status"][0] == "predicted" and trend["remaining_hours"][0] == pytest.approx(2801.0, abs=1e-3)
     c = wh.condition("H1", "s1")
@@ -220,6 +223,7 @@ def test_too_little_data_is_unknown(wh):
     wh.add_valve("U1")
     wh.add_fits("U1", "s1", HOURS[:5], 1.0, 0.2, 0.1)  # 5 ok windows, 10 needed
     wh.add_fits("U1", "1r", HOURS[:30], 1.0, 0.2, 0.1, status="too_few_points")
+    materialise_views(wh.con, ("valve_condition", "fleet_ranking"))  # once, as the report does
     c = {e: wh.condition("U1", e) for e in EDGES}
     assert [c[e]["state"] for e in EDGES] == ["unknown"] * 4
     assert "too little data: 5" in c["s1"]["reason"]
@@ -270,6 +274,7 @@ def test_configured_bounds_are_used(wh):
     wh.add_valve("K2", alpha_wear_high=1.10)
     for v in ("K1", "K2"):
         wh.add_fits(v, "s1", HOURS, 1.15, 0.2, 0.1)
+    materialise_views(wh.con, ("valve_condition",))  # once, as the report does
     assert wh.condition("K1", "s1")["state"] == "healthy"
     assert wh.condition("K2", "s1")["state"] == "worn"
 
@@ -283,6 +288,7 @@ def test_eq9_indicator_against_the_design_value(wh):
     r = np.full(HOURS[::10].size, -0.16)
     r[-1] = -1.4  # the paper's broken edge
     wh.add_standstill("E2", HOURS[::10], r)
+    materialise_views(wh.con, ("standstill_indicator", "valve_condition", "fleet_ranking"))  # once, as the report does
     ind = {row["valve_id"]: row for row in wh.q("SELECT * FROM standstill_indicator").iter_rows(named=True)}
     assert ind["E1"]["eq9_ok"] and not ind["E2"]["eq9_ok"]
     assert ind["E2"]["eq9_deviation"] == pytest.approx(-1.4 + 0.17)

@@ -230,3 +230,31 @@ def test_stray_samples_get_fit_rows_so_their_day_can_go(base, wh, tmp_path):
     update_standstill(load_plant_config(cfg), wh, datetime.now(timezone.utc))
     d = _decisions(fr.run_retention(plant, wh, valve_ids=["V002"], as_of=date(2025, 1, 8), dry_run=True))
     assert d[("V002", day)][0] == "drop"
+
+
+def test_thinning_a_file_of_one_row_group_larger_than_a_batch_keeps_exactly_the_kept_rows(tmp_path):
+    """An older lake file may hold a row group of more rows than a read batch: the kept rows of an
+    hour that begins in its second batch are still found at their rows of the file."""
+    import numpy as np
+    import pyarrow.parquet as pq
+
+    from flows.common.lake import ROW_GROUP_MAX_ROWS, SENSOR_ARROW_SCHEMA, iter_file_batches
+    from transforms.retention import HOUR_US, thin_mask
+
+    n = ROW_GROUP_MAX_ROWS + 60_000  # 1 kHz from hh:42:30: the next hour begins at row 1,050,000, in the second batch
+    t0 = 1_735_700_000 * 10**6 // HOUR_US * HOUR_US + 42 * 60_000_000 + 30_000_000
+    t = t0 + np.arange(n, dtype=np.int64) * 1000
+    frame = pl.DataFrame({"valve_id": "V1", "date": pl.Series(t).cast(pl.Datetime("us", "UTC")).dt.date(),
+                          "timestamp_utc": pl.Series(t).cast(pl.Datetime("us", "UTC")),
+                          **{c: np.arange(n, dtype=np.float32) for c in ("ps_pa", "pr_pa", "p1_pa", "p2_pa", "x_spool_m", "x_cyl_m")},
+                          "x_ref_m": pl.Series([None] * n, dtype=pl.Float32)})  # fmt: skip
+    folder = tmp_path / "valve_id=V1" / "date=x"
+    folder.mkdir(parents=True)
+    path = folder / "part-0.parquet"
+    pq.write_table(frame.to_arrow().select(SENSOR_ARROW_SCHEMA.names).cast(SENSOR_ARROW_SCHEMA), path, row_group_size=n)
+    assert pq.ParquetFile(path).metadata.num_row_groups == 1
+    scan = fr.scan_partition(folder, (t[:1], t[-1:]), True)
+    per_file = fr.count_kept(folder, scan, 10.0)
+    assert fr.thin_partition(per_file) == 2 * 10_000
+    kept = pl.concat(list(iter_file_batches(path)))
+    assert kept.equals(frame.filter(pl.Series(thin_mask(t, scan.firsts, 10.0))).select(kept.columns))

@@ -10,7 +10,7 @@ import synth_valve as sv
 from transforms.characteristic import Characteristic
 from transforms.derivatives import savgol_valid
 from transforms.monitor import monitor, monitor_points
-from transforms.windows import assign_windows, window_arrays
+from transforms.windows import UnsortedTimes, assign_windows, window_layout
 
 EDGES = ("s1", "1r", "s2", "2r")
 
@@ -38,15 +38,18 @@ def awkward_lake():
     return lake.sample(fraction=1.0, shuffle=True, seed=2)
 
 
-def test_window_arrays_equal_the_expressions(awkward_lake):
+def test_window_layout_equals_the_expressions(awkward_lake):
     one = awkward_lake.filter(pl.col("valve_id") == "V1").sort("timestamp_utc", maintain_order=True)
     framed = assign_windows(one, sample_period_s=1e-3).with_columns(savgol_valid(21).alias("valid"))
     ts = one["timestamp_utc"].to_physical().to_numpy()
-    win, valid, n_w = window_arrays(ts, sample_period_s=1e-3, half_window=10)
+    lay = window_layout(ts, sample_period_s=1e-3, half_window=10)
+    win, valid, n_w = lay.window, lay.valid, lay.n_windows
     assert n_w == 2
     np.testing.assert_array_equal(win, framed["window_id"].to_numpy())
     np.testing.assert_array_equal(valid, framed["valid"].to_numpy())
     assert (~valid).sum() > 4 * 20  # window edges, the dropped sample, the duplicate, the 2 ms step
+    with pytest.raises(UnsortedTimes):  # the order is checked in the same pass
+        window_layout(ts[::-1], sample_period_s=1e-3, half_window=10)
 
 
 @pytest.mark.parametrize("leak", [False, True])

@@ -22,6 +22,7 @@ from transforms.retention import (
     decide,
     fitted_cover,
     hour_firsts,
+    kept_ranges,
     kept_row_groups,
     protected_days,
     thin_mask,
@@ -97,7 +98,9 @@ specs = st.builds(
 def test_uncovered_samples_is_brute_force(data):
     t = data.draw(runs())
     s, e = data.draw(windows_for(t))
-    assert uncovered_samples(np.random.default_rng(0).permutation(t), fitted_cover(s, e)) == brute_uncovered(t, s, e)
+    expected = brute_uncovered(t, s, e)
+    assert uncovered_samples(np.random.default_rng(0).permutation(t), fitted_cover(s, e)) == expected
+    assert uncovered_samples(t, fitted_cover(s, e)) == expected  # sorted: runs of windows, binary searches
 
 
 @given(st.data(), specs, st.integers(0, 60), st.booleans())
@@ -143,7 +146,16 @@ def test_reasons_are_the_first_rule_that_fails(data, spec):
 def test_thinning_is_idempotent_and_keeps_every_hour(data, keep_s):
     t = data.draw(runs())
     firsts = hour_firsts(t)
-    kept = t[thin_mask(t, firsts, keep_s)]
+    mask = thin_mask(t, firsts, keep_s)
+    kept = t[mask]
+    # the same rows as index ranges: by binary search (sorted) and as the mask's runs (any order)
+    shuffled = np.random.default_rng(data.draw(st.integers(0, 2**32 - 1))).permutation(t)
+    for times in (t, shuffled):
+        rows = np.zeros(times.size, bool)
+        for a, b in kept_ranges(times, firsts, keep_s):
+            assert a < b and not rows[a:b].any()
+            rows[a:b] = True
+        assert np.array_equal(rows, thin_mask(times, firsts, keep_s))
     # every hour with data keeps its first sample, and only samples < keep_s after it
     assert hour_firsts(kept) == firsts
     assert all(int(x) - firsts[int(x) // HOUR_US] < keep_s * 1e6 for x in kept)
@@ -175,10 +187,12 @@ def test_protected_days_are_the_windows_half_open_dates():
     assert protected_days([]) == frozenset()
 
 
-def test_thin_mask_refuses_hours_it_was_not_given():
+def test_thin_mask_and_kept_ranges_refuse_hours_they_were_not_given():
     t = np.array([DAY_US, DAY_US + 2 * HOUR_US])
     with pytest.raises(ValueError, match="hour is missing"):
         thin_mask(t, hour_firsts(t[:1]), 10.0)
+    with pytest.raises(ValueError, match="hour is missing"):
+        kept_ranges(t, hour_firsts(t[:1]), 10.0)
 
 
 def test_continuous_hour_keeps_its_first_seconds():

@@ -8,9 +8,9 @@ import polars as pl
 import pytest
 import synth_valve as sv
 
-from transforms.derivatives import savgol_arrays, savgol_at
+from transforms.derivatives import savgol_arrays, savgol_at, take_rows
 from transforms.monitor import monitor_points
-from transforms.windows import evaluated_rows
+from transforms.windows import window_layout
 
 WINDOW_ROWS = 700
 """The 6 s windows of ``sv.chamber_data`` (6,000 rows) every 8th row."""
@@ -39,11 +39,36 @@ def test_savgol_at_equals_the_full_pass_bit_for_bit(dtype):
     np.testing.assert_array_equal(de_at, de[rows])
 
 
+@pytest.mark.parametrize("sizes", [[500], [3, 250, 7, 1, 239], [100, 400], [20, 21, 459]])
+def test_savgol_at_over_chunks_equals_the_joined_array_bit_for_bit(sizes):
+    """A column in chunks (row groups, as polars hands them over) is read where it is: the
+    stencils that reach across a chunk's end (or over several short chunks) give the same values."""
+    x = np.random.default_rng(2).normal(size=500).cumsum().astype(np.float32)
+    chunks = np.split(x, np.cumsum(sizes)[:-1])
+    rows = np.unique(np.r_[0:500:3, 5, 9, 10, 11, 99, 100, 101, 489, 490, 499])
+    sm, de = savgol_at(x, rows, window=21, order=3, sample_period_s=1e-3)
+    sm_c, de_c = savgol_at(chunks, rows, window=21, order=3, sample_period_s=1e-3)
+    np.testing.assert_array_equal(sm_c, sm)
+    np.testing.assert_array_equal(de_c, de)
+    np.testing.assert_array_equal(take_rows(chunks, rows), x[rows])
+
+
 def test_evaluated_rows_every_kth_row_of_each_long_window():
-    first, count = np.array([0, 100, 120]), np.array([100, 20, 35])
-    assert evaluated_rows(first, count, None) is None
-    assert evaluated_rows(first, count, 100) is None  # every window ≤ 2 × 100 rows long: k = 1
-    np.testing.assert_array_equal(evaluated_rows(first, count, 30), [0, 3, 6, *range(9, 100, 3), *range(100, 120), *range(120, 155)])
+    # windows of 100, 20 and 35 rows at 1 ms (gaps of 10 ms between them)
+    t_us = np.concatenate([np.arange(100), 200 + np.arange(20), 400 + np.arange(35)]) * 1000
+
+    def layout(window_rows):
+        return window_layout(t_us, sample_period_s=1e-3, half_window=10, window_rows=window_rows)
+
+    assert layout(None).every_row and layout(100).every_row  # every window ≤ 2 × 100 rows long: k = 1
+    lay = layout(30)
+    assert not lay.every_row
+    np.testing.assert_array_equal(lay.first, [0, 100, 120])
+    np.testing.assert_array_equal(lay.count, [100, 20, 35])
+    np.testing.assert_array_equal(lay.rows, [0, 3, 6, *range(9, 100, 3), *range(100, 120), *range(120, 155)])
+    every = layout(None)
+    np.testing.assert_array_equal(lay.window, every.window[lay.rows])
+    np.testing.assert_array_equal(lay.valid, every.valid[lay.rows])
 
 
 def test_points_are_those_of_every_row_at_the_evaluated_rows(lake):

@@ -9,7 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from transforms.derivatives import add_savgol, savgol_weights
-from transforms.windows import LONG_RUN_FRACTION, assign_windows, infer_sample_period_s, window_arrays, window_starts, window_table
+from transforms.windows import LONG_RUN_FRACTION, assign_windows, infer_sample_period_s, window_layout, window_starts, window_table
 
 DT = 1e-3
 T0_US = int(datetime(2025, 3, 1, tzinfo=timezone.utc).timestamp() * 1e6)
@@ -230,9 +230,10 @@ def test_clock_windows_of_assign_windows_and_window_arrays_follow_window_starts(
     expected = window_starts(t, GAP_US, length_s)
     np.testing.assert_array_equal(np.flatnonzero(np.diff(framed["window_id"].to_numpy(), prepend=-1)), expected)
     assert framed["run_start"].to_numpy()[expected].all()  # a stencil never reaches into the next window
-    win, _, n_w = window_arrays(t, sample_period_s=DT, gap_limit_s=GAP_US * 1e-6, half_window=10, window_s=length_s)
-    assert n_w == expected.size
-    np.testing.assert_array_equal(np.flatnonzero(np.diff(win, prepend=-1)), expected)
+    lay = window_layout(t, sample_period_s=DT, gap_limit_s=GAP_US * 1e-6, half_window=10, window_s=length_s)
+    assert lay.n_windows == expected.size and lay.every_row
+    np.testing.assert_array_equal(np.flatnonzero(np.diff(lay.window, prepend=-1)), expected)
+    np.testing.assert_array_equal(lay.first, expected)
 
 
 def test_snapshots_are_never_cut_continuous_recordings_are():

@@ -153,8 +153,12 @@ class Diagnosis:
     split_gaps: list = field(default_factory=list)
     """Per stage: {hydraulic, mechanical} gap."""
     pressure_delay_samples: int = 0
-    """The pressure channels' delay against the positions the records were aligned for
-    (:mod:`transforms.discrepancy.alignment`)."""
+    """The delay shared by the pressure channels against the positions (samples;
+    :mod:`transforms.discrepancy.alignment`)."""
+    pressure_delays: dict = field(default_factory=dict)
+    """The delay each pressure channel (ps, pr, p1, p2) was aligned for (samples)."""
+    lag_finding: str = ""
+    """A chamber transmitter lagging the other pressures: which, how many ms (``PressureDelays.finding``); "" if none."""
 
     @property
     def final_effects(self) -> Effects:
@@ -344,13 +348,13 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
     from scipy import stats as _stats
 
     from transforms.discrepancy.calibration import CLEARANCE, NuisanceModel, calibrate_best, calibrate_prepared, joint_fit, refine_breakaway
-    from transforms.discrepancy.verdict import acting_gap, unexplained
-
-    from transforms.discrepancy.alignment import align_records
+    from transforms.discrepancy.alignment import PRESSURES, align_records
+    from transforms.discrepancy.verdict import acting_gap, lagging_transmitter, unexplained
 
     settings = settings or DiscrepancySettings()
     condition = plant.nominal_condition if condition is None else condition
-    records, delay = align_records(records, plant, condition, settings)
+    recorded = records
+    records, delays = align_records(records, plant, condition, settings)
     prepared = prepare_records(records, plant, condition, settings)
     if not prepared:
         raise ValueError("no record long enough to diagnose")
@@ -366,7 +370,7 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
         if nm.values(z_cal)[CLEARANCE] < SHARP_CLEARANCE * nm.theta0[CLEARANCE]:
             # the data show sharp edges, not the configured Eq. 3's: diagnose with that family
             sharp = replace(nominal[0], geometry=replace(nominal[0].geometry, area_law="sharp"))
-            d = diagnose(records, sharp, nominal[1], settings, library=library, trace_records=trace_records, monitoring=monitoring, priors=priors)
+            d = diagnose(recorded, sharp, nominal[1], settings, library=library, trace_records=trace_records, monitoring=monitoring, priors=priors)
             d.verdict.reason = (f"the edges are sharp (radial clearance calibrated to {nm.values(z_cal)[CLEARANCE] * 1e6:.2g} µm of the "
                                 f"configured {nm.theta0[CLEARANCE] * 1e6:.3g} µm): diagnosed with the sharp-edged law (configure "
                                 f"area_law = \"sharp\"); " + d.verdict.reason)
@@ -503,12 +507,16 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
         verdict = unexplained(first.spec, first.value, first.acting_before, first.acting_after, first.gap_kind, stage_acc[1], first.floor)
     if named and (verdict is None or verdict.verdict == "named") and named[0].spec.name in GAIN_OR_OFFSET:
         verdict = _gain_or_offset(prepared, named[0], refine, settings, verdict)
+    lag = delays.finding()
+    if lag:  # a transmitter lagging the others: a finding of its own (aligned for, not absorbed)
+        verdict = lagging_transmitter(verdict, bool(named), lag, stage_acc[0].split_gap("hydraulic"), floors["hydraulic"])
     return Diagnosis(
         n_records=len(prepared), records=[(p.rec.start_us, p.rec.end_us) for p in prepared], named=named,
         candidates=candidates, gap_rows=gap_rows, residual_rows=residual_rows, stage_effects=stage_effects,
         stage_gaps=stage_gaps, traces=traces, n_blocks=B, equation_sigmas=tuple(float(s) for s in sig),
         monitoring=mon, verdict=verdict, gap_nominal=gap_nominal, model=stage_model, noise_floors=floors,
-        split_gaps=[{k: a.split_gap(k) for k in ("hydraulic", "mechanical")} for a in stage_acc], pressure_delay_samples=delay,
+        split_gaps=[{k: a.split_gap(k) for k in ("hydraulic", "mechanical")} for a in stage_acc], pressure_delay_samples=delays.shared,
+        pressure_delays={c: delays.of(c) for c in PRESSURES}, lag_finding=lag,
     )
 
 

@@ -33,7 +33,11 @@ Two kinds of evidence (docs/discrepancy.md, "Verdicts"):
    ``FLOOR_FACTOR`` × its noise floor (:func:`confirmed`). A selection whose effect does not is
    ``unexplained`` (:func:`unexplained`: the equation, signal, region and size of the
    disagreement); a reading named by the prior alone that does not beat the calibrated base model
-   in the replay is ``ambiguous``.
+   in the replay (shrink its gap ≥ ``GAP_SHRINK``×, or where the base model is already within
+   ``FLOOR_FACTOR`` × the floor, narrow it by ``FLOOR_NARROWS``) is ``ambiguous``.
+4. **A transmitter lagging the others** (:func:`lagging_transmitter`): the records are aligned for
+   it (:mod:`transforms.discrepancy.alignment`) and it is reported: ``unexplained`` where no
+   library effect is found, else added to the reason.
 
 Confidence: for (1) Φ(t) of the advantage over the runner-up (0.999 without one); for (2)
 1/(1 + exp(−(ΔO − Z_AMBIGUOUS²)/2)) for the effect reading, which is 0.5 at the ambiguity line;
@@ -51,7 +55,7 @@ from model.effects import EffectSpec
 from transforms.discrepancy.gaps import GAP_SCALES, NOISE_GAP, SPLIT_GAPS
 from transforms.discrepancy.nuisance import NUISANCE_UNITS
 
-__all__ = ["GAP_SHRINK", "SEPARATE_BY", "Verdict", "Z_AMBIGUOUS", "Z_NAMED", "acting_gap", "confirmed", "nuisance_verdict", "unexplained"]
+__all__ = ["GAP_SHRINK", "SEPARATE_BY", "Verdict", "Z_AMBIGUOUS", "Z_NAMED", "acting_gap", "confirmed", "lagging_transmitter", "nuisance_verdict", "unexplained"]
 
 Z_AMBIGUOUS = 3.0
 """Prior σ (along an effect's nuisance pattern) above which the nuisance reading is reported as doubtful."""
@@ -76,6 +80,11 @@ GAP_SHRINK = 1.5
 (:func:`acting_gap`) shrinks by at least this factor when the effect is added ..."""
 FLOOR_FACTOR = 2.0
 """... or down to this multiple of that gap's noise floor (what the sensor noise alone leaves)."""
+FLOOR_NARROWS = 1.05
+"""A reading named by the prior alone (no residual for the selection) against a calibrated base
+model that already replays its gap within ``FLOOR_FACTOR`` × the noise floor must narrow that gap
+by at least this factor: reaching the floor confirms nothing there, and a shrink of ``GAP_SHRINK``
+is out of reach (the exact model itself leaves ~1.2× the floor)."""
 MECHANICAL_EFFECTS = ("friction_change", "load_mass_change")
 EQUATION_OF = {"p1_hydraulic": "chamber 1 (Eq. 6, p1)", "p2_hydraulic": "chamber 2 (Eq. 6, p2)", "X_mechanical": "the motion (Eq. 5, X)"}
 REGION_MIN_SAMPLES = 200
@@ -117,6 +126,24 @@ def unexplained(spec: EffectSpec, value: float, before: float, after: float, kin
                                 f"but adding it leaves the {kind} gap at {before:.3g} → {after:.3g} (needs ≥ {GAP_SHRINK:g}× or ≤ "
                                 f"{FLOOR_FACTOR:g}× the noise floor {floor:.2g})"),
         gap_before=before, gap_after=after, where=where, gap_kind=kind, floor=floor, **kw)
+
+
+def lagging_transmitter(verdict: "Verdict | None", named: bool, finding: str, gap: float, floor: float) -> "Verdict | None":
+    """The verdict when a chamber pressure transmitter lags the others (``finding``:
+    :meth:`transforms.discrepancy.alignment.PressureDelays.finding`). The records were aligned for
+    it, so the library effects were judged as on a healthy transmitter; where they explain nothing
+    (``none``, or no verdict and nothing ``named`` of the model taken as exact) the verdict is
+    ``unexplained`` with the lag as where the data disagree (``gap``: the hydraulic gap of the
+    base model on the aligned records, ``floor`` its noise floor); otherwise the lag is added to
+    the verdict's reason."""
+    if (verdict is None and not named) or (verdict is not None and verdict.verdict == "none"):
+        kw = dict(nuisances=verdict.nuisances, scores=verdict.scores) if verdict is not None else {}
+        return Verdict("unexplained", MAX_CONFIDENCE, None, float("nan"), separate_by="the transmitter's step response, or a reference transmitter on the same port",
+                       reason=f"the data disagree with the model in a way no library effect explains: {finding}", gap_before=gap, gap_after=gap,
+                       where=finding, gap_kind="hydraulic", floor=floor, **kw)
+    if verdict is not None:
+        verdict.reason += f"; besides, {finding}"
+    return verdict
 
 
 SEPARATE_BY: dict[str, str] = {
@@ -354,7 +381,7 @@ def nuisance_verdict(prepared, nm, fit, named_specs, specs, rows0, w_rows, setti
     if jf is not None:
         table = Calibration(nm=nm, z=jf.z, z_se=jf.z_se, plant=None, condition=None, sigmas=(0.0, 0.0, 0.0)).table()  # type: ignore[arg-type]
     gaps = dict(gap_before=gap_before, gap_after=gap_after)
-    held = ""
+    held = replayed = ""
     if z >= Z_NAMED and not rivals and acc_after is not None:
         # named needs the replay too: the effect must close its gap against the calibrated base
         # model (whose nuisances explain the same data off their priors); where it does not, the
@@ -362,14 +389,16 @@ def nuisance_verdict(prepared, nm, fit, named_specs, specs, rows0, w_rows, setti
         kind = acting_gap(spec)
         before, after = accs[0].split_gap(kind), acc_after.split_gap(kind)
         # against a base model that already replays within FLOOR_FACTOR x the floor, reaching the
-        # floor confirms nothing: only a material shrink does
+        # floor confirms nothing: the reading must narrow the gap by FLOOR_NARROWS
         at_floor = before <= FLOOR_FACTOR * floors[kind]
-        if not confirmed(before, after, floors[kind]) or (at_floor and after * GAP_SHRINK > before):
-            held = f"; its replay does not tell them apart (the {kind} gap {before:.3g} → {after:.3g}" + (
+        replayed = f"the {kind} gap {before:.3g} → {after:.3g}"
+        if not confirmed(before, after, floors[kind]) or (at_floor and after * FLOOR_NARROWS > before):
+            held = f"; its replay does not tell them apart ({replayed}" + (
                 f", the base model's already within {FLOOR_FACTOR:g}× its noise floor {floors[kind]:.2g})" if at_floor else ")")
     if z >= Z_NAMED and not rivals and not held:
         return Verdict("named", best["confidence"], spec, best["value"], alternatives=[nuis], separate_by=sep,
-                       reason=f"without {spec.key} the base model's parameters would have to move {z:.2g}σ outside their tolerances ({nuis}){note}",
+                       reason=f"without {spec.key} the base model's parameters would have to move {z:.2g}σ outside their tolerances ({nuis})"
+                       + (f"; its replay: {replayed}" if replayed else "") + note,
                        nuisances=table, scores=public, **gaps)
     return Verdict("ambiguous", best["confidence"], spec, best["value"], alternatives=[nuis] + alts,
                    alternative_keys=[sc["key"] for sc in rivals], separate_by=sep,
