@@ -270,6 +270,13 @@ def _ramp_fit(f_hat, valid, segment, knots: list[np.ndarray], motion):
     return load, rms, c[k:]
 
 
+def robust_sigma(v: np.ndarray) -> float:
+    """Robust scale of ``v``'s finite values: 1.4826 × their median absolute deviation (the
+    standard deviation for Gaussian values, untouched by a few outliers); 0 with ≤ 10 of them."""
+    v = v[np.isfinite(v)]
+    return 1.4826 * float(np.median(np.abs(v - np.median(v)))) if v.size > 10 else 0.0
+
+
 def _corners(rest: np.ndarray, valid: np.ndarray, segment: np.ndarray, n_segments: int, W: int, dt: float, settings: DiscrepancySettings,
              knots: list[np.ndarray] | None = None) -> list[np.ndarray]:
     """Per segment the knots of a piecewise-linear ``rest`` [N] on the ``valid`` samples: those of
@@ -279,8 +286,7 @@ def _corners(rest: np.ndarray, valid: np.ndarray, segment: np.ndarray, n_segment
     ``settings.corner_sigmas`` robust σ of the filter's output, more than ``W`` from a knot)."""
     kink = _kink_filter(np.where(valid, rest, np.nan), W) / dt  # slope change at every sample [N/s]
     ok = np.isfinite(kink)
-    sig = 1.4826 * float(np.median(np.abs(kink[ok] - np.median(kink[ok])))) if ok.sum() > 10 else 0.0
-    thr = max(settings.corner_min_n_s, settings.corner_sigmas * sig)
+    thr = max(settings.corner_min_n_s, settings.corner_sigmas * robust_sigma(kink))
     ak = np.where(ok, np.abs(kink), 0.0)
     out = []
     for s in range(n_segments):
@@ -484,8 +490,7 @@ def estimate_load(f_hat: np.ndarray, v: np.ndarray, settings: DiscrepancySetting
     if idx.size >= 2 * w + 1:
         jump = step_filter(f_hat[idx], w)
         ok = np.isfinite(jump)
-        sigma = 1.4826 * float(np.median(np.abs(jump[ok] - np.median(jump[ok])))) if ok.sum() > 10 else 0.0
-        thr = max(settings.step_threshold_n, settings.step_threshold_sigmas * sigma)
+        thr = max(settings.step_threshold_n, settings.step_threshold_sigmas * robust_sigma(jump))
         aj = np.where(ok, np.abs(jump), 0.0)
         last = -10 * w
         for j in np.flatnonzero(aj > thr):

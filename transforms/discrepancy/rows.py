@@ -13,7 +13,7 @@ from model.params import PlantParams, ValveCondition
 from model.replay import DRIVE_HYDRAULIC, DRIVE_MECHANICAL, replay
 from model.simulate import DEFAULT_REG_BAND_PA
 from transforms.discrepancy.gaps import RECORDED_OF, GapAccumulator, noise_rms
-from transforms.discrepancy.load import LoadEstimate, estimate_load, load_projector, project_out, replay_load, stuck_spans
+from transforms.discrepancy.load import LoadEstimate, estimate_load, load_projector, project_out, replay_load, robust_sigma, stuck_spans
 from transforms.discrepancy.records import REGIONS, Record, operating_regions, prepare_record
 from transforms.discrepancy.residuals import (
     demean_by_group,
@@ -292,7 +292,7 @@ def _equation_sigmas(y: np.ndarray, rows: _Rows) -> np.ndarray:
     for k in range(3):
         v = y[(rows.eq == k) & np.isfinite(y)]
         if v.size > 10:
-            s = 1.4826 * float(np.median(np.abs(v - np.median(v))))
+            s = robust_sigma(v)
             sig[k] = s if s > 0 else (float(np.std(v)) or 1.0)
     return sig
 
