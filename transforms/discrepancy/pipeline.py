@@ -231,49 +231,6 @@ def _project_out(Nw: np.ndarray, *cols: np.ndarray) -> list[np.ndarray]:
     return out
 
 
-GAIN_OR_OFFSET = ("pressure_sensor_offset", "pressure_sensor_gain")
-PRESSURE_SPAN = 2.0
-"""Where a transmitter's pressure spans this factor (5th to 95th percentile), a gain error and an
-offset of it have different shapes (the gain's error grows with the pressure): the other one is
-fitted and replayed too, and the two are told apart on the hydraulic gap or reported ambiguous."""
-TOLD_APART = 1.25
-"""... told apart when the other's hydraulic gap is at least this factor larger."""
-
-
-def _gain_or_offset(prepared, first: "NamedEffect", refine, settings, verdict):
-    """The verdict for a named pressure transmitter offset or gain (``GAIN_OR_OFFSET``) where the
-    pressure spans ``PRESSURE_SPAN``: the other reading is fitted and replayed; kept named if the
-    named one's hydraulic gap is ``TOLD_APART`` smaller, else ``ambiguous`` with the better first
-    and both listed. Returns ``verdict`` unchanged where the pressure does not span the factor."""
-    from model.effects import library_entry
-    from transforms.discrepancy.verdict import SEPARATE_BY, Verdict
-
-    v = first.spec.variant
-    p = np.concatenate([q.rec.raw[v] for q in prepared])
-    lo, hi = np.nanpercentile(p, [5, 95])
-    if not (lo > 0 and hi >= PRESSURE_SPAN * lo):
-        return verdict
-    other = library_entry(("pressure_sensor_gain" if first.spec.name == "pressure_sensor_offset" else "pressure_sensor_offset") + f"[{v}]")
-    mean = float(np.nanmean(p))
-    guess = (first.value - 1.0) * mean if other.name == "pressure_sensor_offset" else first.value / mean  # same reading at the mean
-    fx, _, model, _ = refine([other], perturbed(Effects(), other, guess))
-    g_other = _gaps(prepared, *model, fx, settings, set())[0].split_gap("hydraulic")
-    g_first = first.acting_after
-    span = f"{v} spans {lo / 1e5:.3g}–{hi / 1e5:.3g} bar"
-    if g_other >= TOLD_APART * g_first:
-        if verdict is not None:
-            verdict.reason += f"; told from {other.key} ({span}: its replay leaves the hydraulic gap at {g_other:.3g} against {g_first:.3g})"
-        return verdict
-    readings = sorted([(g_first, first.spec, first.value), (g_other, other, other.value(fx))], key=lambda r: r[0])
-    (gb, sb, vb), (gw, sw, vw) = readings
-    return Verdict(
-        "ambiguous", float(min(0.999, gw / (gb + gw))), sb, vb, alternatives=[f"{sw.key} {sw.parameter_name}={vw:.4g} {sw.unit}"],
-        alternative_keys=[sw.key], separate_by=SEPARATE_BY["pressure_sensor_gain"],
-        reason=(f"{sb.key} and {sw.key} replay alike ({span}; hydraulic gap {gb:.3g} and {gw:.3g}, less than {TOLD_APART:g}× apart)"),
-        nuisances=verdict.nuisances if verdict is not None else [], scores=verdict.scores if verdict is not None else [],
-        gap_before=first.gap_before, gap_after=first.gap_after)
-
-
 NUISANCE_COLLINEAR = 0.05
 """A candidate whose regressor keeps less than this fraction of its norm once the nuisance
 directions are projected out is not selected on the residuals (it is a nuisance pattern)."""
@@ -349,6 +306,7 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
 
     from transforms.discrepancy.calibration import CLEARANCE, NuisanceModel, calibrate_best, calibrate_prepared, joint_fit, refine_breakaway
     from transforms.discrepancy.alignment import PRESSURES, align_records
+    from transforms.discrepancy.transmitter import GAIN_OR_OFFSET, gain_or_offset
     from transforms.discrepancy.verdict import acting_gap, lagging_transmitter, unexplained
 
     settings = settings or DiscrepancySettings()
@@ -506,7 +464,14 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
         first = named[0]
         verdict = unexplained(first.spec, first.value, first.acting_before, first.acting_after, first.gap_kind, stage_acc[1], first.floor)
     if named and (verdict is None or verdict.verdict == "named") and named[0].spec.name in GAIN_OR_OFFSET:
-        verdict = _gain_or_offset(prepared, named[0], refine, settings, verdict)
+        def alone(spec, value):
+            """(value, model) of ``spec`` alone on the rows: the base model, or with the nuisances jointly."""
+            if nm is None:
+                return value, (plant, condition)
+            fx, _, model, _ = refine([spec], perturbed(base, spec, value - spec.neutral))
+            return spec.value(fx), model
+
+        verdict = gain_or_offset(prepared, named[0], alone, settings, verdict)
     lag = delays.finding()
     if lag:  # a transmitter lagging the others: a finding of its own (aligned for, not absorbed)
         verdict = lagging_transmitter(verdict, bool(named), lag, stage_acc[0].split_gap("hydraulic"), floors["hydraulic"])

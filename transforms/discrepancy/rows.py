@@ -324,6 +324,44 @@ class ReplayTrace:
     replayed: dict[str, np.ndarray]
 
 
+def _replay_starts(p: _Prepared, effects, settings) -> tuple:
+    """(spool position source, true x, p1, p2, v_X, restart indices every ``replay_segment_s``,
+    the measured true states there) of the whole and the hydraulic replay."""
+    rec = p.rec
+    h = settings.savgol_window // 2
+    x_src = np.where(np.isfinite(rec.sg["x"]), rec.sg["x"], rec.raw["x"])
+    x_true, p1_true, p2_true = true_signals(x_src, rec.sg["p1"], rec.sg["p2"], effects)
+    starts = np.arange(h, rec.n - h - 1, max(2, int(round(settings.replay_segment_s / rec.dt))))
+    v_all = np.where(np.isfinite(rec.sg["v"]), rec.sg["v"], 0.0)
+    v = v_all[starts]
+    v = np.where(np.abs(v) < 1e-3, 0.0, v)
+    states = np.column_stack([rec.raw["X"][starts], v, p1_true[starts], p2_true[starts]])
+    return x_src, x_true, p1_true, p2_true, v_all, starts, states
+
+
+def _hydraulic_replay(p: _Prepared, plant, condition, effects, start: tuple, load) -> tuple[np.ndarray, np.ndarray]:
+    """p1, p2 readings (sensor effects applied) replayed on the recorded cylinder motion from
+    ``start`` (:func:`_replay_starts`); ``load`` does not enter the chambers."""
+    rec = p.rec
+    _, x_true, _, _, _, starts, states = start
+    hyd = replay(plant, x_true, rec.raw["ps"], rec.raw["pr"], load, starts, states, condition=condition, effects=effects,
+                 drive=DRIVE_HYDRAULIC, given=rec.raw["X"])
+    _, p1h, p2h = sensor_readings(np.zeros(1), hyd.p1_pa, hyd.p2_pa, effects)
+    return np.asarray(p1h, float).copy(), np.asarray(p2h, float).copy()
+
+
+def hydraulic_gap(prepared, plant, condition, effects, settings) -> float:
+    """The hydraulic gap (``gaps.SPLIT_GAPS``) of ``effects`` on ``prepared``: the chamber replay
+    alone, without the load estimate, the whole or the mechanical replay (for fits on it)."""
+    acc = GapAccumulator()
+    h = settings.savgol_window // 2
+    for p in prepared:
+        for s, rep in zip(("p1_hydraulic", "p2_hydraulic"), _hydraulic_replay(p, plant, condition, effects, _replay_starts(p, effects, settings), 0.0)):
+            rep[p.rec.n - h:] = np.nan  # as _replay_record
+            acc.add(s, rep - p.rec.raw[RECORDED_OF[s]], p.regions)
+    return acc.split_gap("hydraulic")
+
+
 def _replay_record(p: _Prepared, plant, condition, effects, settings) -> dict[str, np.ndarray]:
     """The record replayed whole (p1, p2, X) and split (``gaps.SPLIT_GAPS``): p1, p2 on the
     recorded cylinder motion, X on the recorded pressures (restarts every
@@ -331,18 +369,12 @@ def _replay_record(p: _Prepared, plant, condition, effects, settings) -> dict[st
     rec = p.rec
     h = settings.savgol_window // 2
     n = rec.n
-    x_src = np.where(np.isfinite(rec.sg["x"]), rec.sg["x"], rec.raw["x"])
-    x_true, p1_true, p2_true = true_signals(x_src, rec.sg["p1"], rec.sg["p2"], effects)
-    seg = max(2, int(round(settings.replay_segment_s / rec.dt)))
-    starts = np.arange(h, n - h - 1, seg)
-    v_all = np.where(np.isfinite(rec.sg["v"]), rec.sg["v"], 0.0)
-    v = v_all[starts]
-    v = np.where(np.abs(v) < 1e-3, 0.0, v)
-    states = np.column_stack([rec.raw["X"][starts], v, p1_true[starts], p2_true[starts]])
+    start = _replay_starts(p, effects, settings)
+    x_src, x_true, p1_true, p2_true, v_all, starts, states = start
     load = _replay_load_for(p, plant, condition, effects, settings)
     args = (plant, x_true, rec.raw["ps"], rec.raw["pr"], load)
     res = replay(*args, starts, states, condition=condition, effects=effects)
-    hyd = replay(*args, starts, states, condition=condition, effects=effects, drive=DRIVE_HYDRAULIC, given=rec.raw["X"])
+    p1h, p2h = _hydraulic_replay(p, plant, condition, effects, start, load)
     _, p1_rec, p2_rec = true_signals(x_src, rec.raw["p1"], rec.raw["p2"], effects)
     given_p = np.vstack([np.where(np.isfinite(p1_true), p1_true, p1_rec), np.where(np.isfinite(p2_true), p2_true, p2_rec)])
     # the mechanical replay restarts every mechanical_segment_s and where a move leaves the
@@ -355,9 +387,8 @@ def _replay_record(p: _Prepared, plant, condition, effects, settings) -> dict[st
     mstates = np.column_stack([rec.raw["X"][mstarts], np.where(np.abs(vm) < 1e-3, 0.0, vm), given_p[0, mstarts], given_p[1, mstarts]])
     mech = replay(*args, mstarts, mstates, condition=condition, effects=effects, drive=DRIVE_MECHANICAL, given=given_p)
     _, p1r, p2r = sensor_readings(np.zeros(1), res.p1_pa, res.p2_pa, effects)
-    _, p1h, p2h = sensor_readings(np.zeros(1), hyd.p1_pa, hyd.p2_pa, effects)
     out = {"p1": np.asarray(p1r, float).copy(), "p2": np.asarray(p2r, float).copy(), "X": res.X_m.copy(),
-           "p1_hydraulic": np.asarray(p1h, float).copy(), "p2_hydraulic": np.asarray(p2h, float).copy(), "X_mechanical": mech.X_m.copy()}
+           "p1_hydraulic": p1h, "p2_hydraulic": p2h, "X_mechanical": mech.X_m.copy()}
     for k in out:
         out[k][n - h:] = np.nan  # the record's tail has no Savitzky–Golay regions
     out["X_mechanical"][~moving] = np.nan  # judged at speed only (above)
