@@ -91,7 +91,8 @@ def gain_or_offset(prepared, first, alone, settings, verdict):
     fitted = f"each fitted on the hydraulic replay: {first.spec.key} {v_first:.4g} leaves {g_first:.3g}, {other.key} {v_other:.4g} leaves {g_other:.3g}"
     if g_other >= TOLD_APART * g_first or (g_first <= g_other and not spans):
         if verdict is not None:
-            verdict.reason += f"; told from {other.key} ({span}; {fitted})"
+            verdict.reason += (f"; told from {other.key} ({span}; {fitted})" if g_other >= TOLD_APART * g_first else
+                               f"; the replay prefers it to {other.key}, by less than {TOLD_APART:g}× over a narrow range ({span}; {fitted})")
         return verdict
     readings = sorted([(g_first, first.spec, v_first), (g_other, other, v_other)], key=lambda r: r[0])
     (gb, sb, vb), (gw, sw, vw) = readings
