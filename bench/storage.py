@@ -35,18 +35,23 @@ process (single-threaded polars/Arrow), so the load of the machine changes them 
 from __future__ import annotations
 
 import os
+import sys
+from pathlib import Path
 
 os.environ.setdefault("POLARS_MAX_THREADS", "1")
 os.environ.setdefault("RAYON_NUM_THREADS", "1")
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from flows.common.allocator import retain_freed_memory, retain_polars_memory  # noqa: E402
+
+retain_polars_memory()  # as the commands do, before polars is imported: decoded columns reuse freed pages
+retain_freed_memory()
 
 import argparse  # noqa: E402
 import dataclasses  # noqa: E402
 import shutil  # noqa: E402
-import sys  # noqa: E402
 import tempfile  # noqa: E402
 import time  # noqa: E402
 from datetime import date, datetime, timezone  # noqa: E402
-from pathlib import Path  # noqa: E402
 
 import duckdb  # noqa: E402
 import numpy as np  # noqa: E402
@@ -56,8 +61,6 @@ import tomli_w  # noqa: E402
 
 pa.set_cpu_count(1)
 pa.set_io_thread_count(1)
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from flows.common.config import load_plant_config  # noqa: E402
 from flows.common.lake import partition_bytes, partition_folders, partition_rows  # noqa: E402

@@ -66,12 +66,8 @@ statistics made the write ~20 % slower (85 → 68 ms per 1 M rows, ``docs/ingest
 ROW_GROUP_MIN_ROWS = 65_536
 """A row group closes at the first window start (a gap) after this many rows (~7 hourly 10 s
 windows at 1 kHz; fewer, larger pages decode ~1.7× as fast as a row group per window)…"""
-ROW_GROUP_MAX_ROWS = DAY_FILE_MAX_ROWS
-"""…or at this many rows, whichever comes first: an hour file of a continuous recording (3.6 M
-rows at 1 kHz, no window start inside) is one row group, written and decoded in one piece
-(``docs/ingest.md``, "Storage")."""
-READ_BATCH_ROWS = 1_048_576
-"""Rows :func:`iter_file_batches` decodes at a time (memory holds one batch, not a row group)."""
+ROW_GROUP_MAX_ROWS = 1_048_576
+"""…or at this many rows, whichever comes first."""
 ROW_GROUP_GAP_US = 5_000
 """Times further apart than this start a new window (default ``export.max_gap_s``)."""
 
@@ -380,7 +376,7 @@ def partition_rows(folder: Path) -> int:
 
 
 def iter_file_batches(
-    path: Path, columns: list[str] | None = None, batch_rows: int = READ_BATCH_ROWS, row_groups: list[int] | None = None,
+    path: Path, columns: list[str] | None = None, batch_rows: int = ROW_GROUP_MAX_ROWS, row_groups: list[int] | None = None,
 ) -> Iterator[pl.DataFrame]:
     """One lake file in batches of at most ``batch_rows`` rows (all columns in the canonical
     schema, or only ``columns``; all row groups or only ``row_groups``): memory holds one batch,

@@ -43,13 +43,15 @@ def _continuous(hour: int, n: int) -> pl.DataFrame:
 
 
 def test_lake_file_encodings_codec_and_statistics_from_the_footer_and_rerun_bytes(tmp_path):
-    assert row_group_bounds(np.arange(3_600_000, dtype=np.int64) * 1000) == [(0, 3_600_000)]  # a gapless hour at 1 kHz: one row group
     frame = _continuous(0, 20_000)
+    frame = pl.concat([frame, _continuous(1, 70_000)])  # a window start after 20 k rows, then 70 k gapless rows
     path = partition_path(tmp_path, "V1", date(2025, 1, 1))
-    write_partition(path, frame)
+    write_partition(path, frame, gap_us=5_000)
     first = hashlib.sha256(path.read_bytes()).hexdigest()
     md = pq.ParquetFile(path).metadata
-    assert md.num_row_groups == 1
+    sizes = [md.row_group(g).num_rows for g in range(md.num_row_groups)]
+    t = frame["timestamp_utc"].to_physical().to_numpy()
+    assert sizes == [b - a for a, b in row_group_bounds(t, 5_000)] == [90_000]  # < 64 k rows at the window start: one group
     rg = md.row_group(0)
     float_encoding = COLUMN_ENCODING.get(FLOATS[0], "PLAIN")
     for i in range(rg.num_columns):
@@ -69,8 +71,8 @@ def test_lake_file_encodings_codec_and_statistics_from_the_footer_and_rerun_byte
 
 def test_older_lake_files_are_read_beside_new_ones(tmp_path):
     """A day folder after an upgrade: hour 0 written by an older valvemon (zstd, PLAIN time,
-    dictionary-encoded floats, small row groups), hour 1 with byte-stream-split floats in row
-    groups of 1 M rows' kind, hour 2 by this one. polars (``read_lake``), DuckDB and
+    dictionary-encoded floats, small row groups), hour 1 with byte-stream-split floats (measured
+    for the lake and not taken: ``docs/ingest.md``, "Storage"), hour 2 by this one. polars (``read_lake``), DuckDB and
     retention's thinning read them all alike."""
     wh = tmp_path / "wh"
     folder = partition_path(wh, "V1", date(2025, 1, 1)).parent

@@ -233,16 +233,15 @@ def test_stray_samples_get_fit_rows_so_their_day_can_go(base, wh, tmp_path):
 
 
 def test_thinning_a_file_of_one_row_group_larger_than_a_batch_keeps_exactly_the_kept_rows(tmp_path):
-    """A lake file may hold a row group of more rows than a read batch (an hour file of a continuous
-    recording is one row group): the kept rows of an hour that begins in its second batch are
-    still found at their rows of the file."""
+    """An older lake file may hold a row group of more rows than a read batch: the kept rows of an
+    hour that begins in its second batch are still found at their rows of the file."""
     import numpy as np
     import pyarrow.parquet as pq
 
-    from flows.common.lake import READ_BATCH_ROWS, SENSOR_ARROW_SCHEMA, iter_file_batches
+    from flows.common.lake import ROW_GROUP_MAX_ROWS, SENSOR_ARROW_SCHEMA, iter_file_batches
     from transforms.retention import HOUR_US, thin_mask
 
-    n = READ_BATCH_ROWS + 60_000  # 1 kHz from hh:42:30: the next hour begins at row 1,050,000, in the second batch
+    n = ROW_GROUP_MAX_ROWS + 60_000  # 1 kHz from hh:42:30: the next hour begins at row 1,050,000, in the second batch
     t0 = 1_735_700_000 * 10**6 // HOUR_US * HOUR_US + 42 * 60_000_000 + 30_000_000
     t = t0 + np.arange(n, dtype=np.int64) * 1000
     frame = pl.DataFrame({"valve_id": "V1", "date": pl.Series(t).cast(pl.Datetime("us", "UTC")).dt.date(),
