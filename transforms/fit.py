@@ -54,8 +54,8 @@ from collections.abc import Mapping, Sequence
 import numba
 import numpy as np
 import polars as pl
+from scipy.special import stdtrit  # Student's t quantile (scipy.stats.t.ppf), without importing scipy.stats (~1 s)
 
-from model.student_t import t_quantile  # Student's t quantile (scipy.stats.t.ppf), without importing scipy (~0.3 s)
 from transforms.characteristic import Characteristic
 from transforms.params import EDGES, MonitorParams
 
@@ -649,7 +649,7 @@ def fit_arrays(
         var_x = sigma2 * shh / det
         rho_c = np.clip(np.nan_to_num(rho, nan=0.0), 0.0, 0.98)
         infl = np.sqrt((1.0 + rho_c) / (1.0 - rho_c))
-        tq = t_quantile(dof, 0.5 + ci_level / 2.0)
+        tq = stdtrit(dof, 0.5 + ci_level / 2.0)
         half_a = tq * infl * np.sqrt(var_a)
         half_x = tq * infl * np.sqrt(var_x)
         spread = alpha * np.sqrt(det) / sdd

@@ -26,8 +26,8 @@ from functools import partial
 import numba
 import numpy as np
 import polars as pl
+from scipy.special import stdtrit
 
-from model.student_t import t_quantile
 from transforms.baseline import (
     EDGE_LAWS,
     Plausibility,
@@ -499,7 +499,7 @@ def _leak_columns(fits, u, area, leak, offsets, lam_b, opposite, bk, pmap, valve
     m = np.diff(offsets) // block  # block means
     levels = np.array([pmap[v].ci_level for v in valve_ids]) if len(valve_ids) else np.zeros(0)
     with np.errstate(invalid="ignore"):
-        half = t_quantile(np.maximum(m - 3, 1), 0.5 + levels / 2) * se
+        half = stdtrit(np.maximum(m - 3, 1), 0.5 + levels / 2) * se
     half = np.where(m > 3, half, np.nan)
     lam_row, half_row = lam[opposite], half[opposite]
     return [
