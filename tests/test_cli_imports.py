@@ -57,13 +57,3 @@ def test_query_loads_nothing_heavy(tmp_path):
     assert code == 0 and out.split() == ["n", "1"]
     assert modules.isdisjoint(HEAVY), sorted(modules & set(HEAVY))
 
-
-def test_the_monitor_command_loads_no_scipy_submodule(tmp_path):
-    """The monitor's modules (and the publish it ends with) need none of scipy's submodules: the
-    fits' Student's t quantiles come from ``model.student_t`` (``scipy.special`` cost a monitor
-    command ~0.3 CPU-s). numba imports the bare ``scipy`` package itself."""
-    code = "import sys, flows.cli, flows.monitor.flow, flows.report.publish; print(sorted(m for m in sys.modules if m.startswith('scipy.')))"
-    env = {k: v for k, v in os.environ.items() if not k.startswith("PREFECT_API")} | {"PYTHONPATH": str(ROOT)}
-    proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=120, check=True)
-    loaded = eval(proc.stdout.strip().splitlines()[-1])  # noqa: S307 - our own printed list
-    assert not [m for m in loaded if m.split(".")[1] in ("special", "stats", "signal", "optimize", "integrate", "linalg")], loaded
