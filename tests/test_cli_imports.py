@@ -56,4 +56,3 @@ def test_query_loads_nothing_heavy(tmp_path):
     code, modules, out = _loaded(["query", "SELECT n FROM edge_fits", "--format", "csv", "--warehouse", str(tmp_path / "wh")], tmp_path)
     assert code == 0 and out.split() == ["n", "1"]
     assert modules.isdisjoint(HEAVY), sorted(modules & set(HEAVY))
-
