@@ -4,6 +4,7 @@ Usage (figures and the exact command in BENCHMARKS.md, "Storage and retention"):
 
     taskset -c 0 .venv/bin/python bench/storage.py                # 20 min of one valve
     taskset -c 0 .venv/bin/python bench/storage.py --minutes 60 --valves 500 --keep-days 90 --thin-s 10
+    taskset -c 0 .venv/bin/python bench/storage.py --encodings WAREHOUSE/lake/sensors/valve_id=V001/date=2025-01-01/part-h01.parquet
 
 1. ``valvemon simulate`` writes ``--minutes`` of one valve recorded continuously at 1 kHz (back-to-back
    10-minute windows from 00:00 UTC: one run without a gap, the shape of a continuous recording);
@@ -15,6 +16,16 @@ Usage (figures and the exact command in BENCHMARKS.md, "Storage and retention"):
    measured on a fresh database file holding 200 000 copies of the measured rows (the values
    jittered, so that they do not compress better than real ones).
 
+``--encodings LAKEFILE`` instead re-encodes one lake file (an hour file of a continuous recording)
+with the lake's own writer (``write_partition``, fsync included) in each candidate layout — codec,
+float encoding (PLAIN or BYTE_STREAM_SPLIT), row groups (≤ 1 M rows, or one per hour file) — and
+measures per layout what a night does with the file: bytes per row, the write, the monitor's read
+of it (``lake_chunks`` with the monitor's columns, polars' decoder; the report's standstill pass
+reads the same columns the same way), the same columns decoded by pyarrow and handed to polars
+(the alternative reader), DuckDB's sum of the float columns (one thread), and thinning it to 10 s
+(retention's functions, on a copy). CPU seconds, the least of ``--repeat`` rounds that alternate
+over the layouts.
+
 Then the extrapolation: ``--valves`` valves × 86 400 s × 1 kHz per day, without retention and with
 ``keep_days`` full days plus (thin) the thinned remainder or (drop) nothing; and the fits per
 valve-year for windows of ``--window-min`` minutes. CPU times are ``time.process_time`` of this
@@ -24,18 +35,23 @@ process (single-threaded polars/Arrow), so the load of the machine changes them 
 from __future__ import annotations
 
 import os
+import sys
+from pathlib import Path
 
 os.environ.setdefault("POLARS_MAX_THREADS", "1")
 os.environ.setdefault("RAYON_NUM_THREADS", "1")
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from flows.common.allocator import retain_freed_memory, retain_polars_memory  # noqa: E402
+
+retain_polars_memory()  # as the commands do, before polars is imported: decoded columns reuse freed pages
+retain_freed_memory()
 
 import argparse  # noqa: E402
 import dataclasses  # noqa: E402
 import shutil  # noqa: E402
-import sys  # noqa: E402
 import tempfile  # noqa: E402
 import time  # noqa: E402
 from datetime import date, datetime, timezone  # noqa: E402
-from pathlib import Path  # noqa: E402
 
 import duckdb  # noqa: E402
 import numpy as np  # noqa: E402
@@ -45,8 +61,6 @@ import tomli_w  # noqa: E402
 
 pa.set_cpu_count(1)
 pa.set_io_thread_count(1)
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from flows.common.config import load_plant_config  # noqa: E402
 from flows.common.lake import partition_bytes, partition_folders, partition_rows  # noqa: E402
@@ -90,8 +104,91 @@ def db_bytes_per_row(frame: pl.DataFrame, name: str, fields, n: int = 200_000, s
     return used / n
 
 
+ENCODINGS = [
+    # (name, codec, byte-stream-split floats, row groups of at most this many rows)
+    ("LZ4, ≤ 1 M-row groups (the lake until now)", "lz4", False, 1_048_576),
+    ("LZ4, one group per hour file", "lz4", False, None),
+    ("LZ4 + BYTE_STREAM_SPLIT, ≤ 1 M-row groups", "lz4", True, 1_048_576),
+    ("LZ4 + BYTE_STREAM_SPLIT, one group", "lz4", True, None),
+    ("zstd-1, one group", "zstd", False, None),
+    ("zstd-1 + BYTE_STREAM_SPLIT, one group", "zstd", True, None),
+    ("snappy, one group", "snappy", False, None),
+    ("uncompressed, one group", "none", False, None),
+]
+"""The layouts ``--encodings`` compares (``None``: the lake's :data:`ROW_GROUP_MAX_ROWS`)."""
+
+
+def least(f, repeat: int) -> float:
+    """Least CPU time of ``repeat`` calls of ``f``. [s]"""
+    best = float("inf")
+    for _ in range(repeat):
+        t0 = time.process_time()
+        f()
+        best = min(best, time.process_time() - t0)
+    return best
+
+
+def encodings(source: Path, repeat: int) -> None:
+    """Re-encode one lake file in each layout of :data:`ENCODINGS` with the lake's writer and
+    measure what a night does with it, rounds alternating over the layouts (module doc)."""
+    import pyarrow.parquet as pq
+
+    import flows.common.lake as lake
+    from flows.monitor.flow import lake_chunks
+    from flows.retention.flow import count_kept, scan_partition, thin_partition
+    from transforms.monitor import LAKE_COLUMNS
+
+    frame = pl.read_parquet(source, hive_partitioning=False).cast(dict(lake.SENSOR_POLARS_SCHEMA))
+    n = frame.height
+    floats = [c for c in frame.columns if c.endswith(("_pa", "_m"))]
+    t_us = frame["timestamp_utc"].to_physical().to_numpy()
+    q = f"SELECT {', '.join(f'sum({c})' for c in floats)} FROM read_parquet(?)"
+    con = duckdb.connect()
+    con.execute("SET threads = 1")
+    defaults = (lake.COMPRESSION, lake.COLUMN_ENCODING, lake.ROW_GROUP_MAX_ROWS)
+    best: dict[str, dict[str, float]] = {name: {} for name, *_ in ENCODINGS}
+    facts: dict[str, tuple[int, int]] = {}
+
+    def note(name: str, what: str, f) -> None:
+        t0 = time.process_time()
+        f()
+        best[name][what] = min(best[name].get(what, float("inf")), time.process_time() - t0)
+
+    with tempfile.TemporaryDirectory(prefix="valvemon-encodings-") as tmp:
+        for _ in range(repeat):
+            for name, codec, bss, max_rows in ENCODINGS:
+                wh = Path(tmp) / f"{codec}_{bss}_{max_rows}"
+                path = lake.partition_path(wh, "V001", frame["date"][0]).parent / "part-h01.parquet"
+                lake.COMPRESSION = codec
+                lake.COLUMN_ENCODING = {"timestamp_utc": "DELTA_BINARY_PACKED", **({c: "BYTE_STREAM_SPLIT" for c in floats} if bss else {})}
+                lake.ROW_GROUP_MAX_ROWS = max_rows or defaults[2]
+                try:
+                    note(name, "write", lambda: lake.write_partition(path, frame))
+                finally:
+                    lake.COMPRESSION, lake.COLUMN_ENCODING, lake.ROW_GROUP_MAX_ROWS = defaults
+                facts[name] = (pq.ParquetFile(path).metadata.num_row_groups, path.stat().st_size)
+                note(name, "monitor", lambda: [c.height for c in lake_chunks(wh, "V001", 0.005, None, None, columns=LAKE_COLUMNS, window_s=600.0)])
+                note(name, "pyarrow", lambda: pl.from_arrow(pq.read_table(path, columns=list(LAKE_COLUMNS[1:]))))
+                note(name, "duckdb", lambda: con.execute(q, [str(path)]).fetchall())
+                thin = wh / "thin" / "date=x"
+                thin.mkdir(parents=True, exist_ok=True)
+                shutil.copy(path, thin / "part-h01.parquet")
+                note(name, "thin", lambda: thin_partition(count_kept(thin, scan_partition(thin, (t_us[:1], t_us[-1:]), True), 10.0)))
+    con.close()
+    print(f"{source}: {n:,} rows; CPU s per file, least of {repeat} alternating rounds, one core")
+    print("night = write + 2 × the monitor's read (the monitor's and the report's standstill pass read the same columns) + thinning")
+    print("| layout | row groups | B/row | write | monitor's read (lake_chunks) | pyarrow → polars | DuckDB sum | thin to 10 s | night |")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|")
+    for name, t in best.items():
+        groups, size = facts[name]
+        night = t["write"] + 2 * t["monitor"] + t["thin"]
+        print(f"| {name} | {groups} | {size / n:.2f} | {t['write']:.3f} | {t['monitor']:.3f} | {t['pyarrow']:.3f} | {t['duckdb']:.3f} | {t['thin']:.3f} | {night:.3f} |")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--encodings", type=Path, default=None, metavar="LAKEFILE", help="Compare the lake's candidate layouts on this lake file instead.")
+    ap.add_argument("--repeat", type=int, default=5, help="With --encodings: repetitions per measurement (the least counts).")
     ap.add_argument("--minutes", type=int, default=20, help="Minutes of continuous 1 kHz data measured (a multiple of 10).")
     ap.add_argument("--valves", type=int, default=500)
     ap.add_argument("--keep-days", type=int, default=90)
@@ -99,6 +196,9 @@ def main() -> None:
     ap.add_argument("--window-min", type=float, default=10.0, help="Monitoring window of a continuous recording, for the fits per valve-year. [min]")
     ap.add_argument("--out", type=Path, default=None, help="Work folder (default: a temporary one).")
     args = ap.parse_args()
+    if args.encodings:
+        encodings(args.encodings, args.repeat)
+        return
     root = args.out or Path(tempfile.mkdtemp(prefix="valvemon-storage-"))
     sim, wh = root / "sim", root / "wh"
 

@@ -223,10 +223,10 @@ def savgol_arrays(x: np.ndarray, *, window: int, order: int, sample_period_s: fl
 
 @numba.njit(cache=True)
 def _savgol_at_kernel(x, rows, w0, w1, scale1, smooth, deriv, want_smooth):
-    """The stencil sums of :func:`_savgol_kernel` at the given rows only, in blocks of 256 rows
-    (the stencil loop outside, the rows inside: independent sums side by side), each summed in
-    the same order (oldest sample first, from 0.0), so the values are bit for bit those of the
-    full pass."""
+    """The stencil sums of :func:`_savgol_kernel` at the given rows only, four rows at a time with
+    their sums side by side in registers (independent sums: the additions of one row need not
+    wait for each other's), each summed in the same order (oldest sample first, from 0.0), so
+    the values are bit for bit those of the full pass."""
     n = x.shape[0]
     m = w1.shape[0]
     h = m // 2
@@ -237,35 +237,49 @@ def _savgol_at_kernel(x, rows, w0, w1, scale1, smooth, deriv, want_smooth):
             if want_smooth:
                 smooth[r] = np.nan
         return
-    block = 256
-    acc0 = np.empty(block)
-    acc1 = np.empty(block)
-    base = np.empty(block, dtype=np.int64)
-    for b0 in range(0, nr, block):
-        length = min(block, nr - b0)
-        for r in range(length):
-            i = rows[b0 + r]
-            # a stencil that leaves the array reads row h instead (its value is replaced by NaN)
-            base[r] = i - h if h <= i < n - h else 0
-            acc0[r] = 0.0
-            acc1[r] = 0.0
-        for k in range(m):
-            a0 = w0[k]
-            a1 = w1[k]
-            if want_smooth:
-                for r in range(length):
-                    v = x[base[r] + k]
-                    acc0[r] += a0 * v
-                    acc1[r] += a1 * v
-            else:
-                for r in range(length):
-                    acc1[r] += a1 * x[base[r] + k]
-        for r in range(length):
-            i = rows[b0 + r]
+    for r in range(0, nr, 4):
+        q = min(4, nr - r)
+        # a stencil that leaves the array (or a fourth row past the end) reads row h instead
+        # (its value is replaced by NaN or not stored)
+        i0 = rows[r]
+        i1 = rows[r + 1] if q > 1 else h
+        i2 = rows[r + 2] if q > 2 else h
+        i3 = rows[r + 3] if q > 3 else h
+        b0 = i0 - h if h <= i0 < n - h else 0
+        b1 = i1 - h if h <= i1 < n - h else 0
+        b2 = i2 - h if h <= i2 < n - h else 0
+        b3 = i3 - h if h <= i3 < n - h else 0
+        s0 = s1 = s2 = s3 = 0.0
+        d0 = d1 = d2 = d3 = 0.0
+        if want_smooth:
+            for k in range(m):
+                a0 = w0[k]
+                a1 = w1[k]
+                v0 = np.float64(x[b0 + k])
+                v1 = np.float64(x[b1 + k])
+                v2 = np.float64(x[b2 + k])
+                v3 = np.float64(x[b3 + k])
+                s0 += a0 * v0
+                s1 += a0 * v1
+                s2 += a0 * v2
+                s3 += a0 * v3
+                d0 += a1 * v0
+                d1 += a1 * v1
+                d2 += a1 * v2
+                d3 += a1 * v3
+        else:
+            for k in range(m):
+                a1 = w1[k]
+                d0 += a1 * np.float64(x[b0 + k])
+                d1 += a1 * np.float64(x[b1 + k])
+                d2 += a1 * np.float64(x[b2 + k])
+                d3 += a1 * np.float64(x[b3 + k])
+        for j in range(q):
+            i, s, d = (i0, s0, d0) if j == 0 else (i1, s1, d1) if j == 1 else (i2, s2, d2) if j == 2 else (i3, s3, d3)
             inside = h <= i < n - h
-            deriv[b0 + r] = acc1[r] * scale1 if inside else np.nan
+            deriv[r + j] = d * scale1 if inside else np.nan
             if want_smooth:
-                smooth[b0 + r] = acc0[r] if inside else np.nan
+                smooth[r + j] = s if inside else np.nan
 
 
 def savgol_at(x, rows: np.ndarray, *, window: int, order: int, sample_period_s: float, smooth: bool = True):

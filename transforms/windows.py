@@ -135,7 +135,7 @@ def _starts_kernel(t_us, gaps, length_us):
         nxt = (t_us[a] // length_us + 1) * length_us
         i = a + 1
         while i < b:
-            i += np.searchsorted(t_us[i:b], nxt)  # the first sample at or after the next cut
+            i = _first_at_or_after(t_us, i, b, nxt)  # the first sample at or after the next cut
             if i >= b:
                 break
             if m + 1 > out.shape[0]:
@@ -145,6 +145,20 @@ def _starts_kernel(t_us, gaps, length_us):
             nxt = (t_us[i] // length_us + 1) * length_us
             i += 1
     return out[:m]
+
+
+@numba.njit(cache=True)
+def _first_at_or_after(t_us, lo, hi, value):
+    """The first index in [lo, hi) of the sorted ``t_us`` whose value is >= ``value`` (hi if none):
+    ``lo + np.searchsorted(t_us[lo:hi], value)`` by bisection, without numba's generic
+    searchsorted (~5 s to compile)."""
+    while lo < hi:
+        mid = (lo + hi) >> 1
+        if t_us[mid] < value:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
 
 
 @numba.njit(cache=True)

@@ -7,7 +7,8 @@ One view per file, ``sql/<layer>/<name>.sql`` → view ``<name>``; layers ``stag
 tables), ``core`` (staging and core) and ``report`` (anything). A view depends on every other
 view whose name appears in its SQL as a word (comments stripped); :func:`ordered_views` sorts
 them so each is created after what it reads, and rejects cycles and layer violations.
-:func:`create_views` runs ``CREATE OR REPLACE VIEW`` for all of them, in one transaction.
+:func:`create_views` runs ``CREATE OR REPLACE VIEW`` for all of them, in one transaction, unless
+they are already those (their comments hold a fingerprint of their SQL and the tables' columns).
 
 Readers and the writer
 ----------------------
@@ -25,6 +26,7 @@ gets the new file, and the writer never waits for a reader nor a reader for the 
 
 from __future__ import annotations
 
+import hashlib
 import os
 import re
 import shutil
@@ -143,19 +145,44 @@ def ensure_report_tables(con: duckdb.DuckDBPyConnection) -> None:
     con.execute("CREATE UNIQUE INDEX IF NOT EXISTS standstill_checks_key ON standstill_checks (valve_id, window_start)")
 
 
+def views_stamp(con: duckdb.DuckDBPyConnection, views: list[ViewFile]) -> str:
+    """A fingerprint of what the views are bound from: their SQL in creation order, the columns
+    of the database's tables and DuckDB's version (a view's columns are fixed when it is made)."""
+    columns = con.execute(
+        "SELECT table_name, column_name, data_type FROM duckdb_columns() c WHERE database_name = current_database() AND NOT internal"
+        " AND EXISTS (SELECT 1 FROM duckdb_tables() t WHERE t.database_name = c.database_name AND t.schema_name = c.schema_name"
+        " AND t.table_name = c.table_name) ORDER BY schema_name, table_name, column_index"
+    ).fetchall()
+    digest = hashlib.sha256(duckdb.__version__.encode())
+    for v in views:
+        digest.update(f"\0{v.name}\0{v.sql}".encode())
+    digest.update(repr(columns).encode())
+    return digest.hexdigest()
+
+
 def create_views(con: duckdb.DuckDBPyConnection, sql_dir: Path = SQL_DIR) -> list[str]:
-    """``CREATE OR REPLACE VIEW`` every view of ``sql_dir`` in dependency order, in one transaction.
+    """``CREATE OR REPLACE VIEW`` every view of ``sql_dir`` in dependency order, in one transaction;
+    each view's comment then holds :func:`views_stamp`. When every view already carries the stamp
+    (the same SQL over the same tables, what every command's publish meets but the first after an
+    upgrade) nothing is created: binding the 23 views of `sql/` cost each command ~0.35 CPU-s.
 
     The tables the views read must exist (:func:`ensure_report_tables`). Returns the view names
     in the order they were created.
     """
     views = ordered_views(discover_views(sql_dir))
+    stamp = views_stamp(con, views)
+    stamps = dict(con.execute(
+        "SELECT view_name, comment FROM duckdb_views() WHERE database_name = current_database() AND schema_name = 'main' AND NOT internal"
+    ).fetchall())  # fmt: skip
+    if all(stamps.get(v.name) == stamp for v in views):
+        return [v.name for v in views]
     with transaction(con):
         for v in views:
             try:
                 con.execute(f"CREATE OR REPLACE VIEW {v.name} AS\n{v.sql}")
             except duckdb.Error as exc:
                 raise ValvemonError(f"{v.path}: {str(exc).splitlines()[0]}") from None
+            con.execute(f"COMMENT ON VIEW {v.name} IS '{stamp}'")
     return [v.name for v in views]
 
 

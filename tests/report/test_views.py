@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import html
 
+import duckdb
 import numpy as np
 import polars as pl
 import pytest
@@ -13,7 +14,7 @@ from flows.common.errors import ValvemonError
 from flows.report.export import export_bi
 from flows.report.html import render_report
 from flows.report.remaining import remaining_text, two_figures
-from flows.report.views import SQL_DIR, discover_views, materialise_views, ordered_views
+from flows.report.views import SQL_DIR, create_views, discover_views, materialise_views, ordered_views
 from schemas.fields import EDGES
 from tests.report.viewdb import COMMISSIONED
 
@@ -46,6 +47,35 @@ def test_a_cycle_and_a_layer_violation_are_refused(tmp_path):
     with pytest.raises(ValvemonError, match="cycle"):
         ordered_views(discover_views(tmp_path))
     assert SQL_DIR.is_dir()
+
+
+def test_views_are_created_again_only_when_their_sql_or_the_tables_changed(tmp_path):
+    for layer in ("staging", "core", "report"):
+        (tmp_path / layer).mkdir()
+    (tmp_path / "staging" / "stg_t.sql").write_text("select * from t")
+    (tmp_path / "core" / "core_t.sql").write_text("select a + 1 as b from stg_t")
+    con = duckdb.connect()
+    con.execute("CREATE TABLE t (a INTEGER)")
+
+    def oids():
+        return dict(con.execute("SELECT view_name, view_oid FROM duckdb_views() WHERE NOT internal").fetchall())
+
+    assert create_views(con, tmp_path) == ["stg_t", "core_t"]
+    first = oids()
+    create_views(con, tmp_path)
+    assert oids() == first  # the same SQL over the same tables: nothing made again
+    con.execute("ALTER TABLE t ADD COLUMN c INTEGER")  # what add_missing_columns does after an upgrade
+    create_views(con, tmp_path)
+    assert con.execute("SELECT * FROM stg_t").description[1][0] == "c"
+    second = oids()
+    assert second["stg_t"] != first["stg_t"]
+    (tmp_path / "core" / "core_t.sql").write_text("select a + 2 as b from stg_t")
+    con.execute("INSERT INTO t VALUES (1, 0)")
+    create_views(con, tmp_path)
+    assert con.execute("SELECT b FROM core_t").fetchall() == [(3,)]
+    con.execute("CREATE OR REPLACE VIEW core_t AS SELECT 0 AS b")  # made by hand: its stamp is gone
+    create_views(con, tmp_path)
+    assert con.execute("SELECT b FROM core_t").fetchall() == [(3,)]
 
 
 def test_normal_scatter_raises_no_alarm_and_is_healthy(wh):

@@ -39,6 +39,23 @@ def test_savgol_at_equals_the_full_pass_bit_for_bit(dtype):
     np.testing.assert_array_equal(de_at, de[rows])
 
 
+
+@pytest.mark.parametrize("smooth", [True, False])
+def test_savgol_at_any_number_of_rows_equals_the_full_pass_bit_for_bit(smooth):
+    """The kernel sums four rows at a time: 1 to 9 rows (a last group of one to four), stencils
+    leaving the array among them, give the full pass's values."""
+    x = np.random.default_rng(3).normal(size=300).cumsum().astype(np.float32)
+    sm, de = savgol_arrays(x, window=21, order=3, sample_period_s=1e-3)
+    candidates = np.array([2, 10, 11, 57, 150, 151, 200, 289, 290, 299])
+    for k in range(1, 10):
+        rows = candidates[:k]
+        sm_at, de_at = savgol_at(x, rows, window=21, order=3, sample_period_s=1e-3, smooth=smooth)
+        np.testing.assert_array_equal(de_at, de[rows])
+        if smooth:
+            np.testing.assert_array_equal(sm_at, sm[rows])
+        else:
+            assert sm_at is None
+
 @pytest.mark.parametrize("sizes", [[500], [3, 250, 7, 1, 239], [100, 400], [20, 21, 459]])
 def test_savgol_at_over_chunks_equals_the_joined_array_bit_for_bit(sizes):
     """A column in chunks (row groups, as polars hands them over) is read where it is: the

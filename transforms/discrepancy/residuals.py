@@ -40,6 +40,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
 
 __all__ = [
     "IntervalResiduals",
@@ -93,13 +94,17 @@ class IntervalResiduals:
     t_motion: np.ndarray
 
 
-def _box(y: np.ndarray, m: int) -> np.ndarray:
-    """Centred moving average over m (odd) samples; NaN within m // 2 of the ends."""
+def _box_at(y: np.ndarray, at: np.ndarray, m: int) -> np.ndarray:
+    """Centred moving averages of ``y`` over m (odd) samples, at the sample indices ``at`` only
+    (a dot product per index, not a convolution of the whole record); NaN within m // 2 of the
+    ends."""
+    y = np.asarray(y, float)
     if m <= 1:
-        return np.asarray(y, float)
-    out = np.full(y.size, np.nan)
-    if y.size >= m:
-        out[m // 2:y.size - m // 2] = np.convolve(y, np.full(m, 1.0 / m), mode="valid")
+        return y[at]
+    h = m // 2
+    inside = (at >= h) & (at < y.size - h)
+    out = np.full(at.size, np.nan)
+    out[inside] = sliding_window_view(y, m)[at[inside] - h] @ np.full(m, 1.0 / m)
     return out
 
 
@@ -119,25 +124,30 @@ def interval_residuals(terms: dict, X: np.ndarray, A1: float, A2: float, dt: flo
     if m < 1 or m % 2 != 1:
         raise ValueError("smooth must be odd and >= 1")
     T = L * dt
-    Q1 = _box(_cum_trapz(terms["q1"] - terms["ql1"], dt), m)
-    Q2 = _box(_cum_trapz(terms["q2"] + terms["ql2"], dt), m)
-    C1 = _box(_cum_stieltjes(terms["c1"], terms["p1"]), m)
-    C2 = _box(_cum_stieltjes(terms["c2"], terms["p2"]), m)
-    Xs = _box(np.asarray(X, float), m)
+    # the boxcar'd running integrals and X, at the interval edges only
+    Q1 = _box_at(_cum_trapz(terms["q1"] - terms["ql1"], dt), e, m)
+    Q2 = _box_at(_cum_trapz(terms["q2"] + terms["ql2"], dt), e, m)
+    C1 = _box_at(_cum_stieltjes(terms["c1"], terms["p1"]), e, m)
+    C2 = _box_at(_cum_stieltjes(terms["c2"], terms["p2"]), e, m)
+    Xs = _box_at(X, e, m)
     a, b = e[:-1], e[1:]
-    dX = Xs[b] - Xs[a]
-    r1 = ((Q1[b] - Q1[a]) - A1 * dX - (C1[b] - C1[a])) / T
-    r2 = (A2 * dX - (Q2[b] - Q2[a]) - (C2[b] - C2[a])) / T
-    # motion: triangular weights over [e_{i-1}, e_{i+1}] (Σ w = 1), then the same boxcar
+    dX = np.diff(Xs)
+    r1 = (np.diff(Q1) - A1 * dX - np.diff(C1)) / T
+    r2 = (A2 * dX - np.diff(Q2) - np.diff(C2)) / T
+    # motion: triangular weights over [e_{i-1}, e_{i+1}] (Σ w = 1), then the same boxcar, at
+    # the inner edges only
     f = np.asarray(terms["force"], float)
     k = np.arange(-L, L + 1)
     w = (L - np.abs(k)) / float(L * L)
     if m > 1:
         w = np.convolve(w, np.full(m, 1.0 / m))
-    fw = np.convolve(f, w[::-1], mode="same") if f.size >= w.size else np.full(f.size, np.nan)
     c = e[1:-1]
-    ddX = Xs[e[2:]] - 2.0 * Xs[c] + Xs[e[:-2]]
-    rm = fw[c] - terms["mass"] * ddX / (T * T)
+    H = w.size // 2
+    fw = np.full(c.size, np.nan)
+    if f.size >= w.size:  # zeros beyond the record's ends
+        fw = sliding_window_view(np.pad(f, H), w.size)[c] @ w
+    ddX = Xs[2:] - 2.0 * Xs[1:-1] + Xs[:-2]
+    rm = fw - terms["mass"] * ddX / (T * T)
     return IntervalResiduals(r1=r1, r2=r2, t_cont=(a + b) * 0.5 * dt, rm=rm, t_motion=c * dt)
 
 
