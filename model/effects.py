@@ -440,7 +440,7 @@ def friction(v_X_m_s, params: PlantParams, effects: Effects | None = None) -> np
 
 
 def equation_terms(signals: dict, params: PlantParams, condition: ValveCondition | None = None,
-                   effects: Effects | None = None, reg_band_pa: float = 0.0) -> dict:
+                   effects: Effects | None = None, reg_band_pa: float = 0.0, only=None) -> dict:
     """Every term of the chamber equations (Eq. 6 with leakage and air) and of the motion
     equation (Eq. 5), with ``effects``, at each sample of recorded signals.
 
@@ -452,6 +452,9 @@ def equation_terms(signals: dict, params: PlantParams, condition: ValveCondition
     params, condition, effects, reg_band_pa
         As in :func:`valve_flows`; the sensor effects are inverted first
         (:func:`true_signals`).
+    only : collection of str, optional
+        Compute only these terms (``p1`` and ``p2`` always), e.g. ``("q1", "q2")`` where only
+        the valve's parameters changed; default every term.
 
     Returns
     -------
@@ -465,22 +468,25 @@ def equation_terms(signals: dict, params: PlantParams, condition: ValveCondition
         mass dv/dt = force - F_l.
     """
     e = Effects() if effects is None else effects
+    want = set(("q1", "q2", "ql1", "ql2", "c1", "c2", "force", "mass", "ps_valve") if only is None else only)
     x, p1, p2 = true_signals(signals["x"], signals["p1"], signals["p2"], e)
-    X = np.asarray(signals["X"], float)
-    v = np.asarray(signals["v"], float)
-    q1, q2, psv = valve_flows(x, p1, p2, signals["ps"], signals["pr"], params, condition, e,
-                              reg_band_pa)
-    pe = apply_to_params(params, e)
-    c = pe.cylinder
-    beta = params.fluid.bulk_modulus_pa
-    V1 = c.v01_m3 + c.A1 * X
-    V2 = c.v02_m3 - c.A2 * X
-    qi = e.internal_leakage_m3_s_pa * (p1 - p2)
-    qe = e.external_leakage_m3_s_pa * p2
-    force = c.weight_n + c.A1 * p1 - c.A2 * p2 - friction(v, params, e).reshape(v.shape)
-    return {
-        "p1": p1, "p2": p2, "q1": q1, "q2": q2, "ql1": qi, "ql2": qe - qi,
-        "c1": V1 / effective_bulk_modulus(p1, beta, e.air_fraction),
-        "c2": V2 / effective_bulk_modulus(p2, beta, e.air_fraction),
-        "force": force, "mass": c.mass_kg, "ps_valve": psv,
-    }
+    out = {"p1": p1, "p2": p2}
+    if want & {"q1", "q2", "ps_valve"}:
+        out["q1"], out["q2"], out["ps_valve"] = valve_flows(x, p1, p2, signals["ps"], signals["pr"], params, condition, e,
+                                                            reg_band_pa)
+    if want & {"ql1", "ql2"}:
+        qi = e.internal_leakage_m3_s_pa * (p1 - p2)
+        qe = e.external_leakage_m3_s_pa * p2
+        out["ql1"], out["ql2"] = qi, qe - qi
+    c = apply_to_params(params, e).cylinder
+    if want & {"c1", "c2"}:
+        X = np.asarray(signals["X"], float)
+        beta = params.fluid.bulk_modulus_pa
+        out["c1"] = (c.v01_m3 + c.A1 * X) / effective_bulk_modulus(p1, beta, e.air_fraction)
+        out["c2"] = (c.v02_m3 - c.A2 * X) / effective_bulk_modulus(p2, beta, e.air_fraction)
+    if "force" in want:
+        v = np.asarray(signals["v"], float)
+        out["force"] = c.weight_n + c.A1 * p1 - c.A2 * p2 - friction(v, params, e).reshape(v.shape)
+    if "mass" in want:
+        out["mass"] = c.mass_kg
+    return out

@@ -109,6 +109,28 @@ def test_split_gains_peak_at_a_level_change_and_added_step_splits_the_segment():
     assert not new.usable[260:340].any() and new.usable[:260].all() and new.usable[340:].all()
 
 
+def test_nuisance_jacobian_from_the_terms_it_enters_equals_differences_of_the_whole_rows():
+    """calibration.jacobians evaluates a nuisance's rows from the equation terms it enters only
+    (TERMS_OF): that must be the same arithmetic as central differences of the whole residual
+    rows, bit for bit, whatever the effects (sensor gains and offsets move every term)."""
+    from transforms.discrepancy.calibration import Z_STEP, NuisanceModel, _residuals, jacobians
+    from transforms.discrepancy.rows import _rows, prepare_records
+
+    prepared = prepare_records(_records(None, seed=305, n_windows=1), TABLE1, NOM, SETTINGS)
+    nm = NuisanceModel.of(TABLE1, NOM, PRIORS)
+    z = 0.5 * np.random.default_rng(5).normal(size=len(nm.active))  # within the clipping
+    rows0 = _rows(prepared, *nm.model(np.zeros(len(nm.active))), Effects(), SETTINGS)
+    fx = Effects(p1_sensor_gain=1.02, p2_sensor_offset_pa=3e4, air_fraction=0.01, delta_mass_kg=50.0)
+    r, Jz, _ = jacobians(prepared, nm, z, fx, [], rows0, SETTINGS)
+    assert np.array_equal(r, _residuals(prepared, nm, z, fx, rows0, SETTINGS), equal_nan=True)
+    for j in range(len(nm.active)):
+        zp, zm = z.copy(), z.copy()
+        zp[j] += Z_STEP
+        zm[j] -= Z_STEP
+        col = (_residuals(prepared, nm, zp, fx, rows0, SETTINGS) - _residuals(prepared, nm, zm, fx, rows0, SETTINGS)) / (2 * Z_STEP)
+        assert np.any(col != 0.0) and np.array_equal(Jz[:, j], col, equal_nan=True), nm.names()[j]
+
+
 def test_calibration_recovers_the_perturbed_plant_and_closes_the_gap():
     recs = _records(None, seed=301)
     cal = calibrate(recs, TABLE1, NOM, PRIORS, SETTINGS)

@@ -39,7 +39,7 @@ import numpy as np
 
 from transforms.discrepancy.records import Record
 
-__all__ = ["MAX_DELAY_S", "PressureDelays", "align_records", "pressure_delays", "shifted"]
+__all__ = ["MAX_DELAY_S", "PressureDelays", "align_prepared", "align_records", "pressure_delays", "shifted"]
 
 MAX_DELAY_S = 5.0e-3
 """Largest pressure delay looked for. [s]"""
@@ -156,9 +156,19 @@ def pressure_delays(prepared, plant, condition, settings) -> PressureDelays:
 
 def align_records(records: list[Record], plant, condition, settings) -> tuple[list[Record], PressureDelays]:
     """(``records`` with each pressure channel aligned for its delay, the delays)."""
+    return align_prepared(records, plant, condition, settings)[:2]
+
+
+def align_prepared(records: list[Record], plant, condition, settings) -> tuple[list[Record], PressureDelays, list]:
+    """:func:`align_records` and the aligned records prepared for (plant, condition)
+    (:func:`transforms.discrepancy.rows.prepare_records`): the preparation the delays were
+    measured on when no channel moved, whose loads need not be estimated again."""
     from transforms.discrepancy.rows import prepare_records
 
     prepared = prepare_records(records, plant, condition, settings)
     d = pressure_delays(prepared, plant, condition, settings)
     ks = {c: d.of(c) for c in PRESSURES}
-    return ([shifted(r, ks) for r in records] if any(ks.values()) else records), d
+    if not any(ks.values()):
+        return records, d, prepared
+    records = [shifted(r, ks) for r in records]
+    return records, d, prepare_records(records, plant, condition, settings)

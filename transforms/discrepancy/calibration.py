@@ -10,7 +10,8 @@ segment), each row weighted by 1/σ of its equation, with the prior as extra row
 
 over the standardised nuisances z (prior N(0, I)) and the effect parameters θ (flat prior, kept
 on their physical side). Derivatives are finite differences of the exact residual functions
-(central, step :data:`Z_STEP` σ for a nuisance). The equation weights are re-estimated from the calibrated
+(central, step :data:`Z_STEP` σ for a nuisance; a nuisance's rows are evaluated from the equation
+terms it enters only, :data:`TERMS_OF`, the same arithmetic as the whole rows). The equation weights are re-estimated from the calibrated
 residuals once (the nominal model's residuals carry its own error and would under-weight the data).
 """
 
@@ -24,7 +25,7 @@ from model.effects import Effects, EffectSpec
 from model.params import PlantParams, ValveCondition
 from transforms.discrepancy.nuisance import NUISANCES, NuisancePriors, apply_nuisances, nuisance_sigmas, nuisance_values
 
-__all__ = ["Calibration", "NuisanceModel", "calibrate", "calibrate_best", "joint_fit"]
+__all__ = ["Calibration", "NuisanceModel", "calibrate", "calibrate_best", "effect_jacobian", "jacobians", "joint_fit"]
 
 BREAKAWAY = NUISANCES.index("d_s")
 CLEARANCE = NUISANCES.index("clearance")
@@ -94,34 +95,104 @@ def _residuals(prepared, nm: NuisanceModel, z, effects, rows0, settings):
     return _eliminate_load(_rows(prepared, plant, cond, effects, settings).y, rows0)
 
 
+TERMS_OF: dict[str, tuple[str, ...]] = {
+    **{n: ("q1", "q2") for n in NUISANCES if n.startswith(("alpha_", "underlap_"))}, "clearance": ("q1", "q2"), "land_leakage": ("q1", "q2"),
+    "bulk_modulus": ("c1", "c2"), "v01": ("c1", "c2"), "v02": ("c1", "c2"), "d_v": ("force",), "d_c": ("force",), "d_s": ("force",),
+    "mass": ("force", "mass")}
+"""The equation terms (:func:`model.effects.equation_terms`) each nuisance enters: the valve's
+edges only the valve flows, β and the dead volumes only the chamber compliances, friction and
+mass only the motion equation."""
+
+
+class _RowsAround:
+    """The residual rows at one model (as :func:`_residuals`) with every record's equation terms
+    and interval integrals (:func:`transforms.discrepancy.residuals.interval_integrals`) kept, so
+    that the rows of a model that differs only in some terms (one nuisance moved, :data:`TERMS_OF`)
+    are evaluated from those terms and the integrals over them alone. The same arithmetic on the
+    same numbers as :func:`_residuals`: the rows agree bit for bit."""
+
+    def __init__(self, prepared, plant, condition, effects, rows0, settings):
+        from transforms.discrepancy.residuals import interval_integrals, residuals_of_integrals
+        from transforms.discrepancy.rows import RECORD_STRIDE, _eliminate_load, _terms_raw
+
+        self.prepared, self.effects, self.rows0, self.settings = prepared, effects, rows0, settings
+        self.parts = []
+        y = np.full(rows0.eq.size, np.nan)
+        rec_of = rows0.block // RECORD_STRIDE
+        c = plant.cylinder
+        for i, p in enumerate(prepared):
+            t = _terms_raw(p.rec, plant, condition, effects)
+            integrals = interval_integrals(t, p.rec.raw["X"], p.rec.dt, p.edges, settings.interval_smoothing)
+            ir = residuals_of_integrals(integrals, t["mass"], c.A1, c.A2, p.rec.dt, p.edges)
+            mine = rec_of == i
+            i1, i2, im = (np.flatnonzero(mine & (rows0.eq == k)) for k in range(3))
+            at = (rows0.sample[im] - p.edges[1]) // (p.edges[1] - p.edges[0])  # the motion rows' interval edges
+            y[i1], y[i2], y[im] = ir.r1, ir.r2, ir.rm[at]
+            self.parts.append((p, integrals, t["mass"], i1, i2, im, at))
+        self.y = y
+        self.r = _eliminate_load(y, rows0)
+
+    def rows(self, plant, condition, terms: tuple[str, ...]) -> np.ndarray:
+        """The demeaned residual rows at (plant, condition), which differ from this model only in
+        the equation ``terms``."""
+        from model.effects import equation_terms
+        from model.simulate import DEFAULT_REG_BAND_PA
+        from transforms.discrepancy.residuals import INTEGRALS_OF, interval_integrals, residuals_of_integrals
+        from transforms.discrepancy.rows import _eliminate_load, _signals
+
+        redo = [k for k, deps in INTEGRALS_OF.items() if set(deps) & set(terms)]
+        need = set(terms).union(*(INTEGRALS_OF[k] for k in redo))  # the terms of the integrals to redo
+        y = self.y.copy()
+        c = plant.cylinder
+        for p, integrals, mass, i1, i2, im, at in self.parts:
+            t = equation_terms(_signals(p.rec, False), plant, condition, self.effects, DEFAULT_REG_BAND_PA, only=need)
+            new = {**integrals, **interval_integrals(t, p.rec.raw["X"], p.rec.dt, p.edges, self.settings.interval_smoothing, only=redo)}
+            ir = residuals_of_integrals(new, t.get("mass", mass), c.A1, c.A2, p.rec.dt, p.edges)
+            y[i1], y[i2], y[im] = ir.r1, ir.r2, ir.rm[at]
+        if "force" not in terms and "mass" not in terms:  # the motion rows, and so their load elimination, are unchanged
+            r = self.r.copy()
+            chamber = self.rows0.eq != 2
+            r[chamber] = y[chamber]
+            return r
+        return _eliminate_load(y, self.rows0)
+
+
 def jacobians(prepared, nm: NuisanceModel, z, effects: Effects, specs: list[EffectSpec], rows0, settings, r_here=None):
     """(r, J_z, J_θ): the demeaned residual rows at (z, effects) and their central-difference
     derivatives with respect to the active standardised nuisances and the effects' parameters
     (forward differences for a parameter at its physical bound). Central, because the verdict
     compares an effect with the nuisance pattern it resembles: a spool sensor offset is exactly an
     underlap pattern, and forward differences of different steps would make them differ by the
-    curvature of the orifice law, which the heavily weighted data rows then take for a real difference."""
-    from transforms.discrepancy.rows import FD_FRACTION, perturbed
-
-    r = _residuals(prepared, nm, z, effects, rows0, settings) if r_here is None else r_here
+    curvature of the orifice law, which the heavily weighted data rows then take for a real difference.
+    A nuisance's rows are evaluated from the terms it enters only (:class:`_RowsAround`)."""
+    around = _RowsAround(prepared, *nm.model(z), effects, rows0, settings)
+    r = around.r if r_here is None else r_here
     cols = []
-    for j in range(len(nm.active)):
+    for j, k in enumerate(nm.active):
         zp, zm = np.array(z, float), np.array(z, float)
         zp[j] += Z_STEP
         zm[j] -= Z_STEP
-        cols.append((_residuals(prepared, nm, zp, effects, rows0, settings) - _residuals(prepared, nm, zm, effects, rows0, settings)) / (2 * Z_STEP))
+        terms = TERMS_OF[NUISANCES[k]]
+        cols.append((around.rows(*nm.model(zp), terms) - around.rows(*nm.model(zm), terms)) / (2 * Z_STEP))
     Jz = np.column_stack(cols) if cols else np.zeros((r.size, 0))
+    return r, Jz, effect_jacobian(prepared, nm, z, effects, specs, rows0, settings, r)
+
+
+def effect_jacobian(prepared, nm: NuisanceModel, z, effects: Effects, specs: list[EffectSpec], rows0, settings, r_here=None):
+    """J_θ of :func:`jacobians` alone."""
+    from transforms.discrepancy.rows import FD_FRACTION, perturbed
+
     ecols = []
     for spec in specs:
         d = FD_FRACTION * spec.typical
         lo = spec.value(effects) - d
         if spec.lower is not None and lo < spec.lower:  # one-sided at the physical bound
+            r = _residuals(prepared, nm, z, effects, rows0, settings) if r_here is None else r_here
             ecols.append((_residuals(prepared, nm, z, perturbed(effects, spec, d), rows0, settings) - r) / d)
             continue
         ecols.append((_residuals(prepared, nm, z, perturbed(effects, spec, d), rows0, settings)
                       - _residuals(prepared, nm, z, perturbed(effects, spec, -d), rows0, settings)) / (2 * d))
-    Je = np.column_stack(ecols) if ecols else np.zeros((r.size, 0))
-    return r, Jz, Je
+    return np.column_stack(ecols) if ecols else np.zeros((rows0.eq.size, 0))
 
 
 def _with_params(effects: Effects, specs, values) -> Effects | None:
@@ -266,7 +337,7 @@ def refine_breakaway(prepared, nm: NuisanceModel, z, settings, effects: Effects 
         plant, cond = m.model(z)
         for p in prepared:
             p.loads.setdefault((plant, cond, fx), p.loads[(*ref, fx)])
-        return _gaps(prepared, plant, cond, fx, settings, set())[0].gap()
+        return _gaps(prepared, plant, cond, fx, settings, set(), split=False)[0].gap()
 
     grid = np.linspace(-BREAKAWAY_RANGE, BREAKAWAY_RANGE, 13)
     vals = [gap(g) for g in grid]
@@ -389,15 +460,14 @@ def calibrate(records, plant: PlantParams, condition: ValveCondition, priors: Nu
     detector missed (:func:`split_segment`)."""
     from transforms.discrepancy.rows import _gaps, prepare_records
 
-    from transforms.discrepancy.alignment import align_records
+    from transforms.discrepancy.alignment import align_prepared
 
     fx = Effects() if effects is None else effects
     nm = NuisanceModel.of(plant, condition, priors)
-    records, _ = align_records(records, plant, condition, settings)  # the pressure channels' delay
-    prepared = prepare_records(records, plant, condition, settings)
+    records, _, prepared = align_prepared(records, plant, condition, settings)  # the pressure channels' delay
     if not prepared:
         raise ValueError("no record long enough to calibrate on")
-    g0 = _gaps(prepared, plant, condition, fx, settings, set())[0].gap()
+    g0 = _gaps(prepared, plant, condition, fx, settings, set(), split=False)[0].gap()
     fit, _, _, sig = calibrate_best(prepared, nm, settings, effects, split=True)
     nm = refine_breakaway(prepared, nm, fit.z, settings, effects)
     p1, c1 = nm.model(fit.z)
@@ -405,5 +475,5 @@ def calibrate(records, plant: PlantParams, condition: ValveCondition, priors: Nu
     fit, _, _, sig = calibrate_prepared(prepared, nm, settings, effects, fit.z, split=True)
     p1, c1 = nm.model(fit.z)
     prepared = prepare_records(records, p1, c1, settings)
-    g1 = _gaps(prepared, p1, c1, fx, settings, set())[0].gap()
+    g1 = _gaps(prepared, p1, c1, fx, settings, set(), split=False)[0].gap()
     return Calibration(nm=nm, z=fit.z, z_se=fit.z_se, plant=p1, condition=c1, sigmas=tuple(float(s) for s in sig), gap_nominal=g0, gap_calibrated=g1)

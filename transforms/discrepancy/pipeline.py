@@ -305,15 +305,15 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
     from scipy import stats as _stats
 
     from transforms.discrepancy.calibration import CLEARANCE, NuisanceModel, calibrate_best, calibrate_prepared, joint_fit, refine_breakaway
-    from transforms.discrepancy.alignment import PRESSURES, align_records
+    from transforms.discrepancy.alignment import PRESSURES, align_prepared
     from transforms.discrepancy.transmitter import GAIN_OR_OFFSET, gain_or_offset
     from transforms.discrepancy.verdict import acting_gap, lagging_transmitter, unexplained
 
     settings = settings or DiscrepancySettings()
     condition = plant.nominal_condition if condition is None else condition
     recorded = records
-    records, delays = align_records(records, plant, condition, settings)
-    prepared = prepare_records(records, plant, condition, settings)
+    records, delays, prepared = align_prepared(records, plant, condition, settings)
+    prepared0 = prepared  # the loads of the nominal model
     if not prepared:
         raise ValueError("no record long enough to diagnose")
     base = Effects()
@@ -459,7 +459,9 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
             return _gaps(prepared, *model, fx, settings, set())[0]
 
         verdict = nuisance_verdict(prepared, nm, final_fit, named_specs, specs, rows0, w_rows, settings, named, gap_of, stage_gaps[0], floors, stage_acc)
-        gap_nominal = _gaps(prepared, *nominal, base, settings, set())[0].gap()
+        for p, p0 in zip(prepared, prepared0):  # the same records (prepare_records keeps or drops a record by its length)
+            p.loads.setdefault((*nominal, base), p0.loads[(*nominal, base)])
+        gap_nominal = _gaps(prepared, *nominal, base, settings, set(), split=False)[0].gap()
     elif named and not named[0].confirmed:
         first = named[0]
         verdict = unexplained(first.spec, first.value, first.acting_before, first.acting_after, first.gap_kind, stage_acc[1], first.floor)
@@ -727,9 +729,9 @@ def fit_condition(records: list[Record], plant: PlantParams, start: ValveConditi
     B = loo.shape[0]
     se = np.sqrt((B - 1) / B * np.sum((loo - loo.mean(axis=0)) ** 2, axis=0)) / st.scale if B > 1 else np.full(8, np.inf)
     cond = _with_condition_params(cond0, z)
-    g0 = _gaps(prepared, plant, cond0, base, settings, set())[0].gap()
+    g0 = _gaps(prepared, plant, cond0, base, settings, set(), split=False)[0].gap()
     fresh = prepare_records(records, plant, cond, settings)
-    g1 = _gaps(fresh, plant, cond, base, settings, set())[0].gap()
+    g1 = _gaps(fresh, plant, cond, base, settings, set(), split=False)[0].gap()
     return ConditionFit(
         condition=cond, alpha_se=tuple(float(a) for a in se[:4] * np.array(cond0.alpha)),
         underlap_se_m=tuple(float(u) for u in se[4:]), gap_design=g0, gap_fitted=g1, n_records=len(prepared),

@@ -43,11 +43,14 @@ import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
 __all__ = [
+    "INTEGRALS_OF",
     "IntervalResiduals",
     "demean_by_group",
     "interval_edges",
+    "interval_integrals",
     "interval_residuals",
     "pointwise_residuals",
+    "residuals_of_integrals",
     "triangular_force_balance",
 ]
 
@@ -108,12 +111,17 @@ def _box_at(y: np.ndarray, at: np.ndarray, m: int) -> np.ndarray:
     return out
 
 
-def interval_residuals(terms: dict, X: np.ndarray, A1: float, A2: float, dt: float, edges: np.ndarray, smooth: int = 1) -> IntervalResiduals:
-    """Integrated residuals (module docstring) of one record over the intervals between
-    ``edges`` (equally spaced sample indices). ``terms`` as from ``model.effects.equation_terms``
-    (arrays over the record's samples); ``X`` the recorded cylinder position [m]; ``smooth`` the
-    (odd) number of interval shifts averaged (the edges must lie ``smooth // 2`` inside the
-    record)."""
+INTEGRALS_OF: dict[str, tuple[str, ...]] = {"Q1": ("q1", "ql1"), "Q2": ("q2", "ql2"), "C1": ("c1", "p1"), "C2": ("c2", "p2"), "fw": ("force",)}
+"""The terms each of :func:`interval_integrals`' integrals depends on (besides the record's X)."""
+
+
+def interval_integrals(terms: dict, X: np.ndarray, dt: float, edges: np.ndarray, smooth: int = 1, only=None) -> dict[str, np.ndarray]:
+    """The integrals the integrated residuals (:func:`interval_residuals`) are differences of,
+    boxcar'd over ``smooth`` shifts, at the interval ``edges``: ``Q1`` = ∫ (q1 − ql1) dt,
+    ``Q2`` = ∫ (q2 + ql2) dt [m³], ``C1`` = ∫ c1 dp1, ``C2`` = ∫ c2 dp2 [m³], ``Xs`` = X [m], and
+    at the inner edges ``fw`` = Σ_j w_j force_j (triangular w over two intervals, Σ w = 1) [N].
+    ``only``: compute just these (default all); an integral depends only on its
+    :data:`INTEGRALS_OF` terms, so the others of a model that changed no such term can be kept."""
     e = np.asarray(edges, dtype=np.int64)
     if e.size < 3:
         raise ValueError("need at least 3 interval edges")
@@ -123,32 +131,57 @@ def interval_residuals(terms: dict, X: np.ndarray, A1: float, A2: float, dt: flo
     m = int(smooth)
     if m < 1 or m % 2 != 1:
         raise ValueError("smooth must be odd and >= 1")
-    T = L * dt
+    want = ("Q1", "Q2", "C1", "C2", "Xs", "fw") if only is None else only
+    out = {}
     # the boxcar'd running integrals and X, at the interval edges only
-    Q1 = _box_at(_cum_trapz(terms["q1"] - terms["ql1"], dt), e, m)
-    Q2 = _box_at(_cum_trapz(terms["q2"] + terms["ql2"], dt), e, m)
-    C1 = _box_at(_cum_stieltjes(terms["c1"], terms["p1"]), e, m)
-    C2 = _box_at(_cum_stieltjes(terms["c2"], terms["p2"]), e, m)
-    Xs = _box_at(X, e, m)
+    if "Q1" in want:
+        out["Q1"] = _box_at(_cum_trapz(terms["q1"] - terms["ql1"], dt), e, m)
+    if "Q2" in want:
+        out["Q2"] = _box_at(_cum_trapz(terms["q2"] + terms["ql2"], dt), e, m)
+    if "C1" in want:
+        out["C1"] = _box_at(_cum_stieltjes(terms["c1"], terms["p1"]), e, m)
+    if "C2" in want:
+        out["C2"] = _box_at(_cum_stieltjes(terms["c2"], terms["p2"]), e, m)
+    if "Xs" in want:
+        out["Xs"] = _box_at(X, e, m)
+    if "fw" in want:
+        # motion: triangular weights over [e_{i-1}, e_{i+1}] (Σ w = 1), then the same boxcar, at
+        # the inner edges only
+        f = np.asarray(terms["force"], float)
+        k = np.arange(-L, L + 1)
+        w = (L - np.abs(k)) / float(L * L)
+        if m > 1:
+            w = np.convolve(w, np.full(m, 1.0 / m))
+        c = e[1:-1]
+        H = w.size // 2
+        fw = np.full(c.size, np.nan)
+        if f.size >= w.size:  # zeros beyond the record's ends
+            fw = sliding_window_view(np.pad(f, H), w.size)[c] @ w
+        out["fw"] = fw
+    return out
+
+
+def residuals_of_integrals(integrals: dict, mass: float, A1: float, A2: float, dt: float, edges: np.ndarray) -> IntervalResiduals:
+    """The integrated residuals (module docstring) from :func:`interval_integrals`' values."""
+    e = np.asarray(edges, dtype=np.int64)
+    T = int(e[1] - e[0]) * dt
+    Q1, Q2, C1, C2, Xs = (integrals[k] for k in ("Q1", "Q2", "C1", "C2", "Xs"))
     a, b = e[:-1], e[1:]
     dX = np.diff(Xs)
     r1 = (np.diff(Q1) - A1 * dX - np.diff(C1)) / T
     r2 = (A2 * dX - np.diff(Q2) - np.diff(C2)) / T
-    # motion: triangular weights over [e_{i-1}, e_{i+1}] (Σ w = 1), then the same boxcar, at
-    # the inner edges only
-    f = np.asarray(terms["force"], float)
-    k = np.arange(-L, L + 1)
-    w = (L - np.abs(k)) / float(L * L)
-    if m > 1:
-        w = np.convolve(w, np.full(m, 1.0 / m))
-    c = e[1:-1]
-    H = w.size // 2
-    fw = np.full(c.size, np.nan)
-    if f.size >= w.size:  # zeros beyond the record's ends
-        fw = sliding_window_view(np.pad(f, H), w.size)[c] @ w
     ddX = Xs[2:] - 2.0 * Xs[1:-1] + Xs[:-2]
-    rm = fw - terms["mass"] * ddX / (T * T)
-    return IntervalResiduals(r1=r1, r2=r2, t_cont=(a + b) * 0.5 * dt, rm=rm, t_motion=c * dt)
+    rm = integrals["fw"] - mass * ddX / (T * T)
+    return IntervalResiduals(r1=r1, r2=r2, t_cont=(a + b) * 0.5 * dt, rm=rm, t_motion=e[1:-1] * dt)
+
+
+def interval_residuals(terms: dict, X: np.ndarray, A1: float, A2: float, dt: float, edges: np.ndarray, smooth: int = 1) -> IntervalResiduals:
+    """Integrated residuals (module docstring) of one record over the intervals between
+    ``edges`` (equally spaced sample indices). ``terms`` as from ``model.effects.equation_terms``
+    (arrays over the record's samples); ``X`` the recorded cylinder position [m]; ``smooth`` the
+    (odd) number of interval shifts averaged (the edges must lie ``smooth // 2`` inside the
+    record)."""
+    return residuals_of_integrals(interval_integrals(terms, X, dt, edges, smooth), terms["mass"], A1, A2, dt, edges)
 
 
 def triangular_force_balance(force: np.ndarray, X: np.ndarray, mass: float, dt: float, length: int) -> np.ndarray:

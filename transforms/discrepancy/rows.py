@@ -362,9 +362,9 @@ def hydraulic_gap(prepared, plant, condition, effects, settings) -> float:
     return acc.split_gap("hydraulic")
 
 
-def _replay_record(p: _Prepared, plant, condition, effects, settings) -> dict[str, np.ndarray]:
-    """The record replayed whole (p1, p2, X) and split (``gaps.SPLIT_GAPS``): p1, p2 on the
-    recorded cylinder motion, X on the recorded pressures (restarts every
+def _replay_record(p: _Prepared, plant, condition, effects, settings, split: bool = True) -> dict[str, np.ndarray]:
+    """The record replayed whole (p1, p2, X) and, with ``split``, split (``gaps.SPLIT_GAPS``):
+    p1, p2 on the recorded cylinder motion, X on the recorded pressures (restarts every
     ``mechanical_segment_s``). Readings as recorded (sensor effects applied)."""
     rec = p.rec
     h = settings.savgol_window // 2
@@ -374,32 +374,36 @@ def _replay_record(p: _Prepared, plant, condition, effects, settings) -> dict[st
     load = _replay_load_for(p, plant, condition, effects, settings)
     args = (plant, x_true, rec.raw["ps"], rec.raw["pr"], load)
     res = replay(*args, starts, states, condition=condition, effects=effects)
-    p1h, p2h = _hydraulic_replay(p, plant, condition, effects, start, load)
-    _, p1_rec, p2_rec = true_signals(x_src, rec.raw["p1"], rec.raw["p2"], effects)
-    given_p = np.vstack([np.where(np.isfinite(p1_true), p1_true, p1_rec), np.where(np.isfinite(p2_true), p2_true, p2_rec)])
-    # the mechanical replay restarts every mechanical_segment_s and where a move leaves the
-    # breakaway (|v_X| rises past v_move_m_s): while the cylinder sticks or creeps the load does not
-    # show, so when and how it breaks away is not the motion's to judge; X is judged at speed
-    moving = np.abs(v_all) > settings.v_move_m_s
-    begins = np.flatnonzero(moving[1:] & ~moving[:-1]) + 1
-    mstarts = np.union1d(np.arange(h, n - h - 1, max(2, int(round(settings.mechanical_segment_s / rec.dt)))), begins[(begins > h) & (begins < n - h - 1)])
-    vm = v_all[mstarts]
-    mstates = np.column_stack([rec.raw["X"][mstarts], np.where(np.abs(vm) < 1e-3, 0.0, vm), given_p[0, mstarts], given_p[1, mstarts]])
-    mech = replay(*args, mstarts, mstates, condition=condition, effects=effects, drive=DRIVE_MECHANICAL, given=given_p)
     _, p1r, p2r = sensor_readings(np.zeros(1), res.p1_pa, res.p2_pa, effects)
-    out = {"p1": np.asarray(p1r, float).copy(), "p2": np.asarray(p2r, float).copy(), "X": res.X_m.copy(),
-           "p1_hydraulic": p1h, "p2_hydraulic": p2h, "X_mechanical": mech.X_m.copy()}
+    out = {"p1": np.asarray(p1r, float).copy(), "p2": np.asarray(p2r, float).copy(), "X": res.X_m.copy()}
+    if split:
+        p1h, p2h = _hydraulic_replay(p, plant, condition, effects, start, load)
+        _, p1_rec, p2_rec = true_signals(x_src, rec.raw["p1"], rec.raw["p2"], effects)
+        given_p = np.vstack([np.where(np.isfinite(p1_true), p1_true, p1_rec), np.where(np.isfinite(p2_true), p2_true, p2_rec)])
+        # the mechanical replay restarts every mechanical_segment_s and where a move leaves the
+        # breakaway (|v_X| rises past v_move_m_s): while the cylinder sticks or creeps the load does not
+        # show, so when and how it breaks away is not the motion's to judge; X is judged at speed
+        moving = np.abs(v_all) > settings.v_move_m_s
+        begins = np.flatnonzero(moving[1:] & ~moving[:-1]) + 1
+        mstarts = np.union1d(np.arange(h, n - h - 1, max(2, int(round(settings.mechanical_segment_s / rec.dt)))), begins[(begins > h) & (begins < n - h - 1)])
+        vm = v_all[mstarts]
+        mstates = np.column_stack([rec.raw["X"][mstarts], np.where(np.abs(vm) < 1e-3, 0.0, vm), given_p[0, mstarts], given_p[1, mstarts]])
+        mech = replay(*args, mstarts, mstates, condition=condition, effects=effects, drive=DRIVE_MECHANICAL, given=given_p)
+        out.update({"p1_hydraulic": p1h, "p2_hydraulic": p2h, "X_mechanical": mech.X_m.copy()})
     for k in out:
         out[k][n - h:] = np.nan  # the record's tail has no Savitzky–Golay regions
-    out["X_mechanical"][~moving] = np.nan  # judged at speed only (above)
+    if split:
+        out["X_mechanical"][~moving] = np.nan  # judged at speed only (above)
     return out
 
 
-def _gaps(prepared, plant, condition, effects, settings, keep: set[int]) -> tuple[GapAccumulator, dict[int, dict]]:
+def _gaps(prepared, plant, condition, effects, settings, keep: set[int], split: bool = True) -> tuple[GapAccumulator, dict[int, dict]]:
+    """The replay gaps of every record (and the replays of those in ``keep``); without ``split``,
+    of the whole replay only (:meth:`GapAccumulator.gap`)."""
     acc = GapAccumulator()
     kept = {}
     for i, p in enumerate(prepared):
-        rr = _replay_record(p, plant, condition, effects, settings)
+        rr = _replay_record(p, plant, condition, effects, settings, split)
         for s, rep in rr.items():
             acc.add(s, rep - p.rec.raw[RECORDED_OF[s]], p.regions)
         if i in keep:

@@ -235,10 +235,10 @@ def _block_kappa(rw: np.ndarray, block: np.ndarray) -> float:
 
 def nuisance_scores(nm, fit, named_specs, specs, rows0, w_rows, settings, prepared) -> list[dict]:
     """ΔO, value and nuisance reading of every library candidate not named (module docstring)."""
-    from transforms.discrepancy.calibration import jacobians, joint_fit
+    from transforms.discrepancy.calibration import effect_jacobian, joint_fit
 
     others = [s for s in specs if s not in named_specs]
-    _, _, Jc = jacobians(prepared, nm, fit.z, fit.effects, others, rows0, settings, fit.r) if others else (None, None, np.zeros((fit.r.size, 0)))
+    Jc = effect_jacobian(prepared, nm, fit.z, fit.effects, others, rows0, settings, fit.r)
     rw = fit.r * w_rows
     cols = [fit.Jz * w_rows[:, None], fit.Je * w_rows[:, None], Jc * w_rows[:, None]]
     ok = np.isfinite(rw)
