@@ -142,19 +142,41 @@ REST_STEP_TAIL = 300
 """Samples replayed after the standstill to judge a placement."""
 
 
-def _replay_span(rec: Record, plant, condition, effects, a: int, b: int, load: np.ndarray):
+def _replay_span(rec: Record, plant, condition, effects, a: int, b: int, load: np.ndarray, prefix=None, k: int = 0):
     """Replay samples [a, b) of a record from its measured state at a; returns the readings
-    (p1, p2, X) or None if the replay diverged."""
-    x_src = np.where(np.isfinite(rec.sg["x"]), rec.sg["x"], rec.raw["x"])
-    x_true, p1_true, p2_true = true_signals(x_src[a:b], rec.sg["p1"][a:a + 1], rec.sg["p2"][a:a + 1], effects)
+    (p1, p2, X) or None if the replay diverged. ``prefix``: the states (X, v_X, p1, p2) of a
+    replay of the span with a load that equals ``load`` before a + ``k`` (its :func:`_replay_span_states`):
+    the replay is then continued from its state at a + k, the same numbers as replaying all."""
+    if prefix is None or k <= 0:
+        prefix, k = _replay_span_states(rec, plant, condition, effects, a, b, load), b - a
+        if prefix is None:
+            return None
+    if k < b - a:
+        x_true = true_signals(_spool_source(rec)[a:b], rec.sg["p1"][a:a + 1], rec.sg["p2"][a:a + 1], effects)[0]
+        try:
+            r = replay(plant, x_true, rec.raw["ps"][a:b], rec.raw["pr"][a:b], load, [k], prefix[:, k], condition=condition, effects=effects)
+        except FloatingPointError:
+            return None
+        prefix = np.concatenate([prefix[:, :k], np.vstack([r.X_m, r.vX_m_s, r.p1_pa, r.p2_pa])[:, k:]], axis=1)
+    _, p1r, p2r = sensor_readings(np.zeros(1), prefix[2], prefix[3], effects)
+    return p1r, p2r, prefix[0]
+
+
+def _spool_source(rec: Record) -> np.ndarray:
+    return np.where(np.isfinite(rec.sg["x"]), rec.sg["x"], rec.raw["x"])
+
+
+def _replay_span_states(rec: Record, plant, condition, effects, a: int, b: int, load: np.ndarray) -> np.ndarray | None:
+    """The true states (X, v_X, p1, p2) of samples [a, b) replayed from the measured state at a,
+    shape (4, b − a), or None if the replay diverged."""
+    x_true, p1_true, p2_true = true_signals(_spool_source(rec)[a:b], rec.sg["p1"][a:a + 1], rec.sg["p2"][a:a + 1], effects)
     v0 = rec.sg["v"][a]
     state = [[rec.raw["X"][a], 0.0 if abs(v0) < 1e-3 else v0, p1_true[0], p2_true[0]]]
     try:
         r = replay(plant, x_true, rec.raw["ps"][a:b], rec.raw["pr"][a:b], load, [0], state, condition=condition, effects=effects)
     except FloatingPointError:
         return None
-    _, p1r, p2r = sensor_readings(np.zeros(1), r.p1_pa, r.p2_pa, effects)
-    return p1r, p2r, r.X_m
+    return np.vstack([r.X_m, r.vX_m_s, r.p1_pa, r.p2_pa])
 
 
 def _initial_hold(rec: Record, load: LoadEstimate, plant, condition, effects, settings) -> LoadEstimate:
@@ -211,9 +233,12 @@ def _refine_rest_steps(rec: Record, load: LoadEstimate, f_hat: np.ndarray, plant
             continue
         old, new = (load.levels[i], load.levels[i + 1]) if not load.knot_samples else (load.load[lo], load.load[hi])
         best, best_err = steps[i], np.inf
+        # every candidate's load is the old level's up to the step: replay that once and continue
+        # each candidate from its state at the step (the same numbers as replaying each whole)
+        prefix = _replay_span_states(rec, plant, condition, effects, a, b, replay_load(np.full(b - a, old), hold[a:b], stuck[a:b]))
         for c in cands:
             F = replay_load(np.where(np.arange(a, b) < c, old, new), hold[a:b], stuck[a:b])
-            out = _replay_span(rec, plant, condition, effects, a, b, F)
+            out = _replay_span(rec, plant, condition, effects, a, b, F, prefix, int(c) - a)
             if out is None:
                 continue
             p1r, p2r, Xr = out
