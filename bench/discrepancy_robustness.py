@@ -1,4 +1,4 @@
-"""Robustness of the discrepancy workflow on plants that are not its own model (issue 17).
+"""Robustness of the discrepancy workflow on plants that are not its own model.
 
 Every cell: a true plant whose base parameters are perturbed within realistic tolerances (α and
 underlap per edge, β, V01, V02, d_v, d_c, d_s, mass; each z ~ N(0, 1) clipped to ±2σ of the
@@ -11,7 +11,7 @@ use; the workflow is given the nominal design data only, and
 * ``--commissioning yes``: first calibrates the nuisances on a commissioning window of the same
   valve without the effect (another seed), then diagnoses against that model taken as exact.
 
-``--family sharp|worn3|worn4`` makes the true valve one of issue 16's other families (sharp-edged
+``--family sharp|worn3|worn4`` makes the true valve one of the other valve families (sharp-edged
 spool, worn lands leaking 3× or 4× Eq. 3). ``--declared nameplate`` (default) gives the workflow the
 area law a plant configuration would name: the sharp-edged valve type is configured
 ``area_law = "sharp"``, worn lands are not configured (Eq. 3's nameplate; the workflow's edge-shape
@@ -25,7 +25,7 @@ effects outside the library (``pressure_dependent_friction``, ``transmitter_lag`
 added to ``--effects all``, and for them ``unexplained``, ``ambiguous`` or ``none`` are right and
 any name is wrong.
 
-``--method before`` runs the workflow as it was before issue 17 on the same cells (the design data
+``--method before`` runs the workflow as it was before the nuisance calibration on the same cells (the design data
 taken as exact; with commissioning only α and underlap fitted, ``pipeline.fit_condition``).
 
 Outcome per run: ``named`` (the right effect named first), ``ambiguous`` (the right effect among the
@@ -106,7 +106,7 @@ def _lake(effects, seed: int, n_windows: int, plant):
 
 @functools.lru_cache(maxsize=4)
 def commissioning_condition_before(seed: int, n_windows: int, family: str = "eq3", declared: str = "nameplate"):
-    """Before issue 17: only α and underlap fitted on the commissioning window."""
+    """Before the nuisance calibration: only α and underlap fitted on the commissioning window."""
     from transforms.discrepancy import DiscrepancySettings, split_records
     from transforms.discrepancy.pipeline import fit_condition
 
@@ -141,6 +141,7 @@ def run_cell(key: str, magnitude: str, commissioning: bool, seed: int, n_windows
     from transforms.discrepancy import DiscrepancySettings, split_records
     from transforms.discrepancy.nuisance import NuisancePriors
     from transforms.discrepancy.pipeline import diagnose
+    from transforms.discrepancy.verdict import acting_gap
 
     t0 = time.process_time()
     design = design_plant(family, declared)
@@ -190,6 +191,11 @@ def run_cell(key: str, magnitude: str, commissioning: bool, seed: int, n_windows
         outcome = "ambiguous"
     else:
         outcome = "wrong"
+    # the acceptance's two gap figures: where the effect acts, the shrink from the base model to the
+    # final stage; on the clean valve, each split gap over its noise floor
+    acting = acting_gap(spec) if spec is not None else None
+    shrink = d.split_gaps[0][acting] / d.split_gaps[-1][acting] if acting else None
+    over_floor = {k: d.split_gaps[0][k] / f for k, f in d.noise_floors.items()} if key == "none" else None
     rel_err = None
     if spec is not None and got == key and got_value is not None and np.isfinite(got_value):
         rel_err = abs(got_value - value) / abs(value - spec.neutral)
@@ -200,6 +206,7 @@ def run_cell(key: str, magnitude: str, commissioning: bool, seed: int, n_windows
         "verdict": verdict, "got": got, "got_value": got_value, "alternatives": alts, "confidence": conf, "outcome": outcome,
         "rel_err": rel_err, "gap_nominal": d.gap_nominal, "gap_before": d.stage_gaps[0], "gap_after": d.stage_gaps[-1],
         "split_before": d.split_gaps[0], "split_after": d.split_gaps[-1], "floors": d.noise_floors,
+        "acting_gap": acting, "shrink": shrink, "over_floor": over_floor,
         "cpu_s": time.process_time() - t0,
     }
 
@@ -216,15 +223,21 @@ def table(rows: list[dict]) -> str:
     groups = defaultdict(list)
     for r in rows:
         groups[(r["commissioning"], r["magnitude"], r["effect"])].append(r)
-    lines = ["| commissioning | magnitude | effect | runs | named first | ambiguous (right listed) | none | unexplained | wrong | max rel. error (named) |",
-             "|---|---|---|---|---|---|---|---|---|---|"]
+    lines = ["| commissioning | magnitude | effect | runs | named first | ambiguous (right listed) | none | unexplained | wrong | max rel. error (named) "
+             "| gap shrink where it acts (least, named or ambiguous) | clean valve: gap / noise floor (hydraulic, mechanical; largest) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for (c, m, e), rs in sorted(groups.items(), key=lambda kv: (kv[0][0], kv[0][1] != "typical", kv[0][2])):
         n = len(rs)
         cnt = {o: sum(r["outcome"] == o for r in rs) for o in ("named", "ambiguous", "none", "unexplained", "wrong", "error")}
         errs = [r["rel_err"] for r in rs if r.get("rel_err") is not None and r["outcome"] == "named"]
         err = f"{max(errs):.1%}" if errs else "–"
         wrong = f"{cnt['wrong']}" + (f" (+{cnt['error']} errors)" if cnt["error"] else "")
-        lines.append(f"| {'yes' if c else 'no'} | {m if e != 'none' else '–'} | {e} | {n} | {cnt['named']} | {cnt['ambiguous']} | {cnt['none']} | {cnt['unexplained']} | {wrong} | {err} |")
+        shrinks = [r["shrink"] for r in rs if r.get("shrink") is not None and r["outcome"] in ("named", "ambiguous")]
+        shrink = f"{min(shrinks):.2g}× ({rs[0]['acting_gap']})" if shrinks else "–"
+        over = [r["over_floor"] for r in rs if r.get("over_floor")]
+        clean = f"{max(o['hydraulic'] for o in over):.2g}, {max(o['mechanical'] for o in over):.2g}" if over else "–"
+        lines.append(f"| {'yes' if c else 'no'} | {m if e != 'none' else '–'} | {e} | {n} | {cnt['named']} | {cnt['ambiguous']} | {cnt['none']} | {cnt['unexplained']} | {wrong} | {err} "
+                     f"| {shrink} | {clean} |")
     return "\n".join(lines)
 
 
