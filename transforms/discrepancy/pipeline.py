@@ -344,7 +344,7 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
     # once effects are named, the load is segmented again with the fitted model and the
     # selection repeated (alternating between the nuisance load and the effects)
     rows0, w_rows, sel, sig = _select(prepared, plant, condition, specs, settings, None if nm is None else (nm, z_cal))
-    floors = noise_floors(prepared, settings)
+    floors = noise_floors(prepared, plant, condition, base, settings)
 
     def refine(named_specs, start):
         """(effects, SEs, stage model) of the named effects fitted (with the nuisances)."""
