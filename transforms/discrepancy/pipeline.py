@@ -149,7 +149,7 @@ class Diagnosis:
     model: tuple = ()
     """(plant, condition) of the final stage (calibrated nuisances when priors were given)."""
     noise_floors: dict = field(default_factory=dict)
-    """The split gaps (hydraulic, mechanical) the recorded noise alone leaves (``rows.noise_floors``)."""
+    """The split gaps (hydraulic, mechanical) the recorded noise alone leaves through the replay (``rows.noise_floors``)."""
     split_gaps: list = field(default_factory=list)
     """Per stage: {hydraulic, mechanical} gap."""
     pressure_delay_samples: int = 0

@@ -86,7 +86,7 @@ FLOOR_NARROWS = 1.05
 """A reading named by the prior alone (no residual for the selection) against a calibrated base
 model that already replays its gap within ``FLOOR_FACTOR`` × the noise floor must narrow that gap
 by at least this factor: reaching the floor confirms nothing there, and a shrink of ``GAP_SHRINK``
-is out of reach (the exact model itself leaves ~1.2× the floor)."""
+is out of reach (the exact model itself leaves ~1.2× the hydraulic floor, 0.7–1.2× the mechanical one)."""
 MECHANICAL_EFFECTS = ("friction_change", "load_mass_change")
 EQUATION_OF = {"p1_hydraulic": "chamber 1 (Eq. 6, p1)", "p2_hydraulic": "chamber 2 (Eq. 6, p2)", "X_mechanical": "the motion (Eq. 5, X)"}
 REGION_MIN_SAMPLES = 200
