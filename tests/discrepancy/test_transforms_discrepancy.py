@@ -212,17 +212,17 @@ def test_the_mechanical_noise_floor_is_what_the_noise_leaves_through_the_replay(
     from transforms.discrepancy.rows import _gaps, noise_floors, prepare_records
 
     s, cond, fx = DiscrepancySettings(), TABLE1.nominal_condition, Effects()
+    key = (TABLE1, cond, fx)
     res = simulate_windows(TABLE1, [cond], 10.0, seed=seed)
     m = measure(res, TABLE1.sensors, np.random.default_rng([seed, 99]))
-    gaps = {}
-    for kind, sig in (("recorded", (m.ps, m.pr, m.p1, m.p2, m.x_spool, m.x_cyl)), ("noise-free", (res.ps_pa, res.pr_pa, res.p1_pa, res.p2_pa, res.x_m, res.X_m))):
-        raw = {k: np.asarray(v[0], float) for k, v in zip(("ps", "pr", "p1", "p2", "x", "X"), sig)}
-        prepared = prepare_records([Record("V", 0, 0, 1e-3, raw)], TABLE1, cond, s)
-        p = prepared[0]
-        p.loads[(TABLE1, cond, fx)] = replace(p.loads[(TABLE1, cond, fx)], load=np.asarray(res.F_l_n[0], float), hold_until=0)
-        gaps[kind] = _gaps(prepared, TABLE1, cond, fx, s, set())[0].split_gap("mechanical")
-        if kind == "recorded":
-            floor = noise_floors(prepared, TABLE1, cond, fx, s)["mechanical"]
+    names = ("ps", "pr", "p1", "p2", "x", "X")
+    recorded = Record("V", 0, 0, 1e-3, {k: np.asarray(v[0], float) for k, v in zip(names, (m.ps, m.pr, m.p1, m.p2, m.x_spool, m.x_cyl))})
+    noise_free = Record("V", 0, 0, 1e-3, {k: np.asarray(v[0], float) for k, v in zip(names, (res.ps_pa, res.pr_pa, res.p1_pa, res.p2_pa, res.x_m, res.X_m))})
+    p = prepare_records([recorded], TABLE1, cond, s)[0]
+    p.loads[key] = replace(p.loads[key], load=np.asarray(res.F_l_n[0], float), hold_until=0)  # the true load
+    floor = noise_floors([p], TABLE1, cond, fx, s)["mechanical"]
+    gaps = {kind: _gaps([q], TABLE1, cond, fx, s, set())[0].split_gap("mechanical")
+            for kind, q in (("recorded", p), ("noise-free", replace(p, rec=prepare_record(noise_free, s))))}
     x_noise = TABLE1.sensors.x_cyl.noise_std / 1e-3
     assert floor > 8.0 * x_noise, floor  # ~12 um against 1 um
     assert floor / 1.5 < gaps["recorded"] < 1.5 * floor, (gaps, floor)  # seeds 0-7: 0.74-1.15x
