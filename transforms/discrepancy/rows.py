@@ -439,7 +439,8 @@ def noise_floors(prepared, plant, condition, effects, settings, draws: int = NOI
     """The split gaps (``gaps.SPLIT_GAPS``) the recorded sensor noise alone leaves through the
     replay, on the gap scales (:func:`gaps.noise_rms` estimates each signal's noise from the records).
 
-    * hydraulic: the recorded noise of p1, p2 (the chamber replay passes it about one to one);
+    * hydraulic: the recorded noise of p1, p2 (what the X and spool position noise leave through the
+      chamber replay, 0.03–0.04 bar, is not added: measured and left, docs/discrepancy.md);
     * mechanical: sqrt((X noise / 1 mm)² + (e / 1 mm)²), e the RMS over the moving samples of the
       mechanical replay (:func:`_mechanical_replay`, the model ``plant``, ``condition``,
       ``effects`` and its load) with fresh white noise of the estimated RMS added to the recorded
