@@ -1,4 +1,4 @@
-"""Robustness of the discrepancy workflow on plants that are not its own model (issue 17).
+"""Robustness of the discrepancy workflow on plants that are not its own model.
 
 Every cell: a true plant whose base parameters are perturbed within realistic tolerances (α and
 underlap per edge, β, V01, V02, d_v, d_c, d_s, mass; each z ~ N(0, 1) clipped to ±2σ of the
@@ -11,7 +11,7 @@ use; the workflow is given the nominal design data only, and
 * ``--commissioning yes``: first calibrates the nuisances on a commissioning window of the same
   valve without the effect (another seed), then diagnoses against that model taken as exact.
 
-``--family sharp|worn3|worn4`` makes the true valve one of issue 16's other families (sharp-edged
+``--family sharp|worn3|worn4`` makes the true valve one of the other valve families (sharp-edged
 spool, worn lands leaking 3× or 4× Eq. 3). ``--declared nameplate`` (default) gives the workflow the
 area law a plant configuration would name: the sharp-edged valve type is configured
 ``area_law = "sharp"``, worn lands are not configured (Eq. 3's nameplate; the workflow's edge-shape
@@ -20,12 +20,12 @@ nuisances must absorb them); ``--declared eq3`` gives every valve Eq. 3, the sha
 ``--plant ref`` takes the true plants from the second reference plant (``tests/refplant``, written
 apart from ``model/``: its own integrator, Karnopp sticking, loads ramping to a new level every
 1–4 s, 1 ms transmitter lag and one sample of skew): a valve as built (``manufactured``, seed) with
-the hidden effect in that package's own implementation, three windows by default there; the two
-effects outside the library (``pressure_dependent_friction``, ``transmitter_lag`` on p1) are
+the hidden effect in that package's own implementation (``--load-interval-s 1,1``: a new load level
+every second); the two effects outside the library (``pressure_dependent_friction``, ``transmitter_lag`` on p1) are
 added to ``--effects all``, and for them ``unexplained``, ``ambiguous`` or ``none`` are right and
 any name is wrong.
 
-``--method before`` runs the workflow as it was before issue 17 on the same cells (the design data
+``--method before`` runs the workflow as it was before the nuisance calibration on the same cells (the design data
 taken as exact; with commissioning only α and underlap fitted, ``pipeline.fit_condition``).
 
 Outcome per run: ``named`` (the right effect named first), ``ambiguous`` (the right effect among the
@@ -69,10 +69,11 @@ def true_plant(seed: int, family: str = "eq3"):
 REF_OUTSIDE = ("pressure_dependent_friction", "transmitter_lag")
 
 
-def ref_lake(key: str | None, value, valve_seed: int, window_seed: int, n_windows: int):
+def ref_lake(key: str | None, value, valve_seed: int, window_seed: int, n_windows: int, load_interval_s: tuple[float, float] | None = None):
     """Lake rows of the reference plant's valve ``valve_seed`` (``manufactured``) over windows drawn
     from ``window_seed``, with effect ``key`` (a library key or one of ``REF_OUTSIDE``) at ``value``
-    (None: its typical magnitude)."""
+    (None: its typical magnitude); ``load_interval_s`` the range of the load's intervals between
+    new levels [s] (None: the plant's 1–4 s)."""
     from datetime import datetime, timezone
 
     from tests.refplant import NAMEPLATE, effect, manufactured, simulate_windows, to_lake_frame
@@ -81,7 +82,10 @@ def ref_lake(key: str | None, value, valve_seed: int, window_seed: int, n_window
     if key is not None:
         name, _, ch = key.partition("[")
         fx = effect(name, value, channel=ch.rstrip("]") or "p1")
-    recs = simulate_windows(manufactured(NAMEPLATE, seed=valve_seed), n_windows, window_seed, effects=fx)
+    plant = manufactured(NAMEPLATE, seed=valve_seed)
+    if load_interval_s is not None:
+        plant = replace(plant, operation=replace(plant.operation, load_interval_s=tuple(load_interval_s)))
+    recs = simulate_windows(plant, n_windows, window_seed, effects=fx)
     return to_lake_frame(recs, "V1", datetime(2025, 3, 1, tzinfo=timezone.utc))
 
 
@@ -106,7 +110,7 @@ def _lake(effects, seed: int, n_windows: int, plant):
 
 @functools.lru_cache(maxsize=4)
 def commissioning_condition_before(seed: int, n_windows: int, family: str = "eq3", declared: str = "nameplate"):
-    """Before issue 17: only α and underlap fitted on the commissioning window."""
+    """Before the nuisance calibration: only α and underlap fitted on the commissioning window."""
     from transforms.discrepancy import DiscrepancySettings, split_records
     from transforms.discrepancy.pipeline import fit_condition
 
@@ -118,7 +122,8 @@ def commissioning_condition_before(seed: int, n_windows: int, family: str = "eq3
 
 
 @functools.lru_cache(maxsize=4)
-def commissioning_model(seed: int, n_windows: int, family: str = "eq3", declared: str = "nameplate", plant_source: str = "model"):
+def commissioning_model(seed: int, n_windows: int, family: str = "eq3", declared: str = "nameplate", plant_source: str = "model",
+                        load_interval_s: tuple[float, float] | None = None):
     """The nuisances calibrated on a clean commissioning window of the seed's valve."""
     from transforms.discrepancy import DiscrepancySettings, split_records
     from transforms.discrepancy.calibration import calibrate
@@ -127,7 +132,7 @@ def commissioning_model(seed: int, n_windows: int, family: str = "eq3", declared
     design = design_plant(family, declared)
     s = DiscrepancySettings()
     if plant_source == "ref":
-        recs = split_records(ref_lake(None, None, seed, 5000 + seed, n_windows), s)
+        recs = split_records(ref_lake(None, None, seed, 5000 + seed, n_windows, load_interval_s), s)
     else:
         plant, _ = true_plant(seed, family)
         recs = split_records(_lake(None, 5000 + seed, n_windows, plant), s)
@@ -136,11 +141,12 @@ def commissioning_model(seed: int, n_windows: int, family: str = "eq3", declared
 
 
 def run_cell(key: str, magnitude: str, commissioning: bool, seed: int, n_windows: int, method: str = "nuisance", family: str = "eq3",
-             declared: str = "nameplate", plant_source: str = "model") -> dict:
+             declared: str = "nameplate", plant_source: str = "model", load_interval_s: tuple[float, float] | None = None) -> dict:
     from model.effects import library_entry
     from transforms.discrepancy import DiscrepancySettings, split_records
     from transforms.discrepancy.nuisance import NuisancePriors
     from transforms.discrepancy.pipeline import diagnose
+    from transforms.discrepancy.verdict import acting_gap
 
     t0 = time.process_time()
     design = design_plant(family, declared)
@@ -154,7 +160,7 @@ def run_cell(key: str, magnitude: str, commissioning: bool, seed: int, n_windows
         effects = spec.effects(value)
     s = DiscrepancySettings()
     if plant_source == "ref":
-        lake = ref_lake(None if key == "none" else key, value, seed, 100 + seed, n_windows)
+        lake = ref_lake(None if key == "none" else key, value, seed, 100 + seed, n_windows, load_interval_s)
     else:
         lake = _lake(effects, 100 + seed, n_windows, true_plant(seed, family)[0])
     recs = split_records(lake, s)
@@ -163,7 +169,7 @@ def run_cell(key: str, magnitude: str, commissioning: bool, seed: int, n_windows
             cp, cc = design, design.nominal_condition
         else:
             cp, cc = (commissioning_model if method == "nuisance" else commissioning_condition_before)(seed, n_windows, family, declared,
-                                                                                                    *((plant_source,) if method == "nuisance" else ()))
+                                                                                                    *((plant_source, load_interval_s) if method == "nuisance" else ()))
         d = diagnose(recs, cp, cc, s, monitoring=False)
         if d.verdict is not None:  # unexplained (or gain/offset ambiguous): the verdict decides
             v = d.verdict
@@ -190,16 +196,33 @@ def run_cell(key: str, magnitude: str, commissioning: bool, seed: int, n_windows
         outcome = "ambiguous"
     else:
         outcome = "wrong"
+    # the acceptance's two gap figures: where the effect acts, the shrink from the base model to the
+    # final stage (of the gap, and of what it holds above the noise, sqrt(gap² - floor²): the
+    # recorded noise is independent of the replay, so the two add in squares); on the clean valve,
+    # each split gap over its noise floor
+    acting = acting_gap(spec) if spec is not None else None
+    before_after = None
+    if acting and d.verdict is not None and np.isfinite(d.verdict.acting_before):  # a reading of the nuisance verdict
+        before_after = (d.verdict.acting_before, d.verdict.acting_after)
+    elif acting and d.verdict is not None and d.verdict.verdict == "unexplained" and d.verdict.gap_kind == acting:
+        before_after = (d.verdict.gap_before, d.verdict.gap_after)
+    elif acting:  # the selection's stages
+        before_after = (d.split_gaps[0][acting], d.split_gaps[-1][acting])
+    shrink = before_after[0] / before_after[1] if before_after else None
+    above = [np.sqrt(max(g**2 - d.noise_floors[acting] ** 2, 0.0)) for g in before_after] if before_after else None
+    shrink_above = above[0] / above[1] if above and above[1] > 0 else None
+    over_floor = {k: d.split_gaps[0][k] / f for k, f in d.noise_floors.items()} if key == "none" else None
     rel_err = None
     if spec is not None and got == key and got_value is not None and np.isfinite(got_value):
         rel_err = abs(got_value - value) / abs(value - spec.neutral)
     return {
         "effect": key, "magnitude": magnitude, "commissioning": commissioning, "seed": seed, "value": value, "method": method, "family": family, "declared": declared,
-        "plant": plant_source, "pressure_delay_samples": d.pressure_delay_samples, "pressure_delays": d.pressure_delays,
+        "plant": plant_source, "load_interval_s": load_interval_s, "pressure_delay_samples": d.pressure_delay_samples, "pressure_delays": d.pressure_delays,
         "lag_finding": d.lag_finding, "reason": d.verdict.reason if d.verdict is not None else "",
         "verdict": verdict, "got": got, "got_value": got_value, "alternatives": alts, "confidence": conf, "outcome": outcome,
         "rel_err": rel_err, "gap_nominal": d.gap_nominal, "gap_before": d.stage_gaps[0], "gap_after": d.stage_gaps[-1],
         "split_before": d.split_gaps[0], "split_after": d.split_gaps[-1], "floors": d.noise_floors,
+        "acting_gap": acting, "acting_before_after": before_after, "shrink": shrink, "shrink_above_noise": shrink_above, "over_floor": over_floor,
         "cpu_s": time.process_time() - t0,
     }
 
@@ -216,15 +239,22 @@ def table(rows: list[dict]) -> str:
     groups = defaultdict(list)
     for r in rows:
         groups[(r["commissioning"], r["magnitude"], r["effect"])].append(r)
-    lines = ["| commissioning | magnitude | effect | runs | named first | ambiguous (right listed) | none | unexplained | wrong | max rel. error (named) |",
-             "|---|---|---|---|---|---|---|---|---|---|"]
+    lines = ["| commissioning | magnitude | effect | runs | named first | ambiguous (right listed) | none | unexplained | wrong | max rel. error (named) "
+             "| gap shrink where it acts (least, named or ambiguous; above the noise) | clean valve: gap / noise floor (hydraulic, mechanical; largest) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for (c, m, e), rs in sorted(groups.items(), key=lambda kv: (kv[0][0], kv[0][1] != "typical", kv[0][2])):
         n = len(rs)
         cnt = {o: sum(r["outcome"] == o for r in rs) for o in ("named", "ambiguous", "none", "unexplained", "wrong", "error")}
         errs = [r["rel_err"] for r in rs if r.get("rel_err") is not None and r["outcome"] == "named"]
         err = f"{max(errs):.1%}" if errs else "–"
         wrong = f"{cnt['wrong']}" + (f" (+{cnt['error']} errors)" if cnt["error"] else "")
-        lines.append(f"| {'yes' if c else 'no'} | {m if e != 'none' else '–'} | {e} | {n} | {cnt['named']} | {cnt['ambiguous']} | {cnt['none']} | {cnt['unexplained']} | {wrong} | {err} |")
+        ok = [r for r in rs if r.get("shrink") is not None and r["outcome"] in ("named", "ambiguous")]
+        above = [r["shrink_above_noise"] for r in ok if r.get("shrink_above_noise") is not None]
+        shrink = f"{min(r['shrink'] for r in ok):.2g}× ({ok[0]['acting_gap']}; {min(above):.2g}×)" if ok and above else "–"
+        over = [r["over_floor"] for r in rs if r.get("over_floor")]
+        clean = f"{max(o['hydraulic'] for o in over):.2g}, {max(o['mechanical'] for o in over):.2g}" if over else "–"
+        lines.append(f"| {'yes' if c else 'no'} | {m if e != 'none' else '–'} | {e} | {n} | {cnt['named']} | {cnt['ambiguous']} | {cnt['none']} | {cnt['unexplained']} | {wrong} | {err} "
+                     f"| {shrink} | {clean} |")
     return "\n".join(lines)
 
 
@@ -244,20 +274,24 @@ def main(argv=None) -> None:
     ap.add_argument("--declared", default="nameplate", choices=("nameplate", "eq3"),
                     help="the area law the workflow is given: the valve type's (sharp for the sharp family, Eq. 3 for worn lands) or Eq. 3 always")
     ap.add_argument("--plant", default="model", choices=("model", "ref"), help="the true plants: model/'s own code with perturbed parameters, or the second reference plant (tests/refplant)")
+    ap.add_argument("--load-interval-s", default=None, help="with --plant ref: LOW,HIGH, the load's intervals between new levels [s] (default 1,4)")
     ap.add_argument("--out", default="bench/discrepancy_robustness.jsonl")
     a = ap.parse_args(argv)
     keys = [s.key for s in EFFECT_LIBRARY] + (list(REF_OUTSIDE) if a.plant == "ref" else []) if a.effects == "all" else a.effects.split(",")
     mags = a.magnitudes.split(",")
     comms = [c == "yes" for c in a.commissioning.split(",")]
     seeds = range(a.first_seed, a.first_seed + a.seeds)
+    if a.load_interval_s is not None and a.plant != "ref":
+        ap.error("--load-interval-s needs --plant ref")
+    interval = tuple(float(v) for v in a.load_interval_s.split(",")) if a.load_interval_s else None
     tasks = []
     for c in comms:
         for seed in seeds:  # seed-major, so a worker reuses its commissioning calibration
             if a.effects == "all" or "none" in keys:
-                tasks.append(("none", "typical", c, seed, a.windows, a.method, a.family, a.declared, a.plant))
+                tasks.append(("none", "typical", c, seed, a.windows, a.method, a.family, a.declared, a.plant, interval))
             for m in mags:
                 for k in (k for k in keys if k != "none"):
-                    tasks.append((k, m, c, seed, a.windows, a.method, a.family, a.declared, a.plant))
+                    tasks.append((k, m, c, seed, a.windows, a.method, a.family, a.declared, a.plant, interval))
     t0 = time.time()
     rows = []
     out = Path(a.out)

@@ -191,6 +191,8 @@ def verdict_columns(d: Diagnosis, rank: int) -> dict:
               "gap_kind_floor": _nn(n.floor)} if n is not None else {"gap_kind": None, "gap_kind_before": None, "gap_kind_after": None, "gap_kind_floor": None}
     if v is not None and v.verdict == "unexplained":
         acting = {"gap_kind": v.gap_kind, "gap_kind_before": _nn(v.gap_before), "gap_kind_after": _nn(v.gap_after), "gap_kind_floor": _nn(v.floor)}
+    elif n is None and v is not None and v.gap_kind:  # a reading of the nuisance verdict, replayed with its joint fit
+        acting = {"gap_kind": v.gap_kind, "gap_kind_before": _nn(v.acting_before), "gap_kind_after": _nn(v.acting_after), "gap_kind_floor": _nn(v.floor)}
     common = {"gap_nominal": _nn(d.gap_nominal), **acting, "disagreement": ((v.where if v is not None else "") or d.lag_finding) or None}
     if v is not None:
         if rank > 1:

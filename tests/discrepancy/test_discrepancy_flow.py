@@ -146,3 +146,19 @@ def test_command_line_shows_an_unexplained_disagreement():
     assert "verdict UNEXPLAINED -- the data disagree with the model in a way no library effect explains" in text
     assert "where: the motion (Eq. 5, X): the replayed X is off by 0.3 mm RMS in region retracting" in text
     assert "no library effect named" in text and "found load_mass_change" not in text
+
+
+def test_findings_row_of_a_reading_decided_against_the_tolerances_has_its_acting_gap():
+    # a reading of the nuisance verdict (no selection: ``named`` empty) keeps the gap where it acts in
+    # the findings row, as the selection's names and ``unexplained`` do; ``none`` leaves it null
+    from types import SimpleNamespace
+
+    from flows.discrepancy.flow import verdict_columns
+    from model.effects import library_entry
+    from transforms.discrepancy.verdict import Verdict
+
+    v = Verdict("named", 0.99, library_entry("load_mass_change"), 600.0, gap_kind="mechanical", floor=0.001, acting_before=0.2, acting_after=0.02)
+    row = verdict_columns(SimpleNamespace(verdict=v, named=[], gap_nominal=1.0, lag_finding=""), 1)
+    assert (row["verdict"], row["gap_kind"], row["gap_kind_before"], row["gap_kind_after"], row["gap_kind_floor"]) == ("named", "mechanical", 0.2, 0.02, 0.001)
+    none = verdict_columns(SimpleNamespace(verdict=Verdict("none", 0.9, None, float("nan")), named=[], gap_nominal=1.0, lag_finding=""), 1)
+    assert none["gap_kind"] is None and none["gap_kind_before"] is None

@@ -21,6 +21,7 @@ from transforms.discrepancy.calibration import _split_gains, calibrate
 from transforms.discrepancy.load import LoadEstimate
 from transforms.discrepancy.nuisance import NUISANCES, NuisancePriors, apply_nuisances, nuisance_sigmas, nuisance_values
 from transforms.discrepancy.pipeline import _project_out, diagnose
+from transforms.discrepancy.verdict import acting_gap, confirmed
 
 from .simdata import perturbed_plant, simulate_lake, study_conditions
 
@@ -141,6 +142,12 @@ def test_typical_effect_named_or_honestly_ambiguous_without_commissioning(key, v
         assert v.effect.key == key or key in v.alternative_keys, (v.effect.key, v.alternatives)
     if v.effect.key == key and spec.name not in ("load_mass_change", "friction_change", "spool_sensor_offset"):
         assert abs(v.value - value) <= 0.2 * abs(value - spec.neutral), (v.value, value)
+    if not d.named:  # a reading of the nuisance verdict carries the gap where it acts, replayed with its joint fit
+        kind = acting_gap(v.effect)
+        assert v.gap_kind == kind and v.floor == d.noise_floors[kind], (v.gap_kind, v.floor, d.noise_floors)
+        assert np.isfinite(v.acting_before) and np.isfinite(v.acting_after), (v.acting_before, v.acting_after)
+        if v.verdict == "named":  # confirmed by the replay
+            assert confirmed(v.acting_before, v.acting_after, v.floor), (v.acting_before, v.acting_after, v.floor)
 
 
 @pytest.mark.slow

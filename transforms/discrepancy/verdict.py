@@ -216,9 +216,14 @@ class Verdict:
     where: str = ""
     """``unexplained``: which equation, signal, operating region and how large."""
     gap_kind: str = ""
-    """``unexplained``: the gap where the effect acts (``hydraulic`` or ``mechanical``); its
-    before/after are ``gap_before``/``gap_after``, its noise floor ``floor``."""
+    """The gap where the effect acts (``hydraulic`` or ``mechanical``), its noise floor ``floor``:
+    for ``unexplained`` its before/after are ``gap_before``/``gap_after``; for a reading of the
+    nuisance verdict ``acting_before``/``acting_after``."""
     floor: float = float("nan")
+    acting_before: float = float("nan")
+    acting_after: float = float("nan")
+    """``named`` or ``ambiguous`` from the nuisance verdict: the gap where the first reading acts
+    (:func:`acting_gap`) replayed by the calibrated base model and with the reading's joint fit."""
 
 
 def _logistic(d: float) -> float:
@@ -386,6 +391,9 @@ def nuisance_verdict(prepared, nm, fit, named_specs, specs, rows0, w_rows, setti
     if jf is not None:
         table = Calibration(nm=nm, z=jf.z, z_se=jf.z_se, plant=None, condition=None, sigmas=(0.0, 0.0, 0.0)).table()  # type: ignore[arg-type]
     gaps = dict(gap_before=gap_before, gap_after=gap_after)
+    if acc_after is not None:
+        kind = acting_gap(spec)
+        gaps.update(gap_kind=kind, floor=floors[kind], acting_before=accs[0].split_gap(kind), acting_after=acc_after.split_gap(kind))
     held = replayed = ""
     if z >= Z_NAMED and not rivals and acc_after is not None:
         # named needs the replay too: the effect must close its gap against the calibrated base
