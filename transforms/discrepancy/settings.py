@@ -80,8 +80,7 @@ class DiscrepancySettings:
         The piecewise-linear load is used where it leaves at most 1/``ramp_ratio`` of the
         residual RMS of one constant per segment, and that RMS is above ``ramp_min_n`` (about 3×
         the force balance's noise, ~40 N at 0.05 bar: a rolling force that moves a few hundred
-        newtons within a segment leaves 145–220 N; `model/`'s stepping loads, whose segments are
-        constant, leave at most 2.3× the grid's). [–], [N]
+        newtons within a segment leaves 145–220 N). [–], [N]
     replay_segment_s : float
         The replay restarts from the measured state every this many seconds (multiple
         shooting), so a small flow error cannot make the position drift over a whole record. [s]
