@@ -591,7 +591,7 @@ DISCREPANCY_FINDING_FIELDS = DISCREPANCY_FINDING_FIELDS + (
     Field("gap_kind", pl.Utf8, "", "Where the effect acts and is judged: hydraulic (p1, p2 replayed on the recorded cylinder motion) or mechanical (X replayed on the recorded pressures); null without one.", isin=("hydraulic", "mechanical"), nullable=True),
     Field("gap_kind_before", pl.Float64, "", "That gap (RMS on the 1 bar / 1 mm scales) of the model before the effect is added.", ge=0.0, nullable=True),
     Field("gap_kind_after", pl.Float64, "", "... and with it: named needs ≥ 1.5× less, or ≤ 2× gap_kind_floor.", ge=0.0, nullable=True),
-    Field("gap_kind_floor", pl.Float64, "", "That gap's noise floor: what the recorded sensor noise alone leaves.", ge=0.0, nullable=True),
+    Field("gap_kind_floor", pl.Float64, "", "That gap's noise floor: what the recorded sensor noise alone leaves through the replay.", ge=0.0, nullable=True),
     Field("disagreement", pl.Utf8, "", "unexplained: which equation, signal and operating region disagree, and how much; with any verdict, a pressure transmitter lagging the others (which, how many ms).", nullable=True),
 )
 

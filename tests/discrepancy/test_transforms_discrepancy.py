@@ -231,6 +231,34 @@ def test_gap_accumulator_and_normalised_gap():
     assert {(r["signal"], r["region"]) for r in acc.rows()} == {(s, r) for s in ("p1", "p2", "X") for r in regions}
 
 
+@pytest.mark.parametrize("seed", [0, 1])
+def test_the_mechanical_noise_floor_is_what_the_noise_leaves_through_the_replay(seed):
+    """On the exact model with its true load, the mechanical replay's gap is the recorded noise's:
+    the floor (fresh noise of the estimated RMS replayed again) is within 1.5x of it, ten times
+    the X channel's 1 um (the pressures' 0.05 bar integrated twice), and the same window recorded
+    without noise replays within a tenth of it."""
+    from dataclasses import replace
+
+    from transforms.discrepancy.rows import _gaps, noise_floors, prepare_records
+
+    s, cond, fx = DiscrepancySettings(), TABLE1.nominal_condition, Effects()
+    key = (TABLE1, cond, fx)
+    res = simulate_windows(TABLE1, [cond], 10.0, seed=seed)
+    m = measure(res, TABLE1.sensors, np.random.default_rng([seed, 99]))
+    names = ("ps", "pr", "p1", "p2", "x", "X")
+    recorded = Record("V", 0, 0, 1e-3, {k: np.asarray(v[0], float) for k, v in zip(names, (m.ps, m.pr, m.p1, m.p2, m.x_spool, m.x_cyl))})
+    noise_free = Record("V", 0, 0, 1e-3, {k: np.asarray(v[0], float) for k, v in zip(names, (res.ps_pa, res.pr_pa, res.p1_pa, res.p2_pa, res.x_m, res.X_m))})
+    p = prepare_records([recorded], TABLE1, cond, s)[0]
+    p.loads[key] = replace(p.loads[key], load=np.asarray(res.F_l_n[0], float), hold_until=0)  # the true load
+    floor = noise_floors([p], TABLE1, cond, fx, s)["mechanical"]
+    gaps = {kind: _gaps([q], TABLE1, cond, fx, s, set())[0].split_gap("mechanical")
+            for kind, q in (("recorded", p), ("noise-free", replace(p, rec=prepare_record(noise_free, s))))}
+    x_noise = TABLE1.sensors.x_cyl.noise_std / 1e-3
+    assert floor > 8.0 * x_noise, floor  # ~12 um against 1 um
+    assert floor / 1.5 < gaps["recorded"] < 1.5 * floor, (gaps, floor)  # seeds 0-7: 0.74-1.15x
+    assert gaps["noise-free"] < 0.1 * floor, (gaps, floor)  # integration alone: 0.1-0.5 um
+
+
 def test_operating_regions_partition_motion():
     res = simulate_windows(TABLE1, [TABLE1.nominal_condition], 5.0, seed=0)
     m = measure(res, TABLE1.sensors, np.random.default_rng(0))

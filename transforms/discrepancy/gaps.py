@@ -25,8 +25,11 @@ each effect is judged where it acts and an error in the load estimate cannot hid
   (|v_X| > ``v_standstill_m_s``: while the cylinder sticks the load does not show, so when it
   breaks away is the load estimate's, not the motion's); mass and friction act here.
 
-Their **noise floors** are what the sensor noise alone leaves: the recorded noise's RMS (from the
-high-frequency part of each signal, :func:`noise_rms`) on the same scales.
+Their **noise floors** are what the sensor noise alone leaves through the replay, on the same
+scales (``rows.noise_floors``; each signal's noise RMS from its high-frequency part,
+:func:`noise_rms`): for the hydraulic gap the recorded noise of p1, p2; for the mechanical one the X
+noise together with what fresh noise on the recorded pressures and X leaves in the mechanical
+replay, which integrates the force twice (~10 µm on Table 1's sensors, not the X channel's 1 µm).
 """
 
 from __future__ import annotations

@@ -149,7 +149,7 @@ class Diagnosis:
     model: tuple = ()
     """(plant, condition) of the final stage (calibrated nuisances when priors were given)."""
     noise_floors: dict = field(default_factory=dict)
-    """The split gaps (hydraulic, mechanical) the recorded noise alone leaves (``rows.noise_floors``)."""
+    """The split gaps (hydraulic, mechanical) the recorded noise alone leaves through the replay (``rows.noise_floors``)."""
     split_gaps: list = field(default_factory=list)
     """Per stage: {hydraulic, mechanical} gap."""
     pressure_delay_samples: int = 0
@@ -344,7 +344,7 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
     # once effects are named, the load is segmented again with the fitted model and the
     # selection repeated (alternating between the nuisance load and the effects)
     rows0, w_rows, sel, sig = _select(prepared, plant, condition, specs, settings, None if nm is None else (nm, z_cal))
-    floors = noise_floors(prepared, settings)
+    floors = noise_floors(prepared, plant, condition, base, settings)
 
     def refine(named_specs, start):
         """(effects, SEs, stage model) of the named effects fitted (with the nuisances)."""
