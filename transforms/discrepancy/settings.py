@@ -72,9 +72,15 @@ class DiscrepancySettings:
     corner_min_n_s, corner_sigmas : float
         A corner is a slope change of the load of at least ``corner_min_n_s`` and
         ``corner_sigmas`` robust σ of that filter's output. [N/s], [–]
+    corner_coarse_factor : float
+        The corners the fit missed are looked for once more with the filter this many times wider
+        (±0.15 s) and the floor ``corner_min_n_s`` / factor^1.5 (its noise falls as width^-1.5):
+        a gentle ramp of a few hundred newtons over 0.3 s. [–]
     ramp_ratio, ramp_min_n : float
         The piecewise-linear load is used where it leaves at most 1/``ramp_ratio`` of the
-        residual RMS of one constant per segment, and that RMS is above ``ramp_min_n``. [–], [N]
+        residual RMS of one constant per segment, and that RMS is above ``ramp_min_n`` (about 3×
+        the force balance's noise, ~40 N at 0.05 bar: a rolling force that moves a few hundred
+        newtons within a segment leaves 145–220 N). [–], [N]
     replay_segment_s : float
         The replay restarts from the measured state every this many seconds (multiple
         shooting), so a small flow error cannot make the position drift over a whole record. [s]
@@ -121,8 +127,9 @@ class DiscrepancySettings:
     corner_half_width_s: float = 0.05
     corner_min_n_s: float = 3000.0
     corner_sigmas: float = 4.0
+    corner_coarse_factor: float = 3.0
     ramp_ratio: float = 3.0
-    ramp_min_n: float = 250.0
+    ramp_min_n: float = 120.0
     replay_segment_s: float = 2.5
     mechanical_segment_s: float = 0.5
     block_s: float = 1.0

@@ -1,0 +1,51 @@
+"""The load estimate on the second reference plant (``tests/refplant``: loads ramping to a new level
+every 1–4 s) against the plant's true load, per 10 s window of the robustness study's clean valve:
+the load error on the samples at speed and the mechanical replay's gap (X on the recorded pressures,
+``transforms.discrepancy.gaps``) with the estimated load and with the true one. The model is
+Table 1's with the reference plant's true cylinder (mass, friction), so what is left is the load
+estimate's (``bench/refplant_load.py`` prints it per seed; a test holds seed 1's gentle ramps)."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from datetime import datetime, timezone
+
+import numpy as np
+
+
+def window_figures(seed: int, n_windows: int, only: int | None = None) -> list[dict]:
+    """Per window of valve ``seed`` (``n_windows`` drawn from 100 + ``seed``, as the study's; only
+    window ``only`` if given): the load (``"ramps"`` or ``"constant"``), its RMS error at speed [N],
+    the mechanical gap with the estimate and with the true load [mm]."""
+    from model import TABLE1
+    from model.effects import Effects
+    from tests.refplant import NAMEPLATE, manufactured, simulate_windows, to_lake_frame
+    from transforms.discrepancy import DiscrepancySettings, split_records
+    from transforms.discrepancy.alignment import align_records
+    from transforms.discrepancy.rows import _replay_record, prepare_records
+
+    s = DiscrepancySettings()
+    truth = simulate_windows(manufactured(NAMEPLATE, seed=seed), n_windows, 100 + seed)
+    tc = truth[0].plant.cylinder
+    plant = replace(TABLE1, cylinder=replace(TABLE1.cylinder, mass_kg=tc.mass_kg, d_v_n_s_m=tc.d_v_n_s_m, d_c_n=tc.d_c_n, d_s_n=tc.d_s_n, v0_m_s=tc.v0_m_s))
+    cond = plant.nominal_condition
+    lake = to_lake_frame(truth, "V1", datetime(2025, 3, 1, tzinfo=timezone.utc))
+    recs, _ = align_records(split_records(lake, s), plant, cond, s)
+    windows = list(range(len(recs))) if only is None else [only]
+    fx = Effects()
+    key = (plant, cond, fx)
+    out = []
+    for i, p in zip(windows, prepare_records([recs[i] for i in windows], plant, cond, s)):
+        r = truth[i]
+        est = p.loads[key]
+        true_load = r.true["F_l"][:p.rec.n].astype(float)
+        gaps = []
+        for load in (est, replace(est, load=true_load, hold_until=0)):
+            p.loads[key] = load
+            e = _replay_record(p, plant, cond, fx, s)["X_mechanical"] - p.rec.raw["X"]
+            gaps.append(float(np.sqrt(np.nanmean(e ** 2))) * 1e3)
+        at_speed = est.usable
+        out.append({"seed": seed, "window": i, "load": "ramps" if est.knot_samples else "constant",
+                    "load_error_n": float(np.sqrt(np.mean((est.load[at_speed] - true_load[at_speed]) ** 2))),
+                    "mechanical_gap_mm": gaps[0], "true_load_gap_mm": gaps[1]})
+    return out
