@@ -163,7 +163,13 @@ def _replay_span(rec: Record, plant, condition, effects, a: int, b: int, load: n
 
 
 def _spool_source(rec: Record) -> np.ndarray:
+    """The spool position the replays are driven with [m]: Savitzky–Golay, raw at the record's ends."""
     return np.where(np.isfinite(rec.sg["x"]), rec.sg["x"], rec.raw["x"])
+
+
+def _velocity(rec: Record) -> np.ndarray:
+    """The cylinder velocity the replays restart with [m/s]: Savitzky–Golay, 0 at the record's ends."""
+    return np.where(np.isfinite(rec.sg["v"]), rec.sg["v"], 0.0)
 
 
 def _replay_span_states(rec: Record, plant, condition, effects, a: int, b: int, load: np.ndarray) -> np.ndarray | None:
@@ -354,10 +360,10 @@ def _replay_starts(p: _Prepared, effects, settings) -> tuple:
     the measured true states there) of the whole and the hydraulic replay."""
     rec = p.rec
     h = settings.savgol_window // 2
-    x_src = np.where(np.isfinite(rec.sg["x"]), rec.sg["x"], rec.raw["x"])
+    x_src = _spool_source(rec)
     x_true, p1_true, p2_true = true_signals(x_src, rec.sg["p1"], rec.sg["p2"], effects)
     starts = np.arange(h, rec.n - h - 1, max(2, int(round(settings.replay_segment_s / rec.dt))))
-    v_all = np.where(np.isfinite(rec.sg["v"]), rec.sg["v"], 0.0)
+    v_all = _velocity(rec)
     v = v_all[starts]
     v = np.where(np.abs(v) < 1e-3, 0.0, v)
     states = np.column_stack([rec.raw["X"][starts], v, p1_true[starts], p2_true[starts]])
@@ -394,7 +400,7 @@ def _mechanical_restarts(rec: Record, settings) -> tuple[np.ndarray, np.ndarray]
     breaks away is not the motion's to judge; X is judged at speed (the moving samples)."""
     h = settings.savgol_window // 2
     n = rec.n
-    v_all = np.where(np.isfinite(rec.sg["v"]), rec.sg["v"], 0.0)
+    v_all = _velocity(rec)
     moving = np.abs(v_all) > settings.v_move_m_s
     begins = np.flatnonzero(moving[1:] & ~moving[:-1]) + 1
     starts = np.union1d(np.arange(h, n - h - 1, max(2, int(round(settings.mechanical_segment_s / rec.dt)))), begins[(begins > h) & (begins < n - h - 1)])
@@ -405,11 +411,11 @@ def _mechanical_replay(rec: Record, plant, condition, effects, load, mstarts: np
     """X [m] replayed on the record's pressures (Savitzky–Golay, sensor effects removed) with
     ``load``, restarted at ``mstarts`` (:func:`_mechanical_restarts`) from the recorded X and its
     Savitzky–Golay velocity."""
-    x_src = np.where(np.isfinite(rec.sg["x"]), rec.sg["x"], rec.raw["x"])
+    x_src = _spool_source(rec)
     x_true, p1_true, p2_true = true_signals(x_src, rec.sg["p1"], rec.sg["p2"], effects)
     _, p1_rec, p2_rec = true_signals(x_src, rec.raw["p1"], rec.raw["p2"], effects)
     given_p = np.vstack([np.where(np.isfinite(p1_true), p1_true, p1_rec), np.where(np.isfinite(p2_true), p2_true, p2_rec)])
-    vm = np.where(np.isfinite(rec.sg["v"]), rec.sg["v"], 0.0)[mstarts]
+    vm = _velocity(rec)[mstarts]
     mstates = np.column_stack([rec.raw["X"][mstarts], np.where(np.abs(vm) < 1e-3, 0.0, vm), given_p[0, mstarts], given_p[1, mstarts]])
     mech = replay(plant, x_true, rec.raw["ps"], rec.raw["pr"], load, mstarts, mstates, condition=condition, effects=effects,
                   drive=DRIVE_MECHANICAL, given=given_p)
