@@ -395,16 +395,15 @@ def nuisance_verdict(prepared, nm, fit, named_specs, specs, rows0, w_rows, setti
     if jf is not None:
         table = Calibration(nm=nm, z=jf.z, z_se=jf.z_se, plant=None, condition=None, sigmas=(0.0, 0.0, 0.0)).table()  # type: ignore[arg-type]
     gaps = dict(gap_before=gap_before, gap_after=gap_after)
-    if acc_after is not None:
+    if acc_after is not None:  # the gap where the reading acts, by the base model and its joint fit
         kind = acting_gap(spec)
-        gaps.update(gap_kind=kind, floor=floors[kind], acting_before=accs[0].split_gap(kind), acting_after=acc_after.split_gap(kind))
+        before, after = accs[0].split_gap(kind), acc_after.split_gap(kind)
+        gaps.update(gap_kind=kind, floor=floors[kind], acting_before=before, acting_after=after)
     held = replayed = ""
     if z >= Z_NAMED and not rivals and acc_after is not None:
         # named needs the replay too: the effect must close its gap against the calibrated base
         # model (whose nuisances explain the same data off their priors); where it does not, the
         # replay cannot tell the readings apart and the prior alone decides nothing
-        kind = acting_gap(spec)
-        before, after = accs[0].split_gap(kind), acc_after.split_gap(kind)
         # against a base model that already replays within FLOOR_FACTOR x the floor, reaching the
         # floor confirms nothing: the reading must narrow the gap by FLOOR_NARROWS
         at_floor = before <= FLOOR_FACTOR * floors[kind]
