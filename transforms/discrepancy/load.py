@@ -230,7 +230,20 @@ def _grid_knots(valid, segment, n_segments, knot_samples) -> list[np.ndarray]:
     return [segment_knots(valid, segment, s, knot_samples) for s in range(n_segments)]
 
 
-def _ramp_fit(f_hat, valid, segment, knots: list[np.ndarray], motion):
+def _level_ties(kn: np.ndarray, valid: np.ndarray, level_samples: int) -> np.ndarray:
+    """Column of each of ``kn``'s knot values after tying the two ends of every piece longer than
+    ``level_samples`` whose samples are mostly valid (a level between ramps: the same value)."""
+    col = np.arange(kn.size)
+    if level_samples <= 0 or kn.size < 2:
+        return col
+    for i in range(kn.size - 1):
+        a, b = int(kn[i]), int(kn[i + 1])
+        if b - a > level_samples and np.mean(valid[a:b]) > 0.5:
+            col[i + 1:] -= 1
+    return col
+
+
+def _ramp_fit(f_hat, valid, segment, knots: list[np.ndarray], motion, level_samples: int = 0):
     """Least squares of ``f_hat`` over the valid samples on the segments' load (piecewise linear on
     each segment's ``knots``, a constant where they are empty) and the ``motion`` columns; returns
     (load at every sample, RMS residual, the motion columns' coefficients)."""
@@ -245,18 +258,23 @@ def _ramp_fit(f_hat, valid, segment, knots: list[np.ndarray], motion):
     for s, kn in enumerate(knots):
         if kn.size == 0:
             kn = np.zeros(1)
-        cols.append(hat_basis(kn, idx) * (segment[idx] == s)[:, None])
-        spans.append((off, kn))
-        off += kn.size
+        tie = _level_ties(kn, valid, level_samples)
+        B = hat_basis(kn, idx) * (segment[idx] == s)[:, None]
+        Bt = np.zeros((idx.size, tie[-1] + 1))
+        np.add.at(Bt.T, tie, B.T)
+        cols.append(Bt)
+        spans.append((off, kn, tie))
+        off += tie[-1] + 1
     Bm = np.hstack(cols)
     k = Bm.shape[1]
     X = Bm if motion is None else np.hstack([Bm, motion[idx]])
     D = []
-    for o, kn in spans:
+    for o, kn, tie in spans:
         if kn.size > 2:
             d = np.zeros((kn.size - 2, X.shape[1]))
             for i in range(kn.size - 2):
-                d[i, o + i:o + i + 3] = (1.0, -2.0, 1.0)
+                for j, w in zip(tie[i:i + 3], (1.0, -2.0, 1.0)):
+                    d[i, o + j] += w
             D.append(d)
     A = np.vstack([X] + [SMOOTHING * d for d in D])
     y = np.r_[f_hat[idx], np.zeros(A.shape[0] - idx.size)]
@@ -264,9 +282,9 @@ def _ramp_fit(f_hat, valid, segment, knots: list[np.ndarray], motion):
     res = f_hat[idx] - X @ c
     rms = float(np.sqrt(np.mean(res ** 2))) if idx.size else 0.0
     load = np.zeros(n)
-    for s, (o, kn) in enumerate(spans):
+    for s, (o, kn, tie) in enumerate(spans):
         sel = segment == s
-        load[sel] = hat_basis(kn, np.flatnonzero(sel)) @ c[o:o + kn.size] if kn.size > 1 else c[o]
+        load[sel] = hat_basis(kn, np.flatnonzero(sel)) @ c[o + tie] if kn.size > 1 else c[o]
     return load, rms, c[k:]
 
 
@@ -342,14 +360,15 @@ def ramp_load(f_hat: np.ndarray, valid: np.ndarray, usable: np.ndarray, segment:
     _, _, cm = _ramp_fit(f_hat, valid, segment, _grid_knots(valid, segment, n_segments, knot_samples), motion)
     knots = _corners(f_hat - motion_part(cm), valid, segment, n_segments, W, dt, settings)
     f = settings.corner_coarse_factor
-    load, _, cm = _ramp_fit(f_hat, usable, segment, knots, motion)
+    lv = int(round(settings.load_level_s / dt))
+    load, _, cm = _ramp_fit(f_hat, usable, segment, knots, motion, lv)
     for w, s_w in ((W, settings), (max(W + 1, int(round(W * f))), replace(settings, corner_min_n_s=settings.corner_min_n_s / f ** 1.5))):
         for _ in range(2):
             more = _corners(f_hat - motion_part(cm) - load, valid, segment, n_segments, w, dt, s_w, knots)
             if all(a.size == b.size for a, b in zip(more, knots)):
                 break
             knots = more
-            load, _, cm = _ramp_fit(f_hat, usable, segment, knots, motion)
+            load, _, cm = _ramp_fit(f_hat, usable, segment, knots, motion, lv)
     for s in range(n_segments):
         if not np.any(usable[segment == s]):
             load[segment == s] = levels[s]
