@@ -35,7 +35,10 @@ instants), so the estimate is made piecewise constant:
    then eliminates the same piecewise-linear load from the motion rows
    (:func:`load_projector`) instead of one constant per segment: a mass acts on the
    acceleration and a friction on the velocity, which change within a move (0.3–0.6 s), faster
-   than a load that is linear over 0.1 s can follow, so both stay separable from it.
+   than a load that is linear over 0.1 s can follow, so both stay separable from it. A piece
+   between two knots longer than ``load_level_s`` (a ramp lasts 0.1–0.4 s) is a level: its two
+   ends take one value (:func:`_level_ties`), for its free slope would trade with the velocity
+   column over a whole move.
 
 While the cylinder sticks at the start of a record, before its first observable motion, the load
 is unknown (a step may have happened before); the workflow then tries driving the replay with the
@@ -245,8 +248,9 @@ def _level_ties(kn: np.ndarray, valid: np.ndarray, level_samples: int) -> np.nda
 
 def _ramp_fit(f_hat, valid, segment, knots: list[np.ndarray], motion, level_samples: int = 0):
     """Least squares of ``f_hat`` over the valid samples on the segments' load (piecewise linear on
-    each segment's ``knots``, a constant where they are empty) and the ``motion`` columns; returns
-    (load at every sample, RMS residual, the motion columns' coefficients)."""
+    each segment's ``knots``, a constant where they are empty; a piece longer than ``level_samples``
+    one level, :func:`_level_ties`) and the ``motion`` columns; returns (load at every sample, RMS
+    residual, the motion columns' coefficients)."""
     n = f_hat.size
     m = valid & np.isfinite(f_hat)
     if motion is not None:
@@ -336,7 +340,10 @@ def ramp_load(f_hat: np.ndarray, valid: np.ndarray, usable: np.ndarray, segment:
        that changed while the cylinder stood still or crept) and at the corners of that rest
        (:func:`_corners`);
     3. ``f_hat`` fitted piecewise linear on those knots jointly with the ``motion`` columns (whose
-       part is not load) over the ``usable`` samples (moving past the breakaway, where the friction
+       part is not load) over the ``usable`` samples, a piece longer than ``settings.load_level_s``
+       one level (:func:`_level_ties`: a corner found a few samples off the end of a steep ramp
+       left a misfit that a free slope over the following 1–2 s level traded with the velocity
+       column, the load 30–70 N off over the move; reference plant seed 2: 43 → 15 N at speed) (moving past the breakaway, where the friction
        model holds; at creeping speeds a Stribeck error of the model would set the load); corners
        the fit missed are looked for in its residual (up to twice) and the fit repeated (a missed
        corner made the velocity column take 14 kN·s/m and the load 1.4 kN off over a record);
