@@ -367,15 +367,19 @@ def ramp_load(f_hat: np.ndarray, valid: np.ndarray, usable: np.ndarray, segment:
     _, _, cm = _ramp_fit(f_hat, valid, segment, _grid_knots(valid, segment, n_segments, knot_samples), motion)
     knots = _corners(f_hat - motion_part(cm), valid, segment, n_segments, W, dt, settings)
     f = settings.corner_coarse_factor
-    lv = int(round(settings.load_level_s / dt))
-    load, _, cm = _ramp_fit(f_hat, usable, segment, knots, motion, lv)
+    load, _, cm = _ramp_fit(f_hat, usable, segment, knots, motion)
     for w, s_w in ((W, settings), (max(W + 1, int(round(W * f))), replace(settings, corner_min_n_s=settings.corner_min_n_s / f ** 1.5))):
         for _ in range(2):
             more = _corners(f_hat - motion_part(cm) - load, valid, segment, n_segments, w, dt, s_w, knots)
             if all(a.size == b.size for a, b in zip(more, knots)):
                 break
             knots = more
-            load, _, cm = _ramp_fit(f_hat, usable, segment, knots, motion, lv)
+            load, _, cm = _ramp_fit(f_hat, usable, segment, knots, motion)
+    lv = int(round(settings.load_level_s / dt))
+    if lv > 0 and motion is not None:
+        level_load, _, cm_level = _ramp_fit(f_hat, usable, segment, knots, motion, lv)
+        if np.sqrt(np.mean(motion_part(cm_level)[usable] ** 2)) < np.sqrt(np.mean(motion_part(cm)[usable] ** 2)):
+            load = level_load
     for s in range(n_segments):
         if not np.any(usable[segment == s]):
             load[segment == s] = levels[s]
