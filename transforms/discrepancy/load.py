@@ -38,7 +38,8 @@ instants), so the estimate is made piecewise constant:
    than a load that is linear over 0.1 s can follow, so both stay separable from it. A piece
    between two knots longer than ``load_level_s`` (a ramp lasts 0.1–0.4 s) is a level: its two
    ends take one value (:func:`_level_ties`), for its free slope would trade with the velocity
-   column over a whole move.
+   column over a whole move -- where the levels leave less to the motion columns than free
+   slopes (a corner missed inside a level would make the motion columns take the missed ramp).
 
 While the cylinder sticks at the start of a record, before its first observable motion, the load
 is unknown (a step may have happened before); the workflow then tries driving the replay with the
@@ -340,10 +341,7 @@ def ramp_load(f_hat: np.ndarray, valid: np.ndarray, usable: np.ndarray, segment:
        that changed while the cylinder stood still or crept) and at the corners of that rest
        (:func:`_corners`);
     3. ``f_hat`` fitted piecewise linear on those knots jointly with the ``motion`` columns (whose
-       part is not load) over the ``usable`` samples, a piece longer than ``settings.load_level_s``
-       one level (:func:`_level_ties`: a corner found a few samples off the end of a steep ramp
-       left a misfit that a free slope over the following 1–2 s level traded with the velocity
-       column, the load 30–70 N off over the move; reference plant seed 2: 43 → 15 N at speed) (moving past the breakaway, where the friction
+       part is not load) over the ``usable`` samples (moving past the breakaway, where the friction
        model holds; at creeping speeds a Stribeck error of the model would set the load); corners
        the fit missed are looked for in its residual (up to twice) and the fit repeated (a missed
        corner made the velocity column take 14 kN·s/m and the load 1.4 kN off over a record);
@@ -352,7 +350,13 @@ def ramp_load(f_hat: np.ndarray, valid: np.ndarray, usable: np.ndarray, segment:
        as its width^-1.5): a gentle ramp (a few hundred newtons over 0.3 s, 1–2.5 kN/s) hides in
        the noise of the ±W filter, and a load that misses it lets the velocity and acceleration
        columns take its error, so the load drifts over the whole record (reference plant seed 1:
-       75 N RMS off at speed, 10 N with this pass).
+       75 N RMS off at speed, 10 N with this pass);
+    5. on the final knots, the same fit with every piece longer than ``settings.load_level_s`` one
+       level (:func:`_level_ties`), kept where its motion columns' part (RMS at speed) is smaller
+       than with free slopes: a corner found a few samples off the end of a steep ramp left a
+       misfit that a free slope over the following 1–2 s level traded with the velocity column
+       (reference plant seed 2: the load 43 N off at speed, 15 N with the level), but a corner
+       missed inside a level would make the motion columns take the missed ramp.
 
     A segment without usable samples keeps its ``levels`` value."""
     W = max(2, int(round(settings.corner_half_width_s * knot_samples / settings.load_knot_s)))
