@@ -81,7 +81,8 @@ class DiscrepancySettings:
         of its samples, is a level between ramps: one value, no slope
         (:func:`transforms.discrepancy.load.ramp_load`). The reference plant's loads ramp over
         0.1–0.4 s; a free slope over a 1–2 s level traded with the velocity column of the joint fit
-        (a friction mismatch) and left the load 30–70 N off over whole moves. [s]
+        (a friction mismatch) and left the load 30–70 N off over whole moves. The levels are kept
+        where they leave less to the motion columns than free slopes. 0: free slopes. [s]
     ramp_ratio, ramp_min_n : float
         The piecewise-linear load is used where it leaves at most 1/``ramp_ratio`` of the
         residual RMS of one constant per segment, and that RMS is above ``ramp_min_n`` (about 3×
