@@ -27,6 +27,7 @@ Storage choices (codec, float width and encoding, row groups) are measured and j
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import uuid
@@ -72,6 +73,16 @@ ROW_GROUP_MAX_ROWS = 1_048_576
 """…or at this many rows, whichever comes first."""
 ROW_GROUP_GAP_US = 5_000
 """Times further apart than this start a new window (default ``export.max_gap_s``)."""
+
+TIME_GRID_KEY = "valvemon.time_grid"
+"""Key of a lake file's *time grid record* (Parquet key-value metadata in the footer): for each
+row group, the uniform runs ``[first_us, step_us, rows]`` its ``timestamp_utc`` values are,
+exactly (value i of a run is ``first_us + i * step_us``), written by the lake's writer. A reader
+that trusts it (:func:`time_grid`, checked against the row groups' row counts and time
+statistics) builds the time column without decoding it (``docs/ingest.md``, "Storage")."""
+TIME_GRID_MAX_RUNS = 64
+"""A row group whose time stamps are more runs than this (an irregular clock) gets no record;
+a file with such a row group is read by decoding its time column, as one without a record."""
 
 SENSOR_ARROW_SCHEMA = arrow_schema(SENSOR_FIELDS)
 SENSOR_POLARS_SCHEMA = polars_schema(SENSOR_FIELDS)
@@ -174,9 +185,84 @@ def _coalesced(frames: Iterable[pl.DataFrame], min_rows: int) -> Iterator[pl.Dat
         yield pl.concat(buffer) if len(buffer) > 1 else buffer[0]
 
 
+def grid_runs(t_us: np.ndarray, max_runs: int = TIME_GRID_MAX_RUNS) -> list[list[int]] | None:
+    """The time stamps ``t_us`` (µs, int64, sorted) as uniform runs ``[first_us, step_us, rows]``
+    (each run as long as it goes: a run ends where the step changes, the next starts at the row
+    after), exactly: :func:`grid_times` of the result is ``t_us``. None if they are more than
+    ``max_runs`` runs, or not strictly increasing."""
+    t_us = np.asarray(t_us, dtype=np.int64)
+    n = t_us.shape[0]
+    if n == 0:
+        return []
+    d = np.diff(t_us)
+    if d.size and int(d.min()) <= 0:
+        return None
+    change = np.flatnonzero(d[1:] != d[:-1]) + 1  # steps d[k] that differ from d[k - 1]
+    if change.size > 2 * max_runs:
+        return None
+    runs: list[list[int]] = []
+    a = 0
+    while a < n:
+        if len(runs) == max_runs:
+            return None
+        if a == n - 1:
+            runs.append([int(t_us[a]), 1, 1])
+            break
+        k = np.searchsorted(change, a, side="right")  # the first step change after step a
+        last = int(change[k]) if k < change.size else n - 1  # step d[last] differs: row `last` ends the run
+        runs.append([int(t_us[a]), int(d[a]), last - a + 1])
+        a = last + 1
+    return runs
+
+
+def grid_times(runs: list[list[int]]) -> np.ndarray:
+    """The time stamps (µs, int64) of uniform runs ``[first_us, step_us, rows]`` (:func:`grid_runs`)."""
+    parts = [first + step * np.arange(rows, dtype=np.int64) for first, step, rows in runs]
+    return np.concatenate(parts) if len(parts) != 1 else parts[0]
+
+
+def time_grid(md: pq.FileMetaData) -> list[list[list[int]]] | None:
+    """A lake file's time grid record (:data:`TIME_GRID_KEY`), per row group its runs, if the
+    file has one and it agrees with the footer: one entry per row group, each row group's runs
+    holding its row count, starting at its ``timestamp_utc`` minimum and ending at its maximum,
+    every run and the row groups in increasing time. None otherwise (no record, an irregular row
+    group, a record that disagrees): the time column must be decoded."""
+    raw = (md.metadata or {}).get(TIME_GRID_KEY.encode())
+    if raw is None:
+        return None
+    try:
+        groups = json.loads(raw)
+        col = md.schema.names.index("timestamp_utc")
+    except ValueError:
+        return None
+    if not isinstance(groups, list) or len(groups) != md.num_row_groups:
+        return None
+    prev = None
+    for g, runs in enumerate(groups):
+        rg = md.row_group(g)
+        st = rg.column(col).statistics
+        if not runs or st is None or not st.has_min_max:
+            return None
+        try:
+            rows = 0
+            for first, step, n in runs:
+                if not (isinstance(first, int) and isinstance(step, int) and isinstance(n, int)) or n < 1 or step < 1:
+                    return None
+                if prev is not None and first <= prev:
+                    return None
+                prev = first + step * (n - 1)
+                rows += n
+        except (TypeError, ValueError):
+            return None
+        if rows != rg.num_rows or runs[0][0] != int(st.min_raw) or prev != int(st.max_raw):
+            return None
+    return groups
+
+
 def _write_temp(tmp: Path, frames: Iterable[pl.DataFrame], gap_us: int) -> None:
     """Write the frames, in order, as one Parquet file to ``tmp``, flushed and fsynced; pieces
-    are joined up to :data:`ROW_GROUP_MAX_ROWS` rows before being cut into row groups."""
+    are joined up to :data:`ROW_GROUP_MAX_ROWS` rows before being cut into row groups, and the
+    file gets its time grid record (:data:`TIME_GRID_KEY`) if every row group is one."""
     with open(tmp, "wb") as fh:
         with pq.ParquetWriter(
             fh,
@@ -188,11 +274,16 @@ def _write_temp(tmp: Path, frames: Iterable[pl.DataFrame], gap_us: int) -> None:
             write_statistics=STATISTICS_COLUMNS,
             sorting_columns=[pq.SortingColumn(SENSOR_ARROW_SCHEMA.get_field_index("timestamp_utc"))],
         ) as writer:
+            grid: list | None = []
             for frame in _coalesced(frames, ROW_GROUP_MAX_ROWS):
                 table = frame.to_arrow().cast(SENSOR_ARROW_SCHEMA)
                 t_us = frame["timestamp_utc"].to_physical().to_numpy()
                 for a, b in row_group_bounds(t_us, gap_us, ROW_GROUP_MIN_ROWS, ROW_GROUP_MAX_ROWS):
                     writer.write_table(table.slice(a, b - a), row_group_size=b - a)
+                    runs = grid_runs(t_us[a:b]) if grid is not None else None
+                    grid = None if runs is None else grid + [runs]
+            if grid:
+                writer.add_key_value_metadata({TIME_GRID_KEY: json.dumps(grid, separators=(",", ":"))})
         fh.flush()
         os.fsync(fh.fileno())
 
