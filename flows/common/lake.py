@@ -52,7 +52,7 @@ DAY_FILE_MAX_ROWS = 4_194_304
 """A day with more rows is stored as hour files (``docs/ingest.md``, "Continuous recordings")."""
 US_PER_HOUR = 3_600_000_000
 
-COMPRESSION = "lz4"
+COMPRESSION = "none"
 """Parquet codec of the lake (``docs/ingest.md``, "Storage"): LZ4 decodes 2× as fast as zstd
 level 1 for ~20 % more disk; the monitor reads every row, so its decode speed counts most."""
 COMPRESSION_LEVEL = None
@@ -215,18 +215,14 @@ def grid_runs(t_us: np.ndarray, max_runs: int = TIME_GRID_MAX_RUNS) -> list[list
     return runs
 
 
-def grid_times(runs: list[list[int]]) -> np.ndarray:
-    """The time stamps (µs, int64) of uniform runs ``[first_us, step_us, rows]`` (:func:`grid_runs`)."""
-    parts = [first + step * np.arange(rows, dtype=np.int64) for first, step, rows in runs]
-    return np.concatenate(parts) if len(parts) != 1 else parts[0]
-
-
-def time_grid(md: pq.FileMetaData) -> list[list[list[int]]] | None:
-    """A lake file's time grid record (:data:`TIME_GRID_KEY`), per row group its runs, if the
-    file has one and it agrees with the footer: one entry per row group, each row group's runs
-    holding its row count, starting at its ``timestamp_utc`` minimum and ending at its maximum,
-    every run and the row groups in increasing time. None otherwise (no record, an irregular row
-    group, a record that disagrees): the time column must be decoded."""
+def time_grid(md: pq.FileMetaData) -> list[tuple[int, int, int]] | None:
+    """A lake file's time stamps as uniform runs ``(first_us, step_us, rows)`` in time order
+    (runs that continue each other joined: a continuous hour file is one run), from its time grid
+    record (:data:`TIME_GRID_KEY`) if it has one that agrees with the footer: one entry per row
+    group, each row group's runs holding its row count, starting at its ``timestamp_utc`` minimum
+    and ending at its maximum, every run and the row groups in increasing time. None otherwise
+    (no record, an irregular row group, a record that disagrees): the time column must be
+    decoded."""
     raw = (md.metadata or {}).get(TIME_GRID_KEY.encode())
     if raw is None:
         return None
@@ -237,26 +233,63 @@ def time_grid(md: pq.FileMetaData) -> list[list[list[int]]] | None:
         return None
     if not isinstance(groups, list) or len(groups) != md.num_row_groups:
         return None
-    prev = None
+    out: list[tuple[int, int, int]] = []
+    last = None
     for g, runs in enumerate(groups):
-        rg = md.row_group(g)
-        st = rg.column(col).statistics
-        if not runs or st is None or not st.has_min_max:
+        st = md.row_group(g).column(col).statistics
+        if not isinstance(runs, list) or not runs or st is None or not st.has_min_max:
             return None
-        try:
-            rows = 0
-            for first, step, n in runs:
-                if not (isinstance(first, int) and isinstance(step, int) and isinstance(n, int)) or n < 1 or step < 1:
-                    return None
-                if prev is not None and first <= prev:
-                    return None
-                prev = first + step * (n - 1)
-                rows += n
-        except (TypeError, ValueError):
+        rows = 0
+        for run in runs:
+            if not (isinstance(run, list) and len(run) == 3 and all(type(v) is int for v in run)):
+                return None
+            first, step, n = run
+            if n < 1 or step < 1 or (last is not None and first <= last):
+                return None
+            d = first - last if out else 0
+            if out and (out[-1][2] == 1 or out[-1][1] == d) and (n == 1 or step == d):
+                out[-1] = (out[-1][0], d, out[-1][2] + n)  # it continues the run before
+            else:
+                out.append((first, step, n))
+            last = first + step * (n - 1)
+            rows += n
+        if rows != md.row_group(g).num_rows or runs[0][0] != int(st.min_raw) or last != int(st.max_raw):
             return None
-        if rows != rg.num_rows or runs[0][0] != int(st.min_raw) or prev != int(st.max_raw):
-            return None
-    return groups
+    return out
+
+
+def grid_rows_before(runs: list[tuple[int, int, int]], t_us: int) -> int:
+    """How many of the time stamps of uniform runs (:func:`time_grid`) lie before ``t_us``."""
+    k = 0
+    for first, step, n in runs:
+        if t_us <= first:
+            break
+        k += min(n, -((first - t_us) // step))  # ceil((t_us - first) / step) of the run's rows
+    return k
+
+
+def grid_series(runs: list[tuple[int, int, int]], a: int, b: int, lengths: list[int] | None = None) -> pl.Series:
+    """``timestamp_utc`` of rows [a, b) of uniform runs (:func:`time_grid`), built (not decoded),
+    in chunks of ``lengths`` rows (default one chunk): those of the columns it joins, so that a
+    frame of them keeps its chunks rather than copying them into one."""
+    dtype = SENSOR_POLARS_SCHEMA["timestamp_utc"]
+    pieces = []
+    row = 0
+    for first, step, n in runs:
+        lo, hi = max(a, row), min(b, row + n)
+        if lo < hi:
+            pieces.append(pl.int_range(first + step * (lo - row), first + step * (hi - row), step, dtype=pl.Int64))
+        row += n
+    if not pieces:
+        return pl.Series("timestamp_utc", [], dtype=dtype)
+    t = pl.select(pl.concat(pieces) if len(pieces) > 1 else pieces[0]).to_series().cast(dtype).alias("timestamp_utc")
+    if lengths is None or len(lengths) < 2:
+        return t
+    out, off = t.slice(0, lengths[0]), lengths[0]
+    for m in lengths[1:]:
+        out.append(t.slice(off, m))
+        off += m
+    return out
 
 
 def _write_temp(tmp: Path, frames: Iterable[pl.DataFrame], gap_us: int) -> None:

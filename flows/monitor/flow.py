@@ -42,7 +42,7 @@ from flows.common.batches import WriteBatch
 from flows.common.config import load_plant_config, plant_valves
 from flows.common.errors import ValvemonError
 from flows.common.instants import utc_instant
-from flows.common.lake import SENSOR_POLARS_SCHEMA, grid_times, list_partitions, read_lake, time_grid
+from flows.common.lake import SENSOR_POLARS_SCHEMA, grid_rows_before, grid_series, list_partitions, read_lake, time_grid
 from flows.common.prefect_run import flow, task
 from flows.common.warehouse_db import add_missing_columns, connect, ensure_tables, insert_frame, query_frame, transaction
 from model.area import edge_area
@@ -474,19 +474,17 @@ def _read_span(files: list[_LakeFile], lo: datetime, hi: datetime, columns: list
 
 
 def _grid_rows(f: _LakeFile, lo: datetime, hi: datetime, columns: list[str]) -> pl.DataFrame:
-    """The ``columns`` of a lake file with a time grid record, its rows in [lo, hi): the time
-    stamps built from the record (never decoded), the rows in the span found on them and read as
-    one slice (polars decodes only the pages it covers), the other columns decoded."""
-    t = grid_times([run for runs in f.grid for run in runs])
-    a, b = np.searchsorted(t, [_epoch_us(lo), _epoch_us(hi)], side="left").tolist()
+    """The ``columns`` of a lake file with a time grid record, its rows in [lo, hi): the rows
+    in the span found on the record and read as one slice (polars decodes only the pages it
+    covers), the time stamps built from the record in the other columns' chunks (never decoded)."""
+    a, b = grid_rows_before(f.grid, _epoch_us(lo)), grid_rows_before(f.grid, _epoch_us(hi))
     read = [c for c in columns if c != "timestamp_utc"]
-    if read:
-        lf = pl.scan_parquet(f.path, hive_partitioning=False, schema=SENSOR_POLARS_SCHEMA).select(read)
-        frame = (lf if (a, b) == (0, t.shape[0]) else lf.slice(a, b - a)).collect()
-    else:
-        frame = pl.DataFrame(height=b - a)
-    time = pl.Series("timestamp_utc", t[a:b]).cast(SENSOR_POLARS_SCHEMA["timestamp_utc"])
-    return frame.with_columns(time).select(columns)
+    if not read:
+        return grid_series(f.grid, a, b).to_frame()
+    lf = pl.scan_parquet(f.path, hive_partitioning=False, schema=SENSOR_POLARS_SCHEMA).select(read)
+    frame = (lf if (a, b) == (0, f.rows) else lf.slice(a, b - a)).collect()
+    lengths = [c.len() for c in frame.get_column(read[0]).get_chunks()]
+    return frame.with_columns(grid_series(f.grid, a, b, lengths)).select(columns)
 
 
 def _epoch_us(t: datetime) -> int:
