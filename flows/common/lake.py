@@ -282,7 +282,7 @@ def grid_series(runs: list[tuple[int, int, int]], a: int, b: int, lengths: list[
         row += n
     if not pieces:
         return pl.Series("timestamp_utc", [], dtype=dtype)
-    t = pl.select(pl.concat(pieces) if len(pieces) > 1 else pieces[0]).to_series().cast(dtype).alias("timestamp_utc")
+    t = pl.select(pl.concat(pieces) if len(pieces) > 1 else pieces[0]).to_series().rechunk().cast(dtype).alias("timestamp_utc")
     if lengths is None or len(lengths) < 2:
         return t
     out, off = t.slice(0, lengths[0]), lengths[0]
