@@ -191,7 +191,7 @@ def _coalesced(frames: Iterable[pl.DataFrame], min_rows: int) -> Iterator[pl.Dat
 def grid_runs(t_us: np.ndarray, max_runs: int = TIME_GRID_MAX_RUNS) -> list[list[int]] | None:
     """The time stamps ``t_us`` (µs, int64, sorted) as uniform runs ``[first_us, step_us, rows]``
     (each run as long as it goes: a run ends where the step changes, the next starts at the row
-    after), exactly: :func:`grid_times` of the result is ``t_us``. None if they are more than
+    after), exactly: :func:`grid_series` of the result is ``t_us``. None if they are more than
     ``max_runs`` runs, or not strictly increasing."""
     t_us = np.asarray(t_us, dtype=np.int64)
     n = t_us.shape[0]
