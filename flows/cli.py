@@ -367,7 +367,7 @@ def _fail(message: str, code: int = 1) -> None:
 def main() -> None:
     """Entry point: every failure is one line on stderr and a non-zero exit status: 1, or 2 for
     a usage error (bad option or argument); an interrupt exits with 130, silently."""
-    from flows.cli_values import convert_plainly
+    from flows.common.cli_values import convert_plainly
 
     try:
         command = typer.main.get_command(app)

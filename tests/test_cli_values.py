@@ -1,4 +1,4 @@
-"""The command line's values converted without pydantic (`flows.cli_values`) are typer's own:
+"""The command line's values converted without pydantic (`flows.common.cli_values`) are typer's own:
 the same value and type, or the same error, for every parameter of every command."""
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from typer._click.exceptions import BadParameter
 from typer._coercion import build_runtime_param
 
 from flows.cli import app
-from flows.cli_values import PlainValue, convert_plainly, plain_value
+from flows.common.cli_values import PlainValue, convert_plainly, plain_value
 
 ROOT = Path(__file__).resolve().parents[1]
 
