@@ -526,11 +526,11 @@ def read_file_ranges(path: Path, ranges: np.ndarray) -> Iterator[pl.DataFrame]:
         yield scan.slice(start, stop - start).collect()
 
 
-def row_group_spans(path: Path) -> list[tuple[int, int, int]]:
-    """``(rows, first, last)`` of each row group of a lake file: its rows and the range of its
-    ``timestamp_utc`` (µs since the epoch) from the footer's statistics (no data is read); a
-    group without statistics spans all time."""
-    md = pq.ParquetFile(path).metadata
+def row_group_spans(path: Path | pq.FileMetaData) -> list[tuple[int, int, int]]:
+    """``(rows, first, last)`` of each row group of a lake file (or of its footer, already read):
+    its rows and the range of its ``timestamp_utc`` (µs since the epoch) from the footer's
+    statistics (no data is read); a group without statistics spans all time."""
+    md = path if isinstance(path, pq.FileMetaData) else pq.ParquetFile(path).metadata
     col = md.schema.to_arrow_schema().get_field_index("timestamp_utc")
     out = []
     for i in range(md.num_row_groups):
