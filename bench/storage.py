@@ -106,7 +106,8 @@ def db_bytes_per_row(frame: pl.DataFrame, name: str, fields, n: int = 200_000, s
 
 ENCODINGS = [
     # (name, codec, byte-stream-split floats, row groups of at most this many rows)
-    ("LZ4, ≤ 1 M-row groups (the lake until now)", "lz4", False, 1_048_576),
+    ("uncompressed, ≤ 1 M-row groups (the lake)", "none", False, 1_048_576),
+    ("LZ4, ≤ 1 M-row groups (the lake until 2026-11-27)", "lz4", False, 1_048_576),
     ("LZ4, one group per hour file", "lz4", False, None),
     ("LZ4 + BYTE_STREAM_SPLIT, ≤ 1 M-row groups", "lz4", True, 1_048_576),
     ("LZ4 + BYTE_STREAM_SPLIT, one group", "lz4", True, None),
