@@ -53,7 +53,7 @@ DAY_FILE_MAX_ROWS = 4_194_304
 US_PER_HOUR = 3_600_000_000
 
 COMPRESSION = "none"
-"""Parquet codec of the lake (``docs/ingest.md``, "Storage"): none. LZ4 kept noisy float32 signals
+"""Parquet codec of the lake by default (a plant's ``[lake] codec`` chooses another) (``docs/ingest.md``, "Storage"): none. LZ4 kept noisy float32 signals
 only 29 % smaller (a continuous valve-day 19.9 against 28.0 B per lake row) and cost its decode
 on every read (the monitor's lake read of a valve-day ~0.5 CPU s) and its encode on every write
 (the lake's writer ~0.25 s an hour file); lake files of earlier versions (LZ4, zstd) are read as they
@@ -295,7 +295,7 @@ def grid_series(runs: list[tuple[int, int, int]], a: int, b: int, lengths: list[
     return out
 
 
-def _write_temp(tmp: Path, frames: Iterable[pl.DataFrame], gap_us: int) -> None:
+def _write_temp(tmp: Path, frames: Iterable[pl.DataFrame], gap_us: int, codec: str) -> None:
     """Write the frames, in order, as one Parquet file to ``tmp``, flushed and fsynced; pieces
     are joined up to :data:`ROW_GROUP_MAX_ROWS` rows before being cut into row groups, and the
     file gets its time grid record (:data:`TIME_GRID_KEY`) if every row group is one."""
@@ -303,7 +303,7 @@ def _write_temp(tmp: Path, frames: Iterable[pl.DataFrame], gap_us: int) -> None:
         with pq.ParquetWriter(
             fh,
             SENSOR_ARROW_SCHEMA,
-            compression=COMPRESSION,
+            compression=codec,
             compression_level=COMPRESSION_LEVEL,
             use_dictionary=["valve_id", "date"],
             column_encoding=COLUMN_ENCODING,
@@ -330,7 +330,7 @@ def _commit(tmp: Path, path: Path) -> None:
     _fsync_dir(path.parent)
 
 
-def write_partition(path: Path, frame: pl.DataFrame, *, gap_us: int = ROW_GROUP_GAP_US) -> None:
+def write_partition(path: Path, frame: pl.DataFrame, *, gap_us: int = ROW_GROUP_GAP_US, codec: str = COMPRESSION) -> None:
     """Replace one partition file whole and atomically (module doc).
 
     Parameters
@@ -341,16 +341,18 @@ def write_partition(path: Path, frame: pl.DataFrame, *, gap_us: int = ROW_GROUP_
         Its complete new content: the sensor frame, sorted by time.
     gap_us : int
         Window separation for the row groups (``export.max_gap_s`` in µs).
+    codec : str
+        Parquet codec (``[lake] codec``: ``"none"``, ``"lz4"``, ``"zstd"``).
     """
-    write_partition_pieces(path, [frame], gap_us=gap_us)
+    write_partition_pieces(path, [frame], gap_us=gap_us, codec=codec)
 
 
-def write_partition_pieces(path: Path, frames: Iterable[pl.DataFrame], *, gap_us: int = ROW_GROUP_GAP_US) -> None:
+def write_partition_pieces(path: Path, frames: Iterable[pl.DataFrame], *, gap_us: int = ROW_GROUP_GAP_US, codec: str = COMPRESSION) -> None:
     """:func:`write_partition` for content that arrives in consecutive time-sorted pieces (e.g.
     streamed from a file being thinned): memory holds one row group's worth, not the file."""
     path.parent.mkdir(parents=True, exist_ok=True)
     _remove_stale_temps(path.parent)
-    tmp = _stage(path, frames, gap_us)
+    tmp = _stage(path, frames, gap_us, codec)
     try:
         _commit(tmp, path)
     except BaseException:
@@ -358,17 +360,17 @@ def write_partition_pieces(path: Path, frames: Iterable[pl.DataFrame], *, gap_us
         raise
 
 
-def stage_file(path: Path, frame: pl.DataFrame, *, gap_us: int = ROW_GROUP_GAP_US) -> Path:
+def stage_file(path: Path, frame: pl.DataFrame, *, gap_us: int = ROW_GROUP_GAP_US, codec: str = COMPRESSION) -> Path:
     """Write a lake file's complete new content to a hidden temporary file beside ``path``
     (flushed, fsynced) and return it; :func:`commit_files` puts it in place."""
-    return _stage(path, [frame], gap_us)
+    return _stage(path, [frame], gap_us, codec)
 
 
-def _stage(path: Path, frames: Iterable[pl.DataFrame], gap_us: int) -> Path:
+def _stage(path: Path, frames: Iterable[pl.DataFrame], gap_us: int, codec: str) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.parent / f".{path.name}.{uuid.uuid4().hex}.tmp"
     try:
-        _write_temp(tmp, frames, gap_us)
+        _write_temp(tmp, frames, gap_us, codec)
     except BaseException:
         # an ordinary exception: tidy up; a killed process leaves the file to the next write
         tmp.unlink(missing_ok=True)

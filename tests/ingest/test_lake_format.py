@@ -94,5 +94,6 @@ def test_older_lake_files_are_read_beside_new_ones(tmp_path):
 
     t = whole["timestamp_utc"].to_physical().to_numpy()
     scan = fr.scan_partition(folder, (t[:1], t[-1:]), True)
-    assert fr.thin_partition(fr.count_kept(folder, scan, 10.0)) == 3 * 10_000
+    assert fr.thin_partition(fr.count_kept(folder, scan, 10.0), "lz4") == 3 * 10_000
+    assert {pq.ParquetFile(p).metadata.row_group(0).column(3).compression for p in folder.glob("*.parquet")} == {"LZ4"}  # [lake] codec
     assert read_lake(wh).collect().equals(whole.filter(pl.Series(thin_mask(t, scan.firsts, 10.0))))
