@@ -187,7 +187,7 @@ CONTINUOUS_STAGES = [
     ("flows.ingest.staging", "split_days", "split by day / hour"),
     ("flows.ingest.staging", "read_partition", "read existing lake file"),
     ("flows.ingest.staging", "merge_partition", "merge with the lake file"),
-    ("flows.ingest.staging", "stage_file", "write lake files (LZ4, fsync)"),
+    ("flows.ingest.staging", "stage_file", "write lake files (fsync)"),
     ("flows.ingest.staging", "commit_files", "put files in place (rename)"),
     ("flows.ingest.flow", "record_file", "DuckDB manifest, quarantine, gaps"),
 ]

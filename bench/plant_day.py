@@ -72,9 +72,10 @@ snappy, the columns as they are): no validation, no grid, no units, no manifest.
 
 def run_step(code: Path, cpu: int, argv: list[str], log: Path, script: str | None = None) -> dict:
     """One ``valvemon`` command (or the Python ``script`` with ``argv``) with ``PYTHONPATH=code``,
-    pinned to ``cpu``: wall, CPU, peak RSS."""
+    pinned to ``cpu``: wall, CPU, peak RSS. The command is the tree's installed entry point
+    (``flows.cli.console``, or ``main`` in trees from before it existed)."""
     env = dict(os.environ, PYTHONPATH=str(code), POLARS_MAX_THREADS="1", NUMBA_NUM_THREADS="1")
-    script = script or "import sys; from flows.cli import main; sys.argv[0] = 'valvemon'; main()"
+    script = script or "import sys, flows.cli as c; sys.argv[0] = 'valvemon'; getattr(c, 'console', c.main)()"
     cmd = ["taskset", "-c", str(cpu), sys.executable, "-c", script, *argv]
     t0 = time.perf_counter()
     with log.open("a") as out:

@@ -106,7 +106,8 @@ def db_bytes_per_row(frame: pl.DataFrame, name: str, fields, n: int = 200_000, s
 
 ENCODINGS = [
     # (name, codec, byte-stream-split floats, row groups of at most this many rows)
-    ("LZ4, ≤ 1 M-row groups (the lake until now)", "lz4", False, 1_048_576),
+    ("uncompressed, ≤ 1 M-row groups (the lake)", "none", False, 1_048_576),
+    ("LZ4, ≤ 1 M-row groups (the lake until 2026-11-27)", "lz4", False, 1_048_576),
     ("LZ4, one group per hour file", "lz4", False, None),
     ("LZ4 + BYTE_STREAM_SPLIT, ≤ 1 M-row groups", "lz4", True, 1_048_576),
     ("LZ4 + BYTE_STREAM_SPLIT, one group", "lz4", True, None),
@@ -145,7 +146,7 @@ def encodings(source: Path, repeat: int) -> None:
     q = f"SELECT {', '.join(f'sum({c})' for c in floats)} FROM read_parquet(?)"
     con = duckdb.connect()
     con.execute("SET threads = 1")
-    defaults = (lake.COMPRESSION, lake.COLUMN_ENCODING, lake.ROW_GROUP_MAX_ROWS)
+    defaults = (lake.COLUMN_ENCODING, lake.ROW_GROUP_MAX_ROWS)
     best: dict[str, dict[str, float]] = {name: {} for name, *_ in ENCODINGS}
     facts: dict[str, tuple[int, int]] = {}
 
@@ -159,13 +160,12 @@ def encodings(source: Path, repeat: int) -> None:
             for name, codec, bss, max_rows in ENCODINGS:
                 wh = Path(tmp) / f"{codec}_{bss}_{max_rows}"
                 path = lake.partition_path(wh, "V001", frame["date"][0]).parent / "part-h01.parquet"
-                lake.COMPRESSION = codec
                 lake.COLUMN_ENCODING = {"timestamp_utc": "DELTA_BINARY_PACKED", **({c: "BYTE_STREAM_SPLIT" for c in floats} if bss else {})}
-                lake.ROW_GROUP_MAX_ROWS = max_rows or defaults[2]
+                lake.ROW_GROUP_MAX_ROWS = max_rows or defaults[1]
                 try:
-                    note(name, "write", lambda: lake.write_partition(path, frame))
+                    note(name, "write", lambda: lake.write_partition(path, frame, codec=codec))
                 finally:
-                    lake.COMPRESSION, lake.COLUMN_ENCODING, lake.ROW_GROUP_MAX_ROWS = defaults
+                    lake.COLUMN_ENCODING, lake.ROW_GROUP_MAX_ROWS = defaults
                 facts[name] = (pq.ParquetFile(path).metadata.num_row_groups, path.stat().st_size)
                 note(name, "monitor", lambda: [c.height for c in lake_chunks(wh, "V001", 0.005, None, None, columns=LAKE_COLUMNS, window_s=600.0)])
                 note(name, "pyarrow", lambda: pl.from_arrow(pq.read_table(path, columns=list(LAKE_COLUMNS[1:]))))
@@ -173,7 +173,7 @@ def encodings(source: Path, repeat: int) -> None:
                 thin = wh / "thin" / "date=x"
                 thin.mkdir(parents=True, exist_ok=True)
                 shutil.copy(path, thin / "part-h01.parquet")
-                note(name, "thin", lambda: thin_partition(count_kept(thin, scan_partition(thin, (t_us[:1], t_us[-1:]), True), 10.0)))
+                note(name, "thin", lambda: thin_partition(count_kept(thin, scan_partition(thin, (t_us[:1], t_us[-1:]), True), 10.0), codec))
     con.close()
     print(f"{source}: {n:,} rows; CPU s per file, least of {repeat} alternating rounds, one core")
     print("night = write + 2 × the monitor's read (the monitor's and the report's standstill pass read the same columns) + thinning")

@@ -367,8 +367,12 @@ def _fail(message: str, code: int = 1) -> None:
 def main() -> None:
     """Entry point: every failure is one line on stderr and a non-zero exit status: 1, or 2 for
     a usage error (bad option or argument); an interrupt exits with 130, silently."""
+    from flows.common.cli_values import convert_plainly
+
     try:
-        code = app(standalone_mode=False, prog_name="valvemon")
+        command = typer.main.get_command(app)
+        convert_plainly(command)  # the values converted without pydantic (~0.15–0.2 CPU-s a command)
+        code = command(standalone_mode=False, prog_name="valvemon")
     except (ValvemonError, ConfigError) as exc:  # the reason, naming file, row, key …
         _fail(_first_line(exc))
     except typer.TyperException as exc:  # click's usage errors (click as vendored by typer)
@@ -392,3 +396,51 @@ def main() -> None:
             raise
         _fail(f"unexpected {type(exc).__name__}: {_first_line(exc)} (set {TRACEBACK_ENV}=1 for the traceback)")
     sys.exit(code if isinstance(code, int) else 0)
+
+
+def console() -> None:
+    """The installed ``valvemon`` command (``[project.scripts]``): :func:`main`, and after a
+    command that succeeded the process ends at once (:func:`_end_now`), without the
+    interpreter's teardown, which after ``valvemon monitor`` on a valve-day (modules, numba's
+    compiled code, DuckDB and polars freeing ~750 MB object by object) cost ~0.6 CPU-s
+    (BENCHMARKS.md). A failure or an interrupt exits as :func:`main` does (its one line, its
+    status). :func:`main` itself never ends the process this way: tests and other Python code
+    call it in-process."""
+    try:
+        main()
+    except SystemExit as exc:
+        if exc.code in (0, None):
+            _end_now()
+        raise
+
+
+def _end_now() -> None:
+    """End the process with status 0 without finalizing the interpreter (``os._exit``), once
+    what an ordinary exit still does that anyone could observe is done: the ``atexit`` handlers
+    run (the warehouse's DuckDB host detached, so checkpointed and unlocked; logging flushed;
+    temporary directories removed; child processes reaped), then standard output and error are
+    flushed. Left undone: freeing memory and finalizing modules and objects one by one, which
+    the operating system reclaiming the process replaces. A command closes every file and
+    connection it opens before it returns (what it wrote is then the kernel's, which
+    ``os._exit`` does not touch; a killed run loses nothing either), so no destructor is left
+    with data to write.
+
+    Returns instead (the ordinary exit follows) when that would not be safe: a thread that is
+    neither the main one nor a daemon still runs (an ordinary exit waits for it), Prefect was
+    loaded (its API clients ship logs and events from their own threads and exit hooks), or a
+    standard stream cannot be flushed (e.g. a closed pipe, which the ordinary exit reports)."""
+    import atexit
+    import threading
+
+    if "prefect" in sys.modules:
+        return
+    if any(t is not threading.main_thread() and not t.daemon and t.is_alive() for t in threading.enumerate()):
+        return
+    atexit._run_exitfuncs()  # noqa: SLF001 - the exit handlers, as an ordinary exit runs them (then cleared)
+    try:
+        for stream in (sys.stdout, sys.stderr):
+            if stream is not None:
+                stream.flush()
+    except (OSError, ValueError):
+        return
+    os._exit(0)

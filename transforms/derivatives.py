@@ -159,6 +159,18 @@ def _float_array(a) -> np.ndarray:
     return np.ascontiguousarray(a, dtype=np.float64)
 
 
+def read_only(a: np.ndarray) -> np.ndarray:
+    """``a`` as a read-only view (itself if it is one). polars hands its columns out as read-only
+    views and copies of them are writable; numba compiles a kernel, and loads it from its cache,
+    once for each (~8 ms of a command's start-up each): the arrays a kernel reads from either
+    source are given to it as one kind."""
+    if not a.flags.writeable:
+        return a
+    v = a.view()
+    v.flags.writeable = False
+    return v
+
+
 # --------------------------------------------------------------------------------------------
 # compiled path (used by transforms.monitor for throughput)
 # --------------------------------------------------------------------------------------------
@@ -300,7 +312,7 @@ def savgol_at(x, rows: np.ndarray, *, window: int, order: int, sample_period_s: 
     out1 = np.empty(rows.shape[0])
 
     def run(xs, rs, lo, hi):  # the rows rows[lo:hi], at rs in the array xs
-        _savgol_at_kernel(_float_array(xs), rs, w0, w1, 1.0 / sample_period_s, out0[lo:hi] if smooth else out0, out1[lo:hi], bool(smooth))
+        _savgol_at_kernel(read_only(_float_array(xs)), rs, w0, w1, 1.0 / sample_period_s, out0[lo:hi] if smooth else out0, out1[lo:hi], bool(smooth))
 
     chunks = [x] if isinstance(x, np.ndarray) else list(x)
     if len(chunks) == 1:

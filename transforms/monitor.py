@@ -39,7 +39,7 @@ from transforms.baseline import (
     recognise_edge_law,
 )
 from transforms.characteristic import Characteristic, scaled_shifted
-from transforms.derivatives import add_savgol, savgol_arrays, savgol_at, take_rows
+from transforms.derivatives import add_savgol, read_only, savgol_arrays, savgol_at, take_rows
 from transforms.fit import fit_arrays, fit_groups, sorted_fits, walk_segment
 from transforms.leakage import closed_leakage, effective_scale, inflation, leak_columns, leak_scale_step
 from transforms.params import EDGES, MonitorParams
@@ -239,7 +239,7 @@ def _layout(lake_v: pl.DataFrame, p: MonitorParams) -> tuple[pl.DataFrame, float
     :func:`transforms.windows.window_layout` (which checks the order in its pass)."""
     dt = p.sample_period_s or infer_sample_period_s(lake_v)
     for _ in range(2):
-        ts = lake_v["timestamp_utc"].cast(_UTC_US).to_physical().to_numpy()
+        ts = read_only(lake_v["timestamp_utc"].cast(_UTC_US).to_physical().to_numpy())  # (a view, or a copy of several chunks)
         try:
             lay = window_layout(ts, sample_period_s=dt, gap_limit_s=p.gap_limit_periods * dt, step_tolerance=p.step_tolerance,
                                 half_window=p.half_window, window_s=p.window_s, window_rows=p.window_rows)  # fmt: skip

@@ -21,12 +21,13 @@ then ``os.replace`` puts it in place and the folder is fsynced. A process killed
 leaves the old file or the new one, never a mix; a left-over temporary file is removed by the next
 write to that folder.
 
-Storage choices (codec, float width and encoding, row groups) are measured and justified in
-``docs/ingest.md``; they are the constants below.
+Storage choices (codec, float width and encoding, row groups, the time grid record) are measured
+and justified in ``docs/ingest.md``; they are the constants below.
 """
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import uuid
@@ -51,11 +52,14 @@ DAY_FILE_MAX_ROWS = 4_194_304
 """A day with more rows is stored as hour files (``docs/ingest.md``, "Continuous recordings")."""
 US_PER_HOUR = 3_600_000_000
 
-COMPRESSION = "lz4"
-"""Parquet codec of the lake (``docs/ingest.md``, "Storage"): LZ4 decodes 2× as fast as zstd
-level 1 for ~20 % more disk; the monitor reads every row, so its decode speed counts most."""
+COMPRESSION = "none"
+"""Parquet codec of the lake by default (a plant's ``[lake] codec`` chooses another) (``docs/ingest.md``, "Storage"): none. LZ4 kept noisy float32 signals
+only 29 % smaller (a continuous valve-day 19.9 against 28.0 B per lake row) and cost its decode
+on every read (the monitor's lake read of a valve-day ~0.5 CPU s) and its encode on every write
+(the lake's writer ~0.25 s an hour file); lake files of earlier versions (LZ4, zstd) are read as they
+are: Parquet names the codec per column chunk."""
 COMPRESSION_LEVEL = None
-"""The codec's default level."""
+"""The codec's default level (none has none)."""
 COLUMN_ENCODING = {"timestamp_utc": "DELTA_BINARY_PACKED"}
 """Timestamps on a uniform grid delta-encode to almost nothing: the lake is ~10 % smaller, written
 ~1.4× and the time column decoded ~3× faster than PLAIN + zstd (``docs/ingest.md``, "Storage").
@@ -72,6 +76,16 @@ ROW_GROUP_MAX_ROWS = 1_048_576
 """…or at this many rows, whichever comes first."""
 ROW_GROUP_GAP_US = 5_000
 """Times further apart than this start a new window (default ``export.max_gap_s``)."""
+
+TIME_GRID_KEY = "valvemon.time_grid"
+"""Key of a lake file's *time grid record* (Parquet key-value metadata in the footer): for each
+row group, the uniform runs ``[first_us, step_us, rows]`` its ``timestamp_utc`` values are,
+exactly (value i of a run is ``first_us + i * step_us``), written by the lake's writer. A reader
+that trusts it (:func:`time_grid`, checked against the row groups' row counts and time
+statistics) builds the time column without decoding it (``docs/ingest.md``, "Storage")."""
+TIME_GRID_MAX_RUNS = 64
+"""A row group whose time stamps are more runs than this (an irregular clock) gets no record;
+a file with such a row group is read by decoding its time column, as one without a record."""
 
 SENSOR_ARROW_SCHEMA = arrow_schema(SENSOR_FIELDS)
 SENSOR_POLARS_SCHEMA = polars_schema(SENSOR_FIELDS)
@@ -174,25 +188,138 @@ def _coalesced(frames: Iterable[pl.DataFrame], min_rows: int) -> Iterator[pl.Dat
         yield pl.concat(buffer) if len(buffer) > 1 else buffer[0]
 
 
-def _write_temp(tmp: Path, frames: Iterable[pl.DataFrame], gap_us: int) -> None:
+def grid_runs(t_us: np.ndarray, max_runs: int = TIME_GRID_MAX_RUNS) -> list[list[int]] | None:
+    """The time stamps ``t_us`` (µs, int64, sorted) as uniform runs ``[first_us, step_us, rows]``
+    (each run as long as it goes: a run ends where the step changes, the next starts at the row
+    after), exactly: :func:`grid_series` of the result is ``t_us``. None if they are more than
+    ``max_runs`` runs, or not strictly increasing."""
+    t_us = np.asarray(t_us, dtype=np.int64)
+    n = t_us.shape[0]
+    if n == 0:
+        return []
+    d = np.diff(t_us)
+    if d.size and int(d.min()) <= 0:
+        return None
+    change = np.flatnonzero(d[1:] != d[:-1]) + 1  # steps d[k] that differ from d[k - 1]
+    if change.size > 2 * max_runs:
+        return None
+    runs: list[list[int]] = []
+    a = 0
+    while a < n:
+        if len(runs) == max_runs:
+            return None
+        if a == n - 1:
+            runs.append([int(t_us[a]), 1, 1])
+            break
+        k = np.searchsorted(change, a, side="right")  # the first step change after step a
+        last = int(change[k]) if k < change.size else n - 1  # step d[last] differs: row `last` ends the run
+        runs.append([int(t_us[a]), int(d[a]), last - a + 1])
+        a = last + 1
+    return runs
+
+
+def time_grid(md: pq.FileMetaData) -> list[tuple[int, int, int]] | None:
+    """A lake file's time stamps as uniform runs ``(first_us, step_us, rows)`` in time order
+    (runs that continue each other joined: a continuous hour file is one run), from its time grid
+    record (:data:`TIME_GRID_KEY`) if it has one that agrees with the footer: one entry per row
+    group, each row group's runs holding its row count, starting at its ``timestamp_utc`` minimum
+    and ending at its maximum, every run and the row groups in increasing time. None otherwise
+    (no record, an irregular row group, a record that disagrees): the time column must be
+    decoded."""
+    raw = (md.metadata or {}).get(TIME_GRID_KEY.encode())
+    if raw is None:
+        return None
+    try:
+        groups = json.loads(raw)
+        col = md.schema.names.index("timestamp_utc")
+    except ValueError:
+        return None
+    if not isinstance(groups, list) or len(groups) != md.num_row_groups:
+        return None
+    out: list[tuple[int, int, int]] = []
+    last = None
+    for g, runs in enumerate(groups):
+        st = md.row_group(g).column(col).statistics
+        if not isinstance(runs, list) or not runs or st is None or not st.has_min_max:
+            return None
+        rows = 0
+        for run in runs:
+            if not (isinstance(run, list) and len(run) == 3 and all(type(v) is int for v in run)):
+                return None
+            first, step, n = run
+            if n < 1 or step < 1 or (last is not None and first <= last):
+                return None
+            d = first - last if out else 0
+            if out and (out[-1][2] == 1 or out[-1][1] == d) and (n == 1 or step == d):
+                out[-1] = (out[-1][0], d, out[-1][2] + n)  # it continues the run before
+            else:
+                out.append((first, step, n))
+            last = first + step * (n - 1)
+            rows += n
+        if rows != md.row_group(g).num_rows or runs[0][0] != int(st.min_raw) or last != int(st.max_raw):
+            return None
+    return out
+
+
+def grid_rows_before(runs: list[tuple[int, int, int]], t_us: int) -> int:
+    """How many of the time stamps of uniform runs (:func:`time_grid`) lie before ``t_us``."""
+    k = 0
+    for first, step, n in runs:
+        if t_us <= first:
+            break
+        k += min(n, -((first - t_us) // step))  # ceil((t_us - first) / step) of the run's rows
+    return k
+
+
+def grid_series(runs: list[tuple[int, int, int]], a: int, b: int, lengths: list[int] | None = None) -> pl.Series:
+    """``timestamp_utc`` of rows [a, b) of uniform runs (:func:`time_grid`), built (not decoded),
+    in chunks of ``lengths`` rows (default one chunk): those of the columns it joins, so that a
+    frame of them keeps its chunks rather than copying them into one."""
+    dtype = SENSOR_POLARS_SCHEMA["timestamp_utc"]
+    pieces = []
+    row = 0
+    for first, step, n in runs:
+        lo, hi = max(a, row), min(b, row + n)
+        if lo < hi:
+            pieces.append(pl.int_range(first + step * (lo - row), first + step * (hi - row), step, dtype=pl.Int64))
+        row += n
+    if not pieces:
+        return pl.Series("timestamp_utc", [], dtype=dtype)
+    t = pl.select(pl.concat(pieces) if len(pieces) > 1 else pieces[0]).to_series().rechunk().cast(dtype).alias("timestamp_utc")
+    if lengths is None or len(lengths) < 2:
+        return t
+    out, off = t.slice(0, lengths[0]), lengths[0]
+    for m in lengths[1:]:
+        out.append(t.slice(off, m))
+        off += m
+    return out
+
+
+def _write_temp(tmp: Path, frames: Iterable[pl.DataFrame], gap_us: int, codec: str) -> None:
     """Write the frames, in order, as one Parquet file to ``tmp``, flushed and fsynced; pieces
-    are joined up to :data:`ROW_GROUP_MAX_ROWS` rows before being cut into row groups."""
+    are joined up to :data:`ROW_GROUP_MAX_ROWS` rows before being cut into row groups, and the
+    file gets its time grid record (:data:`TIME_GRID_KEY`) if every row group is one."""
     with open(tmp, "wb") as fh:
         with pq.ParquetWriter(
             fh,
             SENSOR_ARROW_SCHEMA,
-            compression=COMPRESSION,
+            compression=codec,
             compression_level=COMPRESSION_LEVEL,
             use_dictionary=["valve_id", "date"],
             column_encoding=COLUMN_ENCODING,
             write_statistics=STATISTICS_COLUMNS,
             sorting_columns=[pq.SortingColumn(SENSOR_ARROW_SCHEMA.get_field_index("timestamp_utc"))],
         ) as writer:
+            grid: list | None = []
             for frame in _coalesced(frames, ROW_GROUP_MAX_ROWS):
                 table = frame.to_arrow().cast(SENSOR_ARROW_SCHEMA)
                 t_us = frame["timestamp_utc"].to_physical().to_numpy()
                 for a, b in row_group_bounds(t_us, gap_us, ROW_GROUP_MIN_ROWS, ROW_GROUP_MAX_ROWS):
                     writer.write_table(table.slice(a, b - a), row_group_size=b - a)
+                    runs = grid_runs(t_us[a:b]) if grid is not None else None
+                    grid = None if runs is None else grid + [runs]
+            if grid:
+                writer.add_key_value_metadata({TIME_GRID_KEY: json.dumps(grid, separators=(",", ":"))})
         fh.flush()
         os.fsync(fh.fileno())
 
@@ -203,7 +330,7 @@ def _commit(tmp: Path, path: Path) -> None:
     _fsync_dir(path.parent)
 
 
-def write_partition(path: Path, frame: pl.DataFrame, *, gap_us: int = ROW_GROUP_GAP_US) -> None:
+def write_partition(path: Path, frame: pl.DataFrame, *, gap_us: int = ROW_GROUP_GAP_US, codec: str = COMPRESSION) -> None:
     """Replace one partition file whole and atomically (module doc).
 
     Parameters
@@ -214,16 +341,18 @@ def write_partition(path: Path, frame: pl.DataFrame, *, gap_us: int = ROW_GROUP_
         Its complete new content: the sensor frame, sorted by time.
     gap_us : int
         Window separation for the row groups (``export.max_gap_s`` in µs).
+    codec : str
+        Parquet codec (``[lake] codec``: ``"none"``, ``"lz4"``, ``"zstd"``).
     """
-    write_partition_pieces(path, [frame], gap_us=gap_us)
+    write_partition_pieces(path, [frame], gap_us=gap_us, codec=codec)
 
 
-def write_partition_pieces(path: Path, frames: Iterable[pl.DataFrame], *, gap_us: int = ROW_GROUP_GAP_US) -> None:
+def write_partition_pieces(path: Path, frames: Iterable[pl.DataFrame], *, gap_us: int = ROW_GROUP_GAP_US, codec: str = COMPRESSION) -> None:
     """:func:`write_partition` for content that arrives in consecutive time-sorted pieces (e.g.
     streamed from a file being thinned): memory holds one row group's worth, not the file."""
     path.parent.mkdir(parents=True, exist_ok=True)
     _remove_stale_temps(path.parent)
-    tmp = _stage(path, frames, gap_us)
+    tmp = _stage(path, frames, gap_us, codec)
     try:
         _commit(tmp, path)
     except BaseException:
@@ -231,17 +360,17 @@ def write_partition_pieces(path: Path, frames: Iterable[pl.DataFrame], *, gap_us
         raise
 
 
-def stage_file(path: Path, frame: pl.DataFrame, *, gap_us: int = ROW_GROUP_GAP_US) -> Path:
+def stage_file(path: Path, frame: pl.DataFrame, *, gap_us: int = ROW_GROUP_GAP_US, codec: str = COMPRESSION) -> Path:
     """Write a lake file's complete new content to a hidden temporary file beside ``path``
     (flushed, fsynced) and return it; :func:`commit_files` puts it in place."""
-    return _stage(path, [frame], gap_us)
+    return _stage(path, [frame], gap_us, codec)
 
 
-def _stage(path: Path, frames: Iterable[pl.DataFrame], gap_us: int) -> Path:
+def _stage(path: Path, frames: Iterable[pl.DataFrame], gap_us: int, codec: str) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.parent / f".{path.name}.{uuid.uuid4().hex}.tmp"
     try:
-        _write_temp(tmp, frames, gap_us)
+        _write_temp(tmp, frames, gap_us, codec)
     except BaseException:
         # an ordinary exception: tidy up; a killed process leaves the file to the next write
         tmp.unlink(missing_ok=True)
@@ -399,11 +528,11 @@ def read_file_ranges(path: Path, ranges: np.ndarray) -> Iterator[pl.DataFrame]:
         yield scan.slice(start, stop - start).collect()
 
 
-def row_group_spans(path: Path) -> list[tuple[int, int, int]]:
-    """``(rows, first, last)`` of each row group of a lake file: its rows and the range of its
-    ``timestamp_utc`` (µs since the epoch) from the footer's statistics (no data is read); a
-    group without statistics spans all time."""
-    md = pq.ParquetFile(path).metadata
+def row_group_spans(path: Path | pq.FileMetaData) -> list[tuple[int, int, int]]:
+    """``(rows, first, last)`` of each row group of a lake file (or of its footer, already read):
+    its rows and the range of its ``timestamp_utc`` (µs since the epoch) from the footer's
+    statistics (no data is read); a group without statistics spans all time."""
+    md = path if isinstance(path, pq.FileMetaData) else pq.ParquetFile(path).metadata
     col = md.schema.to_arrow_schema().get_field_index("timestamp_utc")
     out = []
     for i in range(md.num_row_groups):

@@ -80,6 +80,7 @@ class LakeStager:
         self.warehouse, self.config, self.lock = Path(warehouse), config, lock
         self.rule = config.export.duplicate_rule
         self.gap_us = max(int(round(config.export.max_gap_s * 1e6)), 1)
+        self.codec = config.lake.codec
         self.buffer: dict[tuple[str, date], list[pl.DataFrame]] = {}
         self.first: dict[tuple[str, date], int] = {}
         """The earliest buffered time (µs) of each valve-day in the buffer."""
@@ -224,7 +225,7 @@ class LakeStager:
 
     def _stage(self, vid: str, day: date, path: Path, frame: pl.DataFrame) -> None:
         old = self.staged.pop(path, None)
-        self.staged[path] = stage_file(path, frame, gap_us=self.gap_us)
+        self.staged[path] = stage_file(path, frame, gap_us=self.gap_us, codec=self.codec)
         if old is not None:
             old.unlink(missing_ok=True)
         self.days_written.add((vid, day))

@@ -42,7 +42,7 @@ from flows.common.batches import WriteBatch
 from flows.common.config import load_plant_config, plant_valves
 from flows.common.errors import ValvemonError
 from flows.common.instants import utc_instant
-from flows.common.lake import SENSOR_POLARS_SCHEMA, list_partitions, read_lake
+from flows.common.lake import SENSOR_POLARS_SCHEMA, grid_rows_before, grid_series, list_partitions, read_lake, row_group_spans, time_grid
 from flows.common.prefect_run import flow, task
 from flows.common.warehouse_db import add_missing_columns, connect, ensure_tables, insert_frame, query_frame, transaction
 from model.area import edge_area
@@ -343,8 +343,8 @@ def lake_chunks(
         read_hi = end + length + timedelta(seconds=2 * gap_s)
     else:
         read_hi = _run_end(warehouse, valve_id, gap_s, end)
-    lo_us = None if start is None else int((start - _EPOCH) / timedelta(microseconds=1))
-    hi_us = None if end is None else int((end - _EPOCH) / timedelta(microseconds=1))
+    lo_us = None if start is None else _epoch_us(start)
+    hi_us = None if end is None else _epoch_us(end)
     for rows in span_chunks(warehouse, valve_id, gap_s, read_lo, read_hi, days, columns, window_s):
         # the windows starting in [start, end) are one contiguous slice of the time-sorted rows
         if rows.height == 0:
@@ -421,20 +421,28 @@ class _LakeFile:
     first: datetime | None
     last: datetime | None
     """First and last time stamp from the row groups' statistics (None: not recorded)."""
+    grid: list | None = None
+    """Its time grid record, checked against the footer (:func:`flows.common.lake.time_grid`;
+    None: the time column must be decoded)."""
 
 
 def _lake_files(warehouse: Path, valve_id: str, start: datetime | None, end: datetime | None) -> list[_LakeFile]:
     """The valve's lake files of the days [start, end) can touch, in time order, with their
-    footers' row counts and time ranges."""
+    footers' row counts, time ranges and time grid records."""
     out = []
     for _, day, path in list_partitions(warehouse, [valve_id], start, end):
+        # the statistics as integers: pyarrow's datetimes of them import pandas (~0.35 CPU-s)
         md = pq.ParquetFile(path).metadata
-        j = md.schema.names.index("timestamp_utc")
-        stats = [md.row_group(g).column(j).statistics for g in range(md.num_row_groups)]
-        known = bool(stats) and all(st is not None and st.has_min_max for st in stats)
-        out.append(_LakeFile(path, day, md.num_rows, min(st.min for st in stats) if known else None,
-                             max(st.max for st in stats) if known else None))  # fmt: skip
+        groups = row_group_spans(md)
+        first, last = min((g[1] for g in groups), default=None), max((g[2] for g in groups), default=None)
+        known = first is not None and first != _NO_STATISTICS  # (a group without statistics spans all time)
+        out.append(_LakeFile(path, day, sum(g[0] for g in groups), _EPOCH + timedelta(microseconds=first) if known else None,
+                             _EPOCH + timedelta(microseconds=last) if known else None, time_grid(md) if known else None))  # fmt: skip
     return out
+
+
+_NO_STATISTICS = -(2**63)
+"""The first time stamp :func:`flows.common.lake.row_group_spans` gives a row group without statistics."""
 
 
 def _day_extent(warehouse: Path, valve_id: str, day: date, files: list[_LakeFile]) -> tuple[datetime, datetime]:
@@ -447,19 +455,45 @@ def _day_extent(warehouse: Path, valve_id: str, day: date, files: list[_LakeFile
     return read_lake(warehouse, [valve_id], lo, lo + timedelta(days=1)).select(t.min().alias("a"), t.max().alias("b")).collect().row(0)
 
 
-def _read_span(files: list[_LakeFile], lo: datetime, hi: datetime) -> pl.LazyFrame | None:
-    """The rows of ``files`` in [lo, hi): only the files whose footers overlap the span are
-    scanned, and a time filter is applied only where a file reaches beyond the span (a row
-    filter copies every column). None: no file overlaps."""
+def _read_span(files: list[_LakeFile], lo: datetime, hi: datetime, columns: list[str]) -> pl.DataFrame | None:
+    """The ``columns`` of the rows of ``files`` in [lo, hi), file by file: only the files whose
+    footers overlap the span are read. A file with a time grid record (:class:`_LakeFile`
+    ``grid``) gets its time column from the record and its rows in the span as one slice
+    (:func:`_grid_rows`); any other is decoded, with a time filter only where it reaches beyond
+    the span (a row filter copies every column). None: no file overlaps."""
     chosen = [f for f in files if f.first is None or (f.first < hi and f.last >= lo)]
     if not chosen:
         return None
-    lf = pl.scan_parquet([str(f.path) for f in chosen], hive_partitioning=False, schema=SENSOR_POLARS_SCHEMA)
-    if any(f.first is None or f.first < lo for f in chosen):
-        lf = lf.filter(pl.col("timestamp_utc") >= lo)
-    if any(f.first is None or f.last >= hi for f in chosen):
-        lf = lf.filter(pl.col("timestamp_utc") < hi)
-    return lf
+    frames = []
+    for f in chosen:
+        if f.grid is not None:
+            frames.append(_grid_rows(f, lo, hi, columns))
+            continue
+        lf = pl.scan_parquet(f.path, hive_partitioning=False, schema=SENSOR_POLARS_SCHEMA)
+        if f.first is None or f.first < lo:
+            lf = lf.filter(pl.col("timestamp_utc") >= lo)
+        if f.first is None or f.last >= hi:
+            lf = lf.filter(pl.col("timestamp_utc") < hi)
+        frames.append(lf.select(columns).collect())
+    return frames[0] if len(frames) == 1 else pl.concat(frames, rechunk=False)
+
+
+def _grid_rows(f: _LakeFile, lo: datetime, hi: datetime, columns: list[str]) -> pl.DataFrame:
+    """The ``columns`` of a lake file with a time grid record, its rows in [lo, hi): the rows
+    in the span found on the record and read as one slice (polars decodes only the pages it
+    covers), the time stamps built from the record in the other columns' chunks (never decoded)."""
+    a, b = grid_rows_before(f.grid, _epoch_us(lo)), grid_rows_before(f.grid, _epoch_us(hi))
+    read = [c for c in columns if c != "timestamp_utc"]
+    if not read:
+        return grid_series(f.grid, a, b).to_frame()
+    lf = pl.scan_parquet(f.path, hive_partitioning=False, schema=SENSOR_POLARS_SCHEMA).select(read)
+    frame = (lf if (a, b) == (0, f.rows) else lf.slice(a, b - a)).collect()
+    lengths = [c.len() for c in frame.get_column(read[0]).get_chunks()]
+    return frame.with_columns(grid_series(f.grid, a, b, lengths)).select(columns)
+
+
+def _epoch_us(t: datetime) -> int:
+    return (t - _EPOCH) // timedelta(microseconds=1)
 
 
 def _read_spans(
@@ -510,6 +544,7 @@ def span_chunks(
     """:func:`lake_chunks` for rows in [start, end) (windows cut at the bounds): the rows
     ``read_lake(warehouse, [valve_id], start, end)`` holds, in chunks of whole windows."""
     select = None
+    read = SENSOR_POLARS_SCHEMA.names()
     if columns is not None:
         names = list(dict.fromkeys(["timestamp_utc", *columns]))
         read = [c for c in names if c != "valve_id"]
@@ -521,12 +556,13 @@ def span_chunks(
     spans = list(_read_spans(warehouse, valve_id, files, start, end, days, window_s))
     carry = None
     for i, (lo, hi) in enumerate(spans):
-        lf = _read_span(files, max(lo, start) if start else lo, min(hi, end) if end else hi)
-        if lf is None:
-            lf = pl.LazyFrame(schema=SENSOR_POLARS_SCHEMA)
+        rows = _read_span(files, max(lo, start) if start else lo, min(hi, end) if end else hi, read)
+        if rows is None:
+            rows = pl.DataFrame(schema={c: SENSOR_POLARS_SCHEMA[c] for c in read})
         # valve_id filled in after the decode: in the query polars cuts the columns into ~100 k-row
         # chunks, after it they stay the row groups' (fewer chunks for the monitor to read across)
-        rows = lf.collect() if select is None else lf.select(read).collect().select(select)
+        if select is not None:
+            rows = rows.select(select)
         if carry is not None:
             rows = pl.concat([carry, rows])
         if rows.height == 0:

@@ -282,18 +282,18 @@ def count_kept(folder: Path, scan: PartitionScan, keep_s: float) -> dict[Path, F
     return per_file
 
 
-def thin_partition(per_file: dict[Path, FileThinning]) -> int:
+def thin_partition(per_file: dict[Path, FileThinning], codec: str) -> int:
     """Replace each file of the partition by its kept rows, read range by range (only the pages
-    holding them are decoded; memory holds one range and one row group of kept rows), atomically
-    per file; a file that keeps all its rows is left alone, one that keeps none is deleted.
-    Returns the rows kept."""
+    holding them are decoded; memory holds one range and one row group of kept rows), written with
+    ``codec`` (``[lake] codec``), atomically per file; a file that keeps all its rows is left
+    alone, one that keeps none is deleted. Returns the rows kept."""
     for f, ft in per_file.items():
         if ft.kept == ft.rows:
             continue
         if ft.kept == 0:
             remove_partition_file(f)
             continue
-        write_partition_pieces(f, read_file_ranges(f, ft.ranges))
+        write_partition_pieces(f, read_file_ranges(f, ft.ranges), codec=codec)
     return sum(ft.kept for ft in per_file.values())
 
 
@@ -363,7 +363,7 @@ def pending_intents(warehouse: Path, valve_ids: list[str] | None) -> list[tuple[
     return [r for r in rows if valve_ids is None or r[1] in valve_ids]
 
 
-def complete_interrupted(warehouse: Path, spec: RetentionSpec, as_of: date, valve_ids: list[str] | None, dry_run: bool) -> list[tuple[str, date]]:
+def complete_interrupted(warehouse: Path, spec: RetentionSpec, as_of: date, valve_ids: list[str] | None, dry_run: bool, codec: str) -> list[tuple[str, date]]:
     """Finish what a killed run began (module doc): the drops it renamed but did not delete
     (recorded first if an older version left them without a record), and its intents: a drop
     completed or, if the partition was never renamed, withdrawn; a thinning done again and
@@ -395,7 +395,7 @@ def complete_interrupted(warehouse: Path, spec: RetentionSpec, as_of: date, valv
         with partition_lock(warehouse, folder / PART_NAME):
             scan = scan_partition(folder, (np.zeros(0, np.int64), np.zeros(0, np.int64)), True)
             per_file = count_kept(folder, scan, spec.thin_keep_s_per_hour)
-            complete(warehouse, action_id, thin_partition(per_file), partition_bytes(folder))
+            complete(warehouse, action_id, thin_partition(per_file, codec), partition_bytes(folder))
     return begun
 
 
@@ -458,7 +458,7 @@ def run_retention(
     # a dry run takes no lock either: even a lock file would be a write
     lock = nullcontext() if dry_run else file_lock(warehouse / ".retention.lock", f"{warehouse}: another retention run is working on this warehouse")
     with lock:
-        summary.interrupted = complete_interrupted(warehouse, spec, as_of, ids, dry_run)
+        summary.interrupted = complete_interrupted(warehouse, spec, as_of, ids, dry_run, config.lake.codec)
         protected = {v.id: protected_days([v.baseline_window] if v.baseline_window else []) for v in config.valves}
         todo: list[tuple[str, date, Path]] = []
         for vid, day, folder in partition_folders(warehouse, ids):
@@ -477,14 +477,14 @@ def run_retention(
                 summary.outcomes.append(PartitionOutcome(vid, day, KEEP, REASON_THINNED, partition_bytes(folder)))
                 continue
             with nullcontext() if dry_run else partition_lock(warehouse, folder / PART_NAME):
-                summary.outcomes.append(_one_partition(warehouse, vid, day, folder, spec, protected[vid], state, as_of, dry_run))
+                summary.outcomes.append(_one_partition(warehouse, vid, day, folder, spec, protected[vid], state, as_of, dry_run, config.lake.codec))
     summary.outcomes.sort(key=lambda o: (o.valve_id, o.day))
     return summary
 
 
 def _one_partition(
     warehouse: Path, vid: str, day: date, folder: Path, spec: RetentionSpec, protected: frozenset[date], state: WarehouseState,
-    as_of: date, dry_run: bool,
+    as_of: date, dry_run: bool, codec: str,
 ) -> PartitionOutcome:
     """Decide one partition past steps 1–2 and, unless ``dry_run``, apply the decision."""
     bytes_before = partition_bytes(folder)
@@ -508,7 +508,7 @@ def _one_partition(
         if not dry_run:
             action_id = uuid.uuid4().hex
             record(warehouse, _log_row(action_id, o, spec, as_of, INTENT))  # rows after exact, bytes after estimated
-            o.rows_after = thin_partition(per_file)
+            o.rows_after = thin_partition(per_file, codec)
             o.bytes_after = partition_bytes(folder)
             complete(warehouse, action_id, o.rows_after, o.bytes_after)
     return o

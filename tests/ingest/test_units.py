@@ -219,11 +219,27 @@ def test_partition_file_layout_codec_and_sorting(tmp_path):
     path = partition_path(tmp_path, "V017", date(2025, 3, 1))
     write_partition(path, frame, gap_us=2_500_000)
     meta = pq.ParquetFile(path).metadata
-    assert meta.num_rows == 5 and meta.row_group(0).column(3).compression == "LZ4"
+    assert meta.num_rows == 5 and meta.row_group(0).column(3).compression == "UNCOMPRESSED"  # the default codec
+    for codec, name in (("lz4", "LZ4"), ("zstd", "ZSTD")):  # a plant's [lake] codec
+        write_partition(path, frame, gap_us=2_500_000, codec=codec)
+        assert pq.ParquetFile(path).metadata.row_group(0).column(3).compression == name
+        assert_frame_equal(pl.read_parquet(path), frame.sort("timestamp_utc"), check_dtypes=False)
     schema = pq.read_schema(path)
     assert schema.field("timestamp_utc").type.unit == "us" and str(schema.field("timestamp_utc").type.tz) == "UTC"
     assert schema.field("p1_pa").metadata[b"unit"] == b"Pa"
     assert meta.row_group(0).sorting_columns[0].column_index == 2
+
+
+def test_the_plants_lake_codec_is_what_the_ingest_writes(plant, tmp_path):
+    cfg, _ = plant("wide.toml", layout="wide", tag_column=None, value_column=None, quality_column=None, good_quality=None)
+    ingest(cfg, DATA / "midnight.csv", tmp_path / "none")
+    cfg.write_text(cfg.read_text() + '\n[lake]\ncodec = "lz4"\n')
+    ingest(cfg, DATA / "midnight.csv", tmp_path / "lz4")
+    files = {k: sorted((tmp_path / k).rglob("*.parquet")) for k in ("none", "lz4")}
+    assert files["none"] and [p.relative_to(tmp_path / "none") for p in files["none"]] == [p.relative_to(tmp_path / "lz4") for p in files["lz4"]]
+    for k, name in (("none", "UNCOMPRESSED"), ("lz4", "LZ4")):
+        assert {pq.ParquetFile(p).metadata.row_group(0).column(3).compression for p in files[k]} == {name}
+    assert read_lake(tmp_path / "lz4").collect().equals(read_lake(tmp_path / "none").collect())
 
 
 def test_read_lake_filters_valves_and_time(plant, tmp_path):

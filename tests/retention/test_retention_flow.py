@@ -255,6 +255,6 @@ def test_thinning_a_file_of_one_row_group_larger_than_a_batch_keeps_exactly_the_
     assert pq.ParquetFile(path).metadata.num_row_groups == 1
     scan = fr.scan_partition(folder, (t[:1], t[-1:]), True)
     per_file = fr.count_kept(folder, scan, 10.0)
-    assert fr.thin_partition(per_file) == 2 * 10_000
+    assert fr.thin_partition(per_file, "none") == 2 * 10_000
     kept = pl.concat(list(iter_file_batches(path)))
     assert kept.equals(frame.filter(pl.Series(thin_mask(t, scan.firsts, 10.0))).select(kept.columns))

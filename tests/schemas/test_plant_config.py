@@ -238,6 +238,22 @@ def test_retention_is_off_unless_configured_and_round_trips(raw, tmp_path):
         assert load_plant_config(path) == cfg and tomllib.loads(path.read_text())["retention"] == table | ({"thin_keep_s_per_hour": 2.5} if table["mode"] == "thin" else {})
 
 
+def test_lake_codec_defaults_to_none_is_chosen_and_round_trips(raw, tmp_path):
+    assert parse_plant_config(raw).lake.codec == "none"
+    path = tmp_path / "plant.toml"
+    path.write_bytes(tomli_w.dumps(plant_config_to_dict(parse_plant_config(raw))).encode())
+    assert "lake" not in tomllib.loads(path.read_text())  # the default is not written back
+    raw["lake"] = {"codec": "lz4"}
+    cfg = parse_plant_config(raw)
+    path.write_bytes(tomli_w.dumps(plant_config_to_dict(cfg)).encode())
+    assert cfg.lake.codec == "lz4" and load_plant_config(path) == cfg and tomllib.loads(path.read_text())["lake"] == {"codec": "lz4"}
+    for table, message in (({"codec": "gzip"}, "lake.codec: 'gzip' is not one of 'none', 'lz4', 'zstd'"),
+                           ({"codec": "lz4", "level": 3}, "lake.level: unknown key"), ("lz4", "lake: expected a table")):
+        raw["lake"] = table
+        with pytest.raises(ConfigError, match=re.escape(message)):
+            parse_plant_config(raw)
+
+
 @pytest.mark.parametrize(
     "table, message",
     [
