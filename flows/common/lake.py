@@ -53,11 +53,11 @@ DAY_FILE_MAX_ROWS = 4_194_304
 US_PER_HOUR = 3_600_000_000
 
 COMPRESSION = "none"
-"""Parquet codec of the lake by default (a plant's ``[lake] codec`` chooses another) (``docs/ingest.md``, "Storage"): none. LZ4 kept noisy float32 signals
-only 29 % smaller (a continuous valve-day 19.9 against 28.0 B per lake row) and cost its decode
-on every read (the monitor's lake read of a valve-day ~0.5 CPU s) and its encode on every write
-(the lake's writer ~0.25 s an hour file); lake files of earlier versions (LZ4, zstd) are read as they
-are: Parquet names the codec per column chunk."""
+"""Parquet codec of the lake by default, none (a plant's ``[lake] codec`` chooses another;
+``docs/ingest.md``, "Storage"). LZ4 kept noisy float32 signals only 29 % smaller (a continuous
+valve-day 19.9 against 28.0 B per lake row) and cost its decode on every read (the monitor's lake
+read of a valve-day ~0.5 CPU s) and its encode on every write (the lake's writer ~0.25 s an hour
+file); lake files of any codec are read as they are: Parquet names the codec per column chunk."""
 COMPRESSION_LEVEL = None
 """The codec's default level (none has none)."""
 COLUMN_ENCODING = {"timestamp_utc": "DELTA_BINARY_PACKED"}

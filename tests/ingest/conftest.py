@@ -22,6 +22,10 @@ from flows.common.warehouse_db import connect, query_frame
 from flows.ingest.flow import run_ingest
 from schemas.fields import SENSOR_FIELDS, polars_schema
 
+T0_US = 1_735_689_600 * 10**6  # 2025-01-01T00:00Z
+"""The lake tests' first time stamp. [µs]"""
+FLOATS = [f.name for f in SENSOR_FIELDS if f.name.endswith(("_pa", "_m"))]
+"""The lake's float signal columns."""
 DATA = Path(__file__).parent / "data"
 EXAMPLE = Path(__file__).parents[1] / "fixtures" / "plant_example.toml"
 T0 = datetime(2025, 3, 1, 12, 0, 0, tzinfo=timezone.utc)

@@ -24,10 +24,8 @@ from flows.common.lake import (
     row_group_bounds,
     write_partition,
 )
+from tests.ingest.conftest import FLOATS, T0_US
 from transforms.retention import HOUR_US, thin_mask
-
-T0_US = 1_735_689_600 * 10**6  # 2025-01-01T00:00Z
-FLOATS = [f.name for f in SENSOR_ARROW_SCHEMA if f.name.endswith(("_pa", "_m"))]
 
 
 def _continuous(hour: int, n: int) -> pl.DataFrame:

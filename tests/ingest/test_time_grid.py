@@ -29,9 +29,7 @@ from flows.common.lake import (
     time_grid,
     write_partition,
 )
-
-T0_US = 1_735_689_600 * 10**6  # 2025-01-01T00:00Z
-FLOATS = [f.name for f in SENSOR_ARROW_SCHEMA if f.name.endswith(("_pa", "_m"))]
+from tests.ingest.conftest import FLOATS, T0_US
 
 
 def _frame(t_us: np.ndarray) -> pl.DataFrame:
