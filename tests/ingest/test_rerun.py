@@ -144,8 +144,8 @@ def test_crash_replacing_an_existing_partition_leaves_the_old_content(plant, tmp
     ingest(cfg, a, wh)
     old = lake(wh)
 
-    def write_then_die(tmp, frame, gap_us):
-        real_write(tmp, frame, gap_us)
+    def write_then_die(*args):
+        real_write(*args)
         raise Crash("killed after fsync of the temporary file")
 
     real_write = flows.common.lake._write_temp
