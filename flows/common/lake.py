@@ -528,10 +528,15 @@ def read_file_ranges(path: Path, ranges: np.ndarray) -> Iterator[pl.DataFrame]:
         yield scan.slice(start, stop - start).collect()
 
 
+UNKNOWN_SPAN_US = (-(2**63), 2**63 - 1)
+"""``(first, last)`` :func:`row_group_spans` gives a row group without statistics: all time."""
+
+
 def row_group_spans(path: Path | pq.FileMetaData) -> list[tuple[int, int, int]]:
     """``(rows, first, last)`` of each row group of a lake file (or of its footer, already read):
     its rows and the range of its ``timestamp_utc`` (µs since the epoch) from the footer's
-    statistics (no data is read); a group without statistics spans all time."""
+    statistics (no data is read); a group without statistics spans all time
+    (:data:`UNKNOWN_SPAN_US`)."""
     md = path if isinstance(path, pq.FileMetaData) else pq.ParquetFile(path).metadata
     col = md.schema.to_arrow_schema().get_field_index("timestamp_utc")
     out = []
@@ -539,7 +544,7 @@ def row_group_spans(path: Path | pq.FileMetaData) -> list[tuple[int, int, int]]:
         rg = md.row_group(i)
         st = rg.column(col).statistics
         known = st is not None and st.has_min_max
-        out.append((rg.num_rows, int(st.min_raw) if known else -(2**63), int(st.max_raw) if known else 2**63 - 1))
+        out.append((rg.num_rows, *((int(st.min_raw), int(st.max_raw)) if known else UNKNOWN_SPAN_US)))
     return out
 
 

@@ -42,7 +42,7 @@ from flows.common.batches import WriteBatch
 from flows.common.config import load_plant_config, plant_valves
 from flows.common.errors import ValvemonError
 from flows.common.instants import utc_instant
-from flows.common.lake import SENSOR_POLARS_SCHEMA, grid_rows_before, grid_series, list_partitions, read_lake, row_group_spans, time_grid
+from flows.common.lake import SENSOR_POLARS_SCHEMA, grid_rows_before, grid_series, UNKNOWN_SPAN_US, list_partitions, read_lake, row_group_spans, time_grid
 from flows.common.prefect_run import flow, task
 from flows.common.warehouse_db import add_missing_columns, connect, ensure_tables, insert_frame, query_frame, transaction
 from model.area import edge_area
@@ -435,14 +435,10 @@ def _lake_files(warehouse: Path, valve_id: str, start: datetime | None, end: dat
         md = pq.ParquetFile(path).metadata
         groups = row_group_spans(md)
         first, last = min((g[1] for g in groups), default=None), max((g[2] for g in groups), default=None)
-        known = first is not None and first != _NO_STATISTICS  # (a group without statistics spans all time)
+        known = first is not None and first != UNKNOWN_SPAN_US[0]  # (a group without statistics spans all time)
         out.append(_LakeFile(path, day, sum(g[0] for g in groups), _EPOCH + timedelta(microseconds=first) if known else None,
                              _EPOCH + timedelta(microseconds=last) if known else None, time_grid(md) if known else None))  # fmt: skip
     return out
-
-
-_NO_STATISTICS = -(2**63)
-"""The first time stamp :func:`flows.common.lake.row_group_spans` gives a row group without statistics."""
 
 
 def _day_extent(warehouse: Path, valve_id: str, day: date, files: list[_LakeFile]) -> tuple[datetime, datetime]:
