@@ -58,7 +58,7 @@ import numpy as np
 
 from transforms.discrepancy.settings import DiscrepancySettings
 
-__all__ = ["LoadEstimate", "estimate_load", "follows_ramps", "load_projector", "project_out", "ramp_load", "replay_load", "segment_knots", "segment_levels", "step_filter",
+__all__ = ["LoadEstimate", "estimate_load", "load_projector", "project_out", "ramp_load", "replay_load", "segment_knots", "segment_levels", "step_filter",
            "stuck_spans"]
 
 
@@ -390,19 +390,6 @@ def ramp_load(f_hat: np.ndarray, valid: np.ndarray, usable: np.ndarray, segment:
     return knots, load
 
 
-def follows_ramps(f_hat: np.ndarray, valid: np.ndarray, segment: np.ndarray, n_segments: int, knot_samples: int, settings: DiscrepancySettings,
-                  motion: tuple | None = None) -> bool:
-    """Does the load vary within its segments? The piecewise-linear fit on the regular grid of
-    ``knot_samples`` (jointly with the ``motion`` columns) leaves at most 1/``settings.ramp_ratio``
-    of the residual RMS of one constant per segment (jointly with the same columns), and that is
-    above ``settings.ramp_min_n``."""
-    if knot_samples <= 0:
-        return False
-    _, rms_const, _ = _ramp_fit(f_hat, valid, segment, _grid_knots(valid, segment, n_segments, 0), motion)
-    _, rms_ramp, _ = _ramp_fit(f_hat, valid, segment, _grid_knots(valid, segment, n_segments, knot_samples), motion)
-    return rms_const > settings.ramp_min_n and rms_ramp * settings.ramp_ratio <= rms_const
-
-
 def load_projector(group: np.ndarray, sample: np.ndarray, knots: dict) -> list[tuple[np.ndarray, np.ndarray]]:
     """The least-squares elimination of the load from motion rows (Frisch–Waugh): per group
     (record × segment) its rows' positions and an orthonormal basis Q of its load columns
@@ -565,7 +552,5 @@ def estimate_load(f_hat: np.ndarray, v: np.ndarray, settings: DiscrepancySetting
         return est
     k = max(2, int(round(settings.load_knot_s / dt)))
     motion = (v, accel)
-    if not follows_ramps(f_hat, valid, segment, len(steps_arr) + 1, k, settings, motion):
-        return est
     knots, load = ramp_load(f_hat, valid, usable, segment, len(steps_arr) + 1, k, settings, levels, motion)
     return replace(est, knot_samples=k, corners=tuple(knots), load=load)

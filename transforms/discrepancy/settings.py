@@ -83,11 +83,6 @@ class DiscrepancySettings:
         0.1–0.4 s; a free slope over a 1–2 s level traded with the velocity column of the joint fit
         (a friction mismatch) and left the load 30–70 N off over whole moves. The levels are kept
         where they leave less to the motion columns than free slopes. 0: free slopes. [s]
-    ramp_ratio, ramp_min_n : float
-        The piecewise-linear load is used where it leaves at most 1/``ramp_ratio`` of the
-        residual RMS of one constant per segment, and that RMS is above ``ramp_min_n`` (about 3×
-        the force balance's noise, ~40 N at 0.05 bar: a rolling force that moves a few hundred
-        newtons within a segment leaves 145–220 N). [–], [N]
     replay_segment_s : float
         The replay restarts from the measured state every this many seconds (multiple
         shooting), so a small flow error cannot make the position drift over a whole record. [s]
@@ -136,8 +131,6 @@ class DiscrepancySettings:
     corner_sigmas: float = 4.0
     corner_coarse_factor: float = 3.0
     load_level_s: float = 0.5
-    ramp_ratio: float = 3.0
-    ramp_min_n: float = 120.0
     replay_segment_s: float = 2.5
     mechanical_segment_s: float = 0.5
     block_s: float = 1.0
