@@ -26,12 +26,16 @@ instants), so the estimate is made piecewise constant:
    (those within ``step_guard_samples`` of a step left out); segments without any take the
    level of the next segment (else the previous one).
 3. **ramps.** A rolling force is not piecewise constant: it ramps to a new level over 0.1–0.4 s,
-   which the step filter's quadratic takes up and does not report. So the load is also fitted
-   piecewise linear in time within each segment (knots every ``load_knot_s`` between the
-   segment's first and last valid sample, constant beyond them; least squares on F̂_l jointly
-   with the velocity and acceleration, so a friction or mass mismatch does not decide it), and
-   that fit is kept where it leaves at most 1/``ramp_ratio`` of the constant levels' residual
-   RMS and the levels leave more than ``ramp_min_n`` (:func:`follows_ramps`). The regression
+   which the step filter's quadratic takes up and does not report. So the load is made piecewise
+   linear in time within each segment, bending at the ramps' corners and at the ends of its
+   standstills (:func:`ramp_load`; least squares on F̂_l jointly with the velocity and
+   acceleration, so a friction or mass mismatch does not decide it), in every record: a segment
+   without a ramp finds no corner and stays one level. (Keeping one constant per segment unless
+   a 0.1 s grid left a third of its residual missed a single ramp at the start of a move, 260 N
+   over 0.5 s, which the grid leaves 1/1.8 of: the replay 0.5 mm off over that 0.5 s piece on the
+   reference plant; and the levels, medians of F̂_l, hold the friction and mass mismatch that the
+   joint fit takes apart: ``model/``'s plant seed 0, 4.9× the noise floor, 1.6× on the
+   corners.) The regression
    then eliminates the same piecewise-linear load from the motion rows
    (:func:`load_projector`) instead of one constant per segment: a mass acts on the
    acceleration and a friction on the velocity, which change within a move (0.3–0.6 s), faster
@@ -140,8 +144,8 @@ class LoadEstimate:
     """A replay holds the cylinder (:func:`replay_load`) while it sticks before this sample:
     the load before the first observable motion was found to differ from the first level."""
     knot_samples: int = 0
-    """Knot spacing of the piecewise-linear load within segments (samples); 0: one constant per
-    segment (module docstring, step 3)."""
+    """Knot spacing of the 0.1 s grid on which the ramps' corners are looked for (samples); 0: one
+    constant per segment (no motion columns given, module docstring, step 3)."""
     corners: tuple = ()
     """Per segment, the knots (sample positions) of its piecewise-linear load: its first and last
     valid sample, the ends of its standstills and the ramps' corners (:func:`ramp_load`); empty: the
@@ -506,7 +510,8 @@ def estimate_load(f_hat: np.ndarray, v: np.ndarray, settings: DiscrepancySetting
     (a load step is often what makes a resting cylinder creep).
 
     ``accel`` [m/s²] (the acceleration averaged as in ``f_hat``) and ``dt`` [s]: with both, the
-    load is made piecewise linear within segments where it ramps (module docstring, step 3)."""
+    load is made piecewise linear within segments, bending at the ramps' corners (module
+    docstring, step 3); without them, one constant per segment."""
     n = f_hat.size
     w = settings.step_half_width
     L = settings.interval_samples

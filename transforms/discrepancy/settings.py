@@ -62,8 +62,9 @@ class DiscrepancySettings:
     step_guard_samples : int
         Samples on either side of a detected load step left out of the motion equation.
     load_knot_s : float
-        Knot spacing of the piecewise-linear load where the load ramps within segments
-        (:mod:`transforms.discrepancy.load`, step 3): a rolling force reaches a new level over
+        Knot spacing of the first, regular piecewise-linear load fit within segments, which takes
+        a first friction and mass mismatch off before the ramps' corners are looked for
+        (:func:`transforms.discrepancy.load.ramp_load`): a rolling force reaches a new level over
         0.1–0.4 s. [s]
     corner_half_width_s : float
         Half-width of the filter that finds the ramps' corners: the slope change between a
