@@ -26,16 +26,16 @@ instants), so the estimate is made piecewise constant:
    (those within ``step_guard_samples`` of a step left out); segments without any take the
    level of the next segment (else the previous one).
 3. **ramps.** A rolling force is not piecewise constant: it ramps to a new level over 0.1–0.4 s,
-   which the step filter's quadratic takes up and does not report. So the load is made piecewise
-   linear in time within each segment, bending at the ramps' corners and at the ends of its
-   standstills (:func:`ramp_load`; least squares on F̂_l jointly with the velocity and
-   acceleration, so a friction or mass mismatch does not decide it), in every record: a segment
-   without a ramp finds no corner and stays one level. (Keeping one constant per segment unless
-   a 0.1 s grid left a third of its residual missed a single ramp at the start of a move, 260 N
-   over 0.5 s, which the grid leaves 1/1.8 of: the replay 0.5 mm off over that 0.5 s piece on the
-   reference plant; and the levels, medians of F̂_l, hold the friction and mass mismatch that the
-   joint fit takes apart: ``model/``'s plant seed 0, 4.9× the noise floor, 1.6× on the
-   corners.) The regression
+   which the step filter's quadratic takes up and does not report. So the load is also fitted
+   piecewise linear in time within each segment (knots every ``load_knot_s`` between the
+   segment's first and last valid sample, constant beyond them; least squares on F̂_l jointly
+   with the velocity and acceleration, so a friction or mass mismatch does not decide it), and
+   that fit is kept where it leaves at most 1/``ramp_ratio`` of the constant levels' residual
+   RMS and the levels leave more than ``ramp_min_n`` (:func:`follows_ramps`), or where the load on
+   the ramps' corners (below) leaves at most 1/``corner_ratio`` of one constant per segment's
+   (:func:`corners_pay`: a single ramp at the start of a move hardly moves the grid's ratio, and
+   one constant missed a 260 N ramp over 0.5 s on the reference plant, the replay 0.5 mm off over
+   that 0.5 s piece). The regression
    then eliminates the same piecewise-linear load from the motion rows
    (:func:`load_projector`) instead of one constant per segment: a mass acts on the
    acceleration and a friction on the velocity, which change within a move (0.3–0.6 s), faster
@@ -62,7 +62,7 @@ import numpy as np
 
 from transforms.discrepancy.settings import DiscrepancySettings
 
-__all__ = ["LoadEstimate", "estimate_load", "load_projector", "project_out", "ramp_load", "replay_load", "segment_knots", "segment_levels", "step_filter",
+__all__ = ["LoadEstimate", "corners_pay", "estimate_load", "follows_ramps", "load_projector", "project_out", "ramp_load", "replay_load", "segment_knots", "segment_levels", "step_filter",
            "stuck_spans"]
 
 
@@ -144,8 +144,8 @@ class LoadEstimate:
     """A replay holds the cylinder (:func:`replay_load`) while it sticks before this sample:
     the load before the first observable motion was found to differ from the first level."""
     knot_samples: int = 0
-    """Knot spacing of the 0.1 s grid on which the ramps' corners are looked for (samples); 0: one
-    constant per segment (no motion columns given, module docstring, step 3)."""
+    """Knot spacing of the piecewise-linear load within segments (samples); 0: one constant per
+    segment (module docstring, step 3)."""
     corners: tuple = ()
     """Per segment, the knots (sample positions) of its piecewise-linear load: its first and last
     valid sample, the ends of its standstills and the ramps' corners (:func:`ramp_load`); empty: the
@@ -394,6 +394,34 @@ def ramp_load(f_hat: np.ndarray, valid: np.ndarray, usable: np.ndarray, segment:
     return knots, load
 
 
+def follows_ramps(f_hat: np.ndarray, valid: np.ndarray, segment: np.ndarray, n_segments: int, knot_samples: int, settings: DiscrepancySettings,
+                  motion: tuple | None = None) -> bool:
+    """Does the load vary within its segments? The piecewise-linear fit on the regular grid of
+    ``knot_samples`` (jointly with the ``motion`` columns) leaves at most 1/``settings.ramp_ratio``
+    of the residual RMS of one constant per segment (jointly with the same columns), and that is
+    above ``settings.ramp_min_n``."""
+    if knot_samples <= 0:
+        return False
+    _, rms_const, _ = _ramp_fit(f_hat, valid, segment, _grid_knots(valid, segment, n_segments, 0), motion)
+    _, rms_ramp, _ = _ramp_fit(f_hat, valid, segment, _grid_knots(valid, segment, n_segments, knot_samples), motion)
+    return rms_const > settings.ramp_min_n and rms_ramp * settings.ramp_ratio <= rms_const
+
+
+def corners_pay(f_hat: np.ndarray, usable: np.ndarray, segment: np.ndarray, n_segments: int, knots: list[np.ndarray], settings: DiscrepancySettings,
+                motion: tuple | None = None) -> bool:
+    """Does the load on its ramps' corners (``knots``, :func:`ramp_load`) leave materially less of
+    ``f_hat`` than one constant per segment, where :func:`follows_ramps` found the 0.1 s grid does
+    not? Both fitted jointly with the ``motion`` columns over the ``usable`` samples; the corner
+    fit's residual RMS is at most 1/``settings.corner_ratio`` of the constants'. Where its corners
+    are right, the corner fit leaves the force balance's noise, so this asks whether the ramps stand
+    out of that noise; the grid, with its many more columns, hardly changes its residual for one
+    ramp at the start of one move (a 260 N ramp over 0.5 s: one constant leaves 1.8× the grid's,
+    and 1.8× the corner fit's)."""
+    _, rms_const, _ = _ramp_fit(f_hat, usable, segment, [np.zeros(0)] * n_segments, motion)
+    _, rms_corner, _ = _ramp_fit(f_hat, usable, segment, knots, motion)
+    return rms_corner * settings.corner_ratio <= rms_const
+
+
 def load_projector(group: np.ndarray, sample: np.ndarray, knots: dict) -> list[tuple[np.ndarray, np.ndarray]]:
     """The least-squares elimination of the load from motion rows (Frisch–Waugh): per group
     (record × segment) its rows' positions and an orthonormal basis Q of its load columns
@@ -510,8 +538,7 @@ def estimate_load(f_hat: np.ndarray, v: np.ndarray, settings: DiscrepancySetting
     (a load step is often what makes a resting cylinder creep).
 
     ``accel`` [m/s²] (the acceleration averaged as in ``f_hat``) and ``dt`` [s]: with both, the
-    load is made piecewise linear within segments, bending at the ramps' corners (module
-    docstring, step 3); without them, one constant per segment."""
+    load is made piecewise linear within segments where it ramps (module docstring, step 3)."""
     n = f_hat.size
     w = settings.step_half_width
     L = settings.interval_samples
@@ -557,5 +584,9 @@ def estimate_load(f_hat: np.ndarray, v: np.ndarray, settings: DiscrepancySetting
         return est
     k = max(2, int(round(settings.load_knot_s / dt)))
     motion = (v, accel)
-    knots, load = ramp_load(f_hat, valid, usable, segment, len(steps_arr) + 1, k, settings, levels, motion)
+    n_seg = len(steps_arr) + 1
+    ramps = follows_ramps(f_hat, valid, segment, n_seg, k, settings, motion)
+    knots, load = ramp_load(f_hat, valid, usable, segment, n_seg, k, settings, levels, motion)
+    if not (ramps or corners_pay(f_hat, usable, segment, n_seg, knots, settings, motion)):
+        return est
     return replace(est, knot_samples=k, corners=tuple(knots), load=load)

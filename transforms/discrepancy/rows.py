@@ -97,8 +97,8 @@ def _load_motion(rec: Record, settings) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _estimate_load(rec: Record, plant, condition, effects, settings) -> LoadEstimate:
-    """The load of one record under the model with ``effects`` (steps, and piecewise linear within
-    segments, bending at the ramps' corners)."""
+    """The load of one record under the model with ``effects`` (piecewise constant, or piecewise
+    linear within segments where it ramps)."""
     f_hat = _force_balance(rec, plant, condition, effects, settings)
     t = _terms_sg(rec, plant, condition, effects)
     v, a = _load_motion(rec, settings)

@@ -62,9 +62,8 @@ class DiscrepancySettings:
     step_guard_samples : int
         Samples on either side of a detected load step left out of the motion equation.
     load_knot_s : float
-        Knot spacing of the first, regular piecewise-linear load fit within segments, which takes
-        a first friction and mass mismatch off before the ramps' corners are looked for
-        (:func:`transforms.discrepancy.load.ramp_load`): a rolling force reaches a new level over
+        Knot spacing of the piecewise-linear load where the load ramps within segments
+        (:mod:`transforms.discrepancy.load`, step 3): a rolling force reaches a new level over
         0.1–0.4 s. [s]
     corner_half_width_s : float
         Half-width of the filter that finds the ramps' corners: the slope change between a
@@ -84,6 +83,17 @@ class DiscrepancySettings:
         0.1–0.4 s; a free slope over a 1–2 s level traded with the velocity column of the joint fit
         (a friction mismatch) and left the load 30–70 N off over whole moves. The levels are kept
         where they leave less to the motion columns than free slopes. 0: free slopes. [s]
+    ramp_ratio, ramp_min_n : float
+        The piecewise-linear load is used where it leaves at most 1/``ramp_ratio`` of the
+        residual RMS of one constant per segment, and that RMS is above ``ramp_min_n`` (about 3×
+        the force balance's noise, ~40 N at 0.05 bar: a rolling force that moves a few hundred
+        newtons within a segment leaves 145–220 N). [–], [N]
+    corner_ratio : float
+        Where the 0.1 s grid does not pass ``ramp_ratio``, the load on the ramps' corners is still
+        used where it leaves at most 1/this of the residual RMS of one constant per segment
+        (both with the motion columns, on the samples at speed;
+        :func:`transforms.discrepancy.load.corners_pay`): one ramp at the start of a move (a
+        260 N ramp over 0.5 s: 1.8). [–]
     replay_segment_s : float
         The replay restarts from the measured state every this many seconds (multiple
         shooting), so a small flow error cannot make the position drift over a whole record. [s]
@@ -132,6 +142,9 @@ class DiscrepancySettings:
     corner_sigmas: float = 4.0
     corner_coarse_factor: float = 3.0
     load_level_s: float = 0.5
+    ramp_ratio: float = 3.0
+    ramp_min_n: float = 120.0
+    corner_ratio: float = 1.5
     replay_segment_s: float = 2.5
     mechanical_segment_s: float = 0.5
     block_s: float = 1.0
