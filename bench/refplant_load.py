@@ -30,7 +30,7 @@ def main(argv=None) -> None:
     t0 = time.process_time()
     for seed in range(a.seeds):
         for r in window_figures(seed, a.windows):
-            print(f"seed {r['seed']} window {r['window']}: load off by {r['load_error_n']:.0f} N RMS at speed; "
+            print(f"seed {r['seed']} window {r['window']}: load ({r['load']}) off by {r['load_error_n']:.0f} N RMS at speed; "
                   f"mechanical gap {r['mechanical_gap_mm']:.3f} mm, with the true load {r['true_load_gap_mm']:.3f} mm", flush=True)
     print(f"CPU {time.process_time() - t0:.0f} s")
 

@@ -15,8 +15,8 @@ import numpy as np
 
 def window_figures(seed: int, n_windows: int, only: int | None = None) -> list[dict]:
     """Per window of valve ``seed`` (``n_windows`` drawn from 100 + ``seed``, as the study's; only
-    window ``only`` if given): the load's RMS error at speed [N], the mechanical gap with the
-    estimate and with the true load [mm]."""
+    window ``only`` if given): the load (``"ramps"`` or ``"constant"``), its RMS error at speed [N],
+    the mechanical gap with the estimate and with the true load [mm]."""
     from model import TABLE1
     from model.effects import Effects
     from tests.refplant import NAMEPLATE, manufactured, simulate_windows, to_lake_frame
@@ -45,7 +45,7 @@ def window_figures(seed: int, n_windows: int, only: int | None = None) -> list[d
             e = _replay_record(p, plant, cond, fx, s)["X_mechanical"] - p.rec.raw["X"]
             gaps.append(float(np.sqrt(np.nanmean(e ** 2))) * 1e3)
         at_speed = est.usable
-        out.append({"seed": seed, "window": i,
+        out.append({"seed": seed, "window": i, "load": "ramps" if est.knot_samples else "constant",
                     "load_error_n": float(np.sqrt(np.mean((est.load[at_speed] - true_load[at_speed]) ** 2))),
                     "mechanical_gap_mm": gaps[0], "true_load_gap_mm": gaps[1]})
     return out

@@ -53,6 +53,7 @@ def test_the_load_follows_the_ramps_and_the_levels(seed, gap_ratio):
     # the joint fit's velocity column (43 N off at speed, 0.091 mm against 0.008 mm) until a level
     # got one value (``load_level_s``)
     (w,) = window_figures(seed, 2, only=1)
+    assert w["load"] == "ramps"
     assert w["load_error_n"] < 25.0, w  # N: 6 N on seed 1, 15 N on seed 2
     assert w["mechanical_gap_mm"] < gap_ratio * w["true_load_gap_mm"], w  # 0.013 against 0.009 mm; 0.026 against 0.0084 mm
 

@@ -415,8 +415,8 @@ def corners_pay(f_hat: np.ndarray, usable: np.ndarray, segment: np.ndarray, n_se
     fit's residual RMS is at most 1/``settings.corner_ratio`` of the constants'. Where its corners
     are right, the corner fit leaves the force balance's noise, so this asks whether the ramps stand
     out of that noise; the grid, with its many more columns, hardly changes its residual for one
-    ramp at the start of one move (a 260 N ramp over 0.5 s: one constant leaves 1.8× the grid's,
-    and 1.8× the corner fit's)."""
+    ramp at the start of one move (a 260 N ramp over 0.5 s on the reference plant: one constant
+    leaves 2.6× the grid's residual over the valid samples, 1.8× the corner fit's at speed)."""
     _, rms_const, _ = _ramp_fit(f_hat, usable, segment, [np.zeros(0)] * n_segments, motion)
     _, rms_corner, _ = _ramp_fit(f_hat, usable, segment, knots, motion)
     return rms_corner * settings.corner_ratio <= rms_const
