@@ -13,22 +13,36 @@ from datetime import datetime, timezone
 import numpy as np
 
 
-def window_figures(seed: int, n_windows: int, only: int | None = None) -> list[dict]:
+def window_figures(seed: int, n_windows: int, only: int | None = None, load_interval_s: tuple[float, float] | None = None,
+                   model: tuple | None = None) -> list[dict]:
     """Per window of valve ``seed`` (``n_windows`` drawn from 100 + ``seed``, as the study's; only
-    window ``only`` if given): the load (``"ramps"`` or ``"constant"``), its RMS error at speed [N],
-    the mechanical gap with the estimate and with the true load [mm]."""
+    window ``only`` if given; ``load_interval_s`` the range of the load's intervals between new
+    levels [s], None: the plant's 1–4 s): the load (``"ramps"`` or ``"constant"``), its RMS error at speed [N],
+    the mechanical gap with the estimate and with the true load [mm], and the velocity part the
+    estimate leaves (least squares of F̂_l − load on v_X over the samples at speed) [N·s/m]: a
+    friction mismatch of the model, or, with the true cylinder, load error that follows v_X.
+
+    ``model``: (plant, condition) to diagnose with instead of Table 1's with the plant's true
+    cylinder (e.g. a commissioning calibration's; its true-load gap then carries the model's own
+    force error)."""
     from model import TABLE1
     from model.effects import Effects
     from tests.refplant import NAMEPLATE, manufactured, simulate_windows, to_lake_frame
     from transforms.discrepancy import DiscrepancySettings, split_records
     from transforms.discrepancy.alignment import align_records
-    from transforms.discrepancy.rows import _replay_record, prepare_records
+    from transforms.discrepancy.rows import _force_balance, _replay_record, prepare_records
 
     s = DiscrepancySettings()
-    truth = simulate_windows(manufactured(NAMEPLATE, seed=seed), n_windows, 100 + seed)
-    tc = truth[0].plant.cylinder
-    plant = replace(TABLE1, cylinder=replace(TABLE1.cylinder, mass_kg=tc.mass_kg, d_v_n_s_m=tc.d_v_n_s_m, d_c_n=tc.d_c_n, d_s_n=tc.d_s_n, v0_m_s=tc.v0_m_s))
-    cond = plant.nominal_condition
+    ref = manufactured(NAMEPLATE, seed=seed)
+    if load_interval_s is not None:
+        ref = replace(ref, operation=replace(ref.operation, load_interval_s=tuple(load_interval_s)))
+    truth = simulate_windows(ref, n_windows, 100 + seed)
+    if model is None:
+        tc = truth[0].plant.cylinder
+        plant = replace(TABLE1, cylinder=replace(TABLE1.cylinder, mass_kg=tc.mass_kg, d_v_n_s_m=tc.d_v_n_s_m, d_c_n=tc.d_c_n, d_s_n=tc.d_s_n, v0_m_s=tc.v0_m_s))
+        cond = plant.nominal_condition
+    else:
+        plant, cond = model
     lake = to_lake_frame(truth, "V1", datetime(2025, 3, 1, tzinfo=timezone.utc))
     recs, _ = align_records(split_records(lake, s), plant, cond, s)
     windows = list(range(len(recs))) if only is None else [only]
@@ -45,7 +59,10 @@ def window_figures(seed: int, n_windows: int, only: int | None = None) -> list[d
             e = _replay_record(p, plant, cond, fx, s)["X_mechanical"] - p.rec.raw["X"]
             gaps.append(float(np.sqrt(np.nanmean(e ** 2))) * 1e3)
         at_speed = est.usable
+        left = (_force_balance(p.rec, plant, cond, fx, s) - est.load)[at_speed]
+        v = p.rec.sg["v"][at_speed]
         out.append({"seed": seed, "window": i, "load": "ramps" if est.knot_samples else "constant",
                     "load_error_n": float(np.sqrt(np.mean((est.load[at_speed] - true_load[at_speed]) ** 2))),
-                    "mechanical_gap_mm": gaps[0], "true_load_gap_mm": gaps[1]})
+                    "mechanical_gap_mm": gaps[0], "true_load_gap_mm": gaps[1],
+                    "velocity_part_n_s_m": float(np.polyfit(v, left, 1)[0])})
     return out
