@@ -26,13 +26,15 @@ Two kinds of evidence (docs/discrepancy.md, "Verdicts"):
    the hydraulic gap where the reading acts ≤ ``FLOOR_FACTOR`` × its noise floor), one whose exact joint fit
    widens that gap by more than ``REPLAY_REFUTES`` (resp. ``FLOOR_REFUTES``) is refuted and the verdict is ``none`` (a transmitter gain that
    balances the equation rows' small systematic errors but replays worse); the runner-up is not
-   promoted.
+   promoted. The whole replay does not refute a reading that the gap where it acts speaks for
+   (:func:`whole_replay_refutes`).
 
 3. **No name without a shrinking gap.** A named reading must close the gap where it acts (the
    hydraulic or the mechanical replay, :func:`acting_gap`) by ≥ ``GAP_SHRINK``× or to ≤
    ``FLOOR_FACTOR`` × its noise floor (:func:`confirmed`). A selection whose effect does not is
    ``unexplained`` (:func:`unexplained`: the equation, signal, region and size of the
-   disagreement); a reading named by the prior alone that does not beat the calibrated base model
+   disagreement), unless another candidate's reading of (2) beats the calibrated base model in the
+   replay (:func:`beyond_selection`: then ``ambiguous``); a reading named by the prior alone that does not beat the calibrated base model
    in the replay (shrink its gap ≥ ``GAP_SHRINK``×, or where the base model is already within
    ``FLOOR_FACTOR`` × the floor, narrow it by ``FLOOR_NARROWS``) is ``ambiguous``.
 4. **A transmitter lagging the others** (:func:`lagging_transmitter`): the records are aligned for
@@ -66,9 +68,10 @@ MAX_CONFIDENCE = 0.999
 REPLAY_REFUTES = 1.1
 """Where the calibrated base model replays within the noise floor (gap ≤ ``gaps.NOISE_GAP``), a
 reading whose exact fit widens the replay gap beyond this factor is refuted, unless it acts on the
-hydraulic gap and narrows that by ``FLOOR_NARROWS`` (an effect that is a nuisance pattern leaves the
-gap about as it is, one that explains the data shrinks it; the whole replay also holds the load
-estimate, which the reading's joint fit moves). Above the
+hydraulic gap and narrows that by ``FLOOR_NARROWS``, or is a mass or friction reading that leaves the
+mechanical gap within ``FLOOR_REFUTES`` (:func:`whole_replay_refutes`; an effect that is a nuisance
+pattern leaves the gap about as it is, one that explains the data shrinks it; the whole replay also
+holds the load estimate, which the reading's joint fit moves). Above the
 floor the replay is dominated by what neither model describes (the load estimate around frequent
 load steps) and does not arbitrate: there the true entrained air widened it by 12 %."""
 FLOOR_REFUTES = 1.03
