@@ -232,8 +232,9 @@ class Verdict:
     ----------
     verdict : str
         ``named``, ``ambiguous``, ``unexplained`` (the equations point at an effect whose replay
-        does not close the gap where it acts: the data disagree with the model in a way no library
-        effect explains, ``where``) or ``none``.
+        does not close the gap where it acts, and no other candidate's reading beats the calibrated
+        base model there (:func:`beyond_selection`): the data disagree with the model in a way no
+        library effect explains, ``where``) or ``none``.
     confidence : float
         In [0, 1]: how sure the first reading is (module docstring).
     effect : EffectSpec or None
