@@ -451,7 +451,7 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
     verdict = None
     gap_nominal = stage_gaps[0]
     if nm is not None:
-        from transforms.discrepancy.verdict import nuisance_verdict
+        from transforms.discrepancy.verdict import beyond_selection, nuisance_verdict
 
         if final_fit is None:
             final_fit = joint_fit(prepared, nm, z_cal, [], base, rows0, w_rows, settings, iterations=0)
@@ -459,6 +459,13 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
             return _gaps(prepared, *model, fx, settings, set())[0]
 
         verdict = nuisance_verdict(prepared, nm, final_fit, named_specs, specs, rows0, w_rows, settings, named, gap_of, stage_gaps[0], floors, stage_acc)
+        if named and not named[0].confirmed:
+            # the selection's effect does not close its gap: the other candidates' readings against
+            # the calibrated base model, judged as where nothing was selected (verdict.beyond_selection)
+            base_fit = joint_fit(prepared, nm, z_cal, [], base, rows0, w_rows, settings, iterations=0)
+            rest = [s for s in specs if s != named[0].spec]
+            verdict = beyond_selection(verdict, nuisance_verdict(prepared, nm, base_fit, [], rest, rows0, w_rows, settings, [], gap_of,
+                                                                 stage_gaps[0], floors, stage_acc))
         for p, p0 in zip(prepared, prepared0):  # the same records (prepare_records keeps or drops a record by its length)
             p.loads.setdefault((*nominal, base), p0.loads[(*nominal, base)])
         gap_nominal = _gaps(prepared, *nominal, base, settings, set(), split=False)[0].gap()
