@@ -31,7 +31,11 @@ instants), so the estimate is made piecewise constant:
    segment's first and last valid sample, constant beyond them; least squares on F̂_l jointly
    with the velocity and acceleration, so a friction or mass mismatch does not decide it), and
    that fit is kept where it leaves at most 1/``ramp_ratio`` of the constant levels' residual
-   RMS and the levels leave more than ``ramp_min_n`` (:func:`follows_ramps`). The regression
+   RMS and the levels leave more than ``ramp_min_n`` (:func:`follows_ramps`), or where the load on
+   the ramps' corners (below) leaves at most 1/``corner_ratio`` of one constant per segment's
+   (:func:`corners_pay`: a single ramp at the start of a move hardly moves the grid's ratio, and
+   one constant missed a 260 N ramp over 0.5 s on the reference plant, the replay 0.5 mm off over
+   that 0.5 s piece). The regression
    then eliminates the same piecewise-linear load from the motion rows
    (:func:`load_projector`) instead of one constant per segment: a mass acts on the
    acceleration and a friction on the velocity, which change within a move (0.3–0.6 s), faster
@@ -58,7 +62,7 @@ import numpy as np
 
 from transforms.discrepancy.settings import DiscrepancySettings
 
-__all__ = ["LoadEstimate", "estimate_load", "follows_ramps", "load_projector", "project_out", "ramp_load", "replay_load", "segment_knots", "segment_levels", "step_filter",
+__all__ = ["LoadEstimate", "corners_pay", "estimate_load", "follows_ramps", "load_projector", "project_out", "ramp_load", "replay_load", "segment_knots", "segment_levels", "step_filter",
            "stuck_spans"]
 
 
@@ -403,6 +407,21 @@ def follows_ramps(f_hat: np.ndarray, valid: np.ndarray, segment: np.ndarray, n_s
     return rms_const > settings.ramp_min_n and rms_ramp * settings.ramp_ratio <= rms_const
 
 
+def corners_pay(f_hat: np.ndarray, usable: np.ndarray, segment: np.ndarray, n_segments: int, knots: list[np.ndarray], settings: DiscrepancySettings,
+                motion: tuple | None = None) -> bool:
+    """Does the load on its ramps' corners (``knots``, :func:`ramp_load`) leave materially less of
+    ``f_hat`` than one constant per segment, where :func:`follows_ramps` found the 0.1 s grid does
+    not? Both fitted jointly with the ``motion`` columns over the ``usable`` samples; the corner
+    fit's residual RMS is at most 1/``settings.corner_ratio`` of the constants'. Where its corners
+    are right, the corner fit leaves the force balance's noise, so this asks whether the ramps stand
+    out of that noise; the grid, with its many more columns, hardly changes its residual for one
+    ramp at the start of one move (a 260 N ramp over 0.5 s: one constant leaves 1.8× the grid's,
+    and 1.8× the corner fit's)."""
+    _, rms_const, _ = _ramp_fit(f_hat, usable, segment, [np.zeros(0)] * n_segments, motion)
+    _, rms_corner, _ = _ramp_fit(f_hat, usable, segment, knots, motion)
+    return rms_corner * settings.corner_ratio <= rms_const
+
+
 def load_projector(group: np.ndarray, sample: np.ndarray, knots: dict) -> list[tuple[np.ndarray, np.ndarray]]:
     """The least-squares elimination of the load from motion rows (Frisch–Waugh): per group
     (record × segment) its rows' positions and an orthonormal basis Q of its load columns
@@ -565,7 +584,9 @@ def estimate_load(f_hat: np.ndarray, v: np.ndarray, settings: DiscrepancySetting
         return est
     k = max(2, int(round(settings.load_knot_s / dt)))
     motion = (v, accel)
-    if not follows_ramps(f_hat, valid, segment, len(steps_arr) + 1, k, settings, motion):
+    n_seg = len(steps_arr) + 1
+    ramps = follows_ramps(f_hat, valid, segment, n_seg, k, settings, motion)
+    knots, load = ramp_load(f_hat, valid, usable, segment, n_seg, k, settings, levels, motion)
+    if not (ramps or corners_pay(f_hat, usable, segment, n_seg, knots, settings, motion)):
         return est
-    knots, load = ramp_load(f_hat, valid, usable, segment, len(steps_arr) + 1, k, settings, levels, motion)
     return replace(est, knot_samples=k, corners=tuple(knots), load=load)

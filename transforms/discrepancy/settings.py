@@ -88,6 +88,12 @@ class DiscrepancySettings:
         residual RMS of one constant per segment, and that RMS is above ``ramp_min_n`` (about 3×
         the force balance's noise, ~40 N at 0.05 bar: a rolling force that moves a few hundred
         newtons within a segment leaves 145–220 N). [–], [N]
+    corner_ratio : float
+        Where the 0.1 s grid does not pass ``ramp_ratio``, the load on the ramps' corners is still
+        used where it leaves at most 1/this of the residual RMS of one constant per segment
+        (both with the motion columns, on the samples at speed;
+        :func:`transforms.discrepancy.load.corners_pay`): one ramp at the start of a move (a
+        260 N ramp over 0.5 s: 1.8). [–]
     replay_segment_s : float
         The replay restarts from the measured state every this many seconds (multiple
         shooting), so a small flow error cannot make the position drift over a whole record. [s]
@@ -138,6 +144,7 @@ class DiscrepancySettings:
     load_level_s: float = 0.5
     ramp_ratio: float = 3.0
     ramp_min_n: float = 120.0
+    corner_ratio: float = 1.5
     replay_segment_s: float = 2.5
     mechanical_segment_s: float = 0.5
     block_s: float = 1.0
