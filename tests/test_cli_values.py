@@ -73,10 +73,10 @@ def paths(tmp_path_factory) -> list[str]:
 @pytest.mark.parametrize("name, cmd, param", PLAIN, ids=[n for n, _, _ in PLAIN])
 def test_the_values_a_command_line_gives(name, cmd, param, paths):
     """Strings, lists of them, flags' bools, the defaults, None, and values typer rejects."""
-    values = [None, param.default, True, False, 0, 3, 2.5, "3", "2.5", "yes", "x y", Path("p"), *paths]
+    values = [None, param.default, True, False, 0, 3, 2.5, "3", "2.5", "yes", "x y", Path("p"), "\x00", "a\x00b", *paths]
     for v in values:
         _same(v, cmd, param)
-    for v in ([], ("a", "b"), ["3", "x"], (Path("p"),), tuple(paths)):
+    for v in ([], ("a", "b"), ["3", "x"], ("a", "\x00"), (Path("p"),), tuple(paths)):
         _same(v, cmd, param)
 
 

@@ -52,6 +52,8 @@ class PlainValue(RuntimeParam):
 
     def _one(self, value: Any, param, ctx: Context) -> Any:
         if self.leaf is Path and isinstance(value, (str, Path)):
+            if "\x00" in str(value):  # pydantic rejects a NUL in a path with its own message: typer's
+                raise _Typers
             # typer's: the string as a Path (pydantic's Path(value)), then its checks of the path
             return coerce_cli_path(Path(value), self.parameter_info, path_type=Path, param=param, ctx=ctx)
         if type(value) is self.leaf:  # a string as given, a flag's bool, a default of the type
