@@ -72,6 +72,23 @@ def _exact_record(seed=7, effects=None, seconds=10.0):
     return res, prepare_record(Record("V", 0, 0, 1e-3, raw), DiscrepancySettings())
 
 
+def _rolling_force(load_of_t, rng=None):
+    """The force balance F̂_l of seed 1's exact record (the cylinder runs over 2.98–5.22 s) with the
+    load ``load_of_t(t)`` [N], a 600 kg mass and a 3 kN·s/m friction mismatch and 30 N of noise
+    (from ``rng``, default ``default_rng(3)``): (settings, t, v, a, load, f), ``a`` the acceleration
+    over ±L samples as the force balance averages it."""
+    _, rec = _exact_record(seed=1)
+    s = DiscrepancySettings()
+    t = np.arange(rec.n) * 1e-3
+    L = s.interval_samples
+    a = np.full(rec.n, np.nan)
+    a[L:-L] = (rec.raw["X"][2 * L:] - 2 * rec.raw["X"][L:-L] + rec.raw["X"][:-2 * L]) / (L * 1e-3) ** 2
+    v = rec.sg["v"]
+    load = load_of_t(t)
+    rng = np.random.default_rng(3) if rng is None else rng
+    return s, t, v, a, load, load + 600.0 * a + 3000.0 * v + 30.0 * rng.normal(size=rec.n)
+
+
 def test_integrated_residuals_vanish_on_exact_states_and_show_a_hidden_leak():
     s = DiscrepancySettings()
     for fx, expect_zero in ((None, True), (Effects(internal_leakage_m3_s_pa=2e-12), False)):
@@ -113,16 +130,8 @@ def test_load_follows_ramps_and_keeps_mass_and_friction_apart():
     constant per segment."""
     from transforms.discrepancy.load import load_projector, project_out
 
-    res, rec = _exact_record(seed=1)
-    s = DiscrepancySettings()
-    t = np.arange(rec.n) * 1e-3
-    ramp = np.interp(t, [0.0, 2.0, 2.3, 5.0, 5.35, 8.0, 8.1], [1500.0, 1500.0, -2500.0, -2500.0, 4000.0, 4000.0, 0.0])
-    L = s.interval_samples
-    a = np.full(rec.n, np.nan)
-    a[L:-L] = (rec.raw["X"][2 * L:] - 2 * rec.raw["X"][L:-L] + rec.raw["X"][:-2 * L]) / (L * 1e-3) ** 2
-    v = rec.sg["v"]
     rng = np.random.default_rng(3)
-    f = ramp + 600.0 * a + 3000.0 * v + 30.0 * rng.normal(size=rec.n)  # load, a mass and a friction mismatch, noise
+    s, t, v, a, ramp, f = _rolling_force(lambda t: np.interp(t, [0.0, 2.0, 2.3, 5.0, 5.35, 8.0, 8.1], [1500.0, 1500.0, -2500.0, -2500.0, 4000.0, 4000.0, 0.0]), rng)
     est = estimate_load(f, v, s, accel=a, dt=1e-3)
     assert est.knot_samples == 100  # ramps of 1.5-6.5 kN
     knots = np.concatenate(est.corners)
@@ -133,7 +142,7 @@ def test_load_follows_ramps_and_keeps_mass_and_friction_apart():
     err = np.sqrt(np.mean((est.load[ok] - ramp[ok]) ** 2))
     const = estimate_load(f, v, s)  # one constant per segment
     assert err < 30.0 and err < 0.05 * np.sqrt(np.mean((const.load[ok] - ramp[ok]) ** 2)), err  # N (noise 30 N; knots every 0.1 s: ~35-250 N)
-    flat = estimate_load(np.where(t < 5.0, 1500.0, -2500.0) + 600.0 * a + 30.0 * rng.normal(size=rec.n), v, s, accel=a, dt=1e-3)
+    flat = estimate_load(np.where(t < 5.0, 1500.0, -2500.0) + 600.0 * a + 30.0 * rng.normal(size=t.size), v, s, accel=a, dt=1e-3)
     assert flat.knot_samples == 0
     # eliminating the load (rows every 20 samples, as the motion rows) leaves the mass and friction
     rows = np.flatnonzero(ok & np.isfinite(a) & (np.abs(v) > s.v_move_m_s))[::20]
@@ -162,15 +171,7 @@ def test_load_follows_a_gentle_ramp():
     has such ramps) leaves one constant per segment ~150 N: more than 3x the noise, so the load
     follows it, and the corner pass with the wider filter finds its corners, which the ±0.05 s
     filter does not tell from the noise (1.4 N/ms, under its 3 N/ms floor)."""
-    _, rec = _exact_record(seed=1)
-    s = DiscrepancySettings()
-    t = np.arange(rec.n) * 1e-3
-    ramp = np.interp(t, [3.5, 3.8], [1500.0, 2200.0])  # within the cylinder's run over 2.98-5.22 s
-    L = s.interval_samples
-    a = np.full(rec.n, np.nan)
-    a[L:-L] = (rec.raw["X"][2 * L:] - 2 * rec.raw["X"][L:-L] + rec.raw["X"][:-2 * L]) / (L * 1e-3) ** 2
-    v = rec.sg["v"]
-    f = ramp + 600.0 * a + 3000.0 * v + 30.0 * np.random.default_rng(3).normal(size=rec.n)  # load, mass and friction mismatch, noise
+    s, _, v, a, ramp, f = _rolling_force(lambda t: np.interp(t, [3.5, 3.8], [1500.0, 2200.0]))  # within the cylinder's run
 
     def error(settings):
         est = estimate_load(f, v, settings, accel=a, dt=1e-3)
@@ -197,15 +198,7 @@ def test_load_follows_one_small_ramp_at_the_start_of_a_move():
     less than the constant (:func:`corners_pay`) and is kept: ~7 N off."""
     from transforms.discrepancy.load import _grid_knots, _ramp_fit
 
-    _, rec = _exact_record(seed=1)
-    s = DiscrepancySettings()
-    t = np.arange(rec.n) * 1e-3
-    ramp = 1500.0 + np.interp(t, [3.0, 3.5], [0.0, 400.0])  # the cylinder runs over 2.98-5.22 s
-    L = s.interval_samples
-    a = np.full(rec.n, np.nan)
-    a[L:-L] = (rec.raw["X"][2 * L:] - 2 * rec.raw["X"][L:-L] + rec.raw["X"][:-2 * L]) / (L * 1e-3) ** 2
-    v = rec.sg["v"]
-    f = ramp + 600.0 * a + 3000.0 * v + 30.0 * np.random.default_rng(3).normal(size=rec.n)  # load, mass and friction mismatch, noise
+    s, _, v, a, ramp, f = _rolling_force(lambda t: 1500.0 + np.interp(t, [3.0, 3.5], [0.0, 400.0]))  # from the start of the run
     est = estimate_load(f, v, s, accel=a, dt=1e-3)
     u = est.usable
     n_seg = len(est.steps) + 1
