@@ -9,8 +9,33 @@ from __future__ import annotations
 
 from dataclasses import replace
 from datetime import datetime, timezone
+from functools import lru_cache
 
 import numpy as np
+
+
+@lru_cache(maxsize=4)
+def _simulated(seed: int, n_windows: int, load_interval_s: tuple[float, float] | None) -> list:
+    """The clean windows of valve ``seed``, the study's (``n_windows`` drawn from 100 + ``seed``;
+    ``load_interval_s`` the range of the load's intervals between new levels [s], None: the plant's
+    1–4 s); simulated once per process for every model diagnosed on them."""
+    from tests.refplant import NAMEPLATE, manufactured, simulate_windows
+
+    ref = manufactured(NAMEPLATE, seed=seed)
+    if load_interval_s is not None:
+        ref = replace(ref, operation=replace(ref.operation, load_interval_s=tuple(load_interval_s)))
+    return simulate_windows(ref, n_windows, 100 + seed)
+
+
+def true_cylinder_model(seed: int, n_windows: int, load_interval_s: tuple[float, float] | None = None, d_v_factor: float = 1.0) -> tuple:
+    """(plant, condition): Table 1's with valve ``seed``'s true cylinder (mass, friction), its
+    viscous friction d_v times ``d_v_factor``."""
+    from model import TABLE1
+
+    tc = _simulated(seed, n_windows, None if load_interval_s is None else tuple(load_interval_s))[0].plant.cylinder
+    plant = replace(TABLE1, cylinder=replace(TABLE1.cylinder, mass_kg=tc.mass_kg, d_v_n_s_m=tc.d_v_n_s_m * d_v_factor, d_c_n=tc.d_c_n,
+                                              d_s_n=tc.d_s_n, v0_m_s=tc.v0_m_s))
+    return plant, plant.nominal_condition
 
 
 def window_figures(seed: int, n_windows: int, only: int | None = None, load_interval_s: tuple[float, float] | None = None,
@@ -25,24 +50,15 @@ def window_figures(seed: int, n_windows: int, only: int | None = None, load_inte
     ``model``: (plant, condition) to diagnose with instead of Table 1's with the plant's true
     cylinder (e.g. a commissioning calibration's; its true-load gap then carries the model's own
     force error)."""
-    from model import TABLE1
     from model.effects import Effects
-    from tests.refplant import NAMEPLATE, manufactured, simulate_windows, to_lake_frame
+    from tests.refplant import to_lake_frame
     from transforms.discrepancy import DiscrepancySettings, split_records
     from transforms.discrepancy.alignment import align_records
     from transforms.discrepancy.rows import _force_balance, _replay_record, prepare_records
 
     s = DiscrepancySettings()
-    ref = manufactured(NAMEPLATE, seed=seed)
-    if load_interval_s is not None:
-        ref = replace(ref, operation=replace(ref.operation, load_interval_s=tuple(load_interval_s)))
-    truth = simulate_windows(ref, n_windows, 100 + seed)
-    if model is None:
-        tc = truth[0].plant.cylinder
-        plant = replace(TABLE1, cylinder=replace(TABLE1.cylinder, mass_kg=tc.mass_kg, d_v_n_s_m=tc.d_v_n_s_m, d_c_n=tc.d_c_n, d_s_n=tc.d_s_n, v0_m_s=tc.v0_m_s))
-        cond = plant.nominal_condition
-    else:
-        plant, cond = model
+    truth = _simulated(seed, n_windows, None if load_interval_s is None else tuple(load_interval_s))
+    plant, cond = true_cylinder_model(seed, n_windows, load_interval_s) if model is None else model
     lake = to_lake_frame(truth, "V1", datetime(2025, 3, 1, tzinfo=timezone.utc))
     recs, _ = align_records(split_records(lake, s), plant, cond, s)
     windows = list(range(len(recs))) if only is None else [only]

@@ -12,7 +12,7 @@ import pytest
 
 from model import TABLE1
 from model.effects import library_entry
-from tests.discrepancy.refplant_load import window_figures
+from tests.discrepancy.refplant_load import true_cylinder_model, window_figures
 from tests.refplant import NAMEPLATE, effect, manufactured, simulate_windows, to_lake_frame
 from transforms.discrepancy import DiscrepancySettings, split_records
 from transforms.discrepancy.alignment import align_records
@@ -60,6 +60,20 @@ def test_the_load_follows_the_ramps_and_the_levels(seed, gap_ratio):
     # 28 and -68 N s/m here; with a new load level every second seed 1's window 1 leaves 284 N s/m
     # (0.094 mm), and a commissioning d_v 0.75 % off (750 N s/m) 0.14-0.17 mm
     assert abs(w["velocity_part_n_s_m"]) < 150.0, w
+
+
+@pytest.mark.slow
+def test_the_mechanical_replay_takes_a_small_friction_error_but_not_a_friction_change():
+    # seed 0 with a new load level every second, window 0: the commissioning calibration there has
+    # d_v 0.75 % high (100,747 N s/m), which replayed X 0.165 mm off (0.054 mm with the plant's
+    # d_v) while the replay integrated the model's d_v as it is. The replay now moves d_v by what
+    # the load leaves along v_X, by at most mechanical_friction_rel (1 %): a 20 % friction change
+    # (the library's typical one) still shows
+    interval = (1.0, 1.0)
+    gap = {k: window_figures(0, 2, only=0, load_interval_s=interval, model=true_cylinder_model(0, 2, interval, k))[0]["mechanical_gap_mm"]
+           for k in (1.0, 1.0075, 1.2)}
+    assert gap[1.0075] < 1.2 * gap[1.0], gap
+    assert gap[1.2] > 10.0 * gap[1.0], gap
 
 
 @pytest.mark.slow

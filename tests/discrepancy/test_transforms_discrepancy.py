@@ -25,7 +25,7 @@ from transforms.discrepancy import (
     prepare_record,
     split_records,
 )
-from transforms.discrepancy.load import step_filter
+from transforms.discrepancy.load import friction_mismatch, step_filter
 from transforms.discrepancy.residuals import triangular_force_balance
 
 from .simdata import simulate_lake
@@ -209,6 +209,18 @@ def test_load_follows_one_small_ramp_at_the_start_of_a_move():
     assert np.sqrt(np.mean((est.load[u] - ramp[u]) ** 2)) < 12.0, est.corners  # N (noise 30 N)
 
 
+def test_the_friction_mismatch_is_what_the_load_leaves_along_the_velocity():
+    """The force balance of a model whose viscous friction is 3 kN·s/m short and mass 600 kg
+    short, with a ramping load: what the estimated load leaves along v_X (jointly with the
+    acceleration) is the 3 kN·s/m, as with the true load; the mechanical replay's friction is moved
+    by it (``rows._mechanical_plant``, up to ``mechanical_friction_rel``)."""
+    s, _, v, a, ramp, f = _rolling_force(lambda t: np.interp(t, [3.5, 3.8], [1500.0, 2200.0]))
+    est = estimate_load(f, v, s, accel=a, dt=1e-3)
+    assert friction_mismatch(f, est.load, est.usable, (v, a)) == pytest.approx(3000.0, rel=0.03)
+    assert friction_mismatch(f, ramp, est.usable, (v, a)) == pytest.approx(3000.0, rel=0.01)
+    assert friction_mismatch(f, ramp, np.zeros(f.size, dtype=bool), (v, a)) == 0.0  # nothing at speed
+
+
 def test_a_long_piece_of_the_load_is_a_level():
     """A steep ramp (5.1 kN over 0.13 s) into a 2.5 s level while the cylinder runs, with the
     ramp's end knot 3 samples late (the kink filter finds corners within 2-8 samples): a free slope
@@ -300,7 +312,8 @@ def test_the_mechanical_noise_floor_is_what_the_noise_leaves_through_the_replay(
     recorded = Record("V", 0, 0, 1e-3, {k: np.asarray(v[0], float) for k, v in zip(names, (m.ps, m.pr, m.p1, m.p2, m.x_spool, m.x_cyl))})
     noise_free = Record("V", 0, 0, 1e-3, {k: np.asarray(v[0], float) for k, v in zip(names, (res.ps_pa, res.pr_pa, res.p1_pa, res.p2_pa, res.x_m, res.X_m))})
     p = prepare_records([recorded], TABLE1, cond, s)[0]
-    p.loads[key] = replace(p.loads[key], load=np.asarray(res.F_l_n[0], float), hold_until=0)  # the true load
+    # the true load, and so the model's own friction (nothing left along v_X: rows._mechanical_plant)
+    p.loads[key] = replace(p.loads[key], load=np.asarray(res.F_l_n[0], float), hold_until=0, friction_mismatch=0.0)
     floor = noise_floors([p], TABLE1, cond, fx, s)["mechanical"]
     gaps = {kind: _gaps([q], TABLE1, cond, fx, s, set())[0].split_gap("mechanical")
             for kind, q in (("recorded", p), ("noise-free", replace(p, rec=prepare_record(noise_free, s))))}

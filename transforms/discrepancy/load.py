@@ -45,6 +45,10 @@ instants), so the estimate is made piecewise constant:
    column over a whole move -- where the levels leave less to the motion columns than free
    slopes (a corner missed inside a level would make the motion columns take the missed ramp).
 
+What the final load leaves of F̂_l along the velocity (jointly with the acceleration) is the
+viscous friction the model lacks (:func:`friction_mismatch`); the mechanical replay moves the
+model's by it, within ``mechanical_friction_rel``.
+
 While the cylinder sticks at the start of a record, before its first observable motion, the load
 is unknown (a step may have happened before); the workflow then tries driving the replay with the
 load that holds the cylinder (:func:`replay_load`) until it moves and keeps that if it fits better.
@@ -62,8 +66,8 @@ import numpy as np
 
 from transforms.discrepancy.settings import DiscrepancySettings
 
-__all__ = ["LoadEstimate", "corners_pay", "estimate_load", "follows_ramps", "load_projector", "project_out", "ramp_load", "replay_load", "segment_knots", "segment_levels", "step_filter",
-           "stuck_spans"]
+__all__ = ["LoadEstimate", "corners_pay", "estimate_load", "follows_ramps", "friction_mismatch", "load_projector", "project_out", "ramp_load",
+           "replay_load", "segment_knots", "segment_levels", "step_filter", "stuck_spans"]
 
 
 @lru_cache(maxsize=8)
@@ -150,6 +154,9 @@ class LoadEstimate:
     """Per segment, the knots (sample positions) of its piecewise-linear load: its first and last
     valid sample, the ends of its standstills and the ramps' corners (:func:`ramp_load`); empty: the
     regular grid of ``knot_samples``."""
+    friction_mismatch: float = 0.0
+    """The viscous friction the model lacks, by what the load leaves of the force balance
+    (:func:`friction_mismatch`). [N s/m]"""
 
     def knots(self, s: int) -> np.ndarray:
         """Knots (sample positions) of segment ``s``'s piecewise-linear load; empty: a constant."""
@@ -420,6 +427,19 @@ def corners_pay(f_hat: np.ndarray, usable: np.ndarray, segment: np.ndarray, n_se
     _, rms_const, _ = _ramp_fit(f_hat, usable, segment, [np.zeros(0)] * n_segments, motion)
     _, rms_corner, _ = _ramp_fit(f_hat, usable, segment, knots, motion)
     return rms_corner * settings.corner_ratio <= rms_const
+
+
+def friction_mismatch(f_hat: np.ndarray, load: np.ndarray, usable: np.ndarray, motion: tuple) -> float:
+    """Δd_v [N s/m]: the velocity coefficient of the least squares of what ``load`` leaves of the
+    force balance ``f_hat`` on the ``motion`` columns (v_X, the acceleration) over the ``usable``
+    samples. The force balance is the load plus Δd_v v_X + Δm a where the model's viscous friction
+    and mass are Δd_v and Δm short of the plant's; where the load was fitted jointly with these
+    columns (:func:`ramp_load`) this is the joint fit's coefficient. 0 with fewer than 10 samples."""
+    M = np.column_stack(motion)
+    m = usable & np.isfinite(f_hat) & np.isfinite(load) & np.all(np.isfinite(M), axis=1)
+    if m.sum() < 10:
+        return 0.0
+    return float(np.linalg.lstsq(M[m], (f_hat - load)[m], rcond=None)[0][0])
 
 
 def load_projector(group: np.ndarray, sample: np.ndarray, knots: dict) -> list[tuple[np.ndarray, np.ndarray]]:

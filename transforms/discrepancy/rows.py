@@ -13,7 +13,7 @@ from model.params import PlantParams, ValveCondition
 from model.replay import DRIVE_HYDRAULIC, DRIVE_MECHANICAL, replay
 from model.simulate import DEFAULT_REG_BAND_PA
 from transforms.discrepancy.gaps import GAP_SCALES, RECORDED_OF, GapAccumulator, noise_rms
-from transforms.discrepancy.load import LoadEstimate, estimate_load, load_projector, project_out, replay_load, robust_sigma, stuck_spans
+from transforms.discrepancy.load import LoadEstimate, estimate_load, load_projector, friction_mismatch, project_out, replay_load, robust_sigma, stuck_spans
 from transforms.discrepancy.records import REGIONS, Record, operating_regions, prepare_record
 from transforms.discrepancy.residuals import (
     demean_by_group,
@@ -103,7 +103,8 @@ def _estimate_load(rec: Record, plant, condition, effects, settings) -> LoadEsti
     t = _terms_sg(rec, plant, condition, effects)
     v, a = _load_motion(rec, settings)
     load = estimate_load(f_hat, v, settings, f_point=t["force"] - t["mass"] * rec.sg["a"], accel=a, dt=rec.dt)
-    return _refine_rest_steps(rec, load, f_hat, plant, condition, effects, settings)
+    load = _refine_rest_steps(rec, load, f_hat, plant, condition, effects, settings)
+    return replace(load, friction_mismatch=friction_mismatch(f_hat, load.load, load.usable, (v, a)))
 
 
 def _load_for(p: _Prepared, plant, condition, effects, settings) -> np.ndarray:
@@ -112,6 +113,17 @@ def _load_for(p: _Prepared, plant, condition, effects, settings) -> np.ndarray:
     if key not in p.loads:
         p.loads[key] = _estimate_load(p.rec, plant, condition, effects, settings)
     return p.loads[key].load
+
+
+def _mechanical_plant(p: _Prepared, plant, condition, effects, settings) -> PlantParams:
+    """The plant the mechanical replay integrates: the model's viscous friction d_v moved by the
+    friction its load leaves in the record's force balance (:attr:`LoadEstimate.friction_mismatch`),
+    by at most ``settings.mechanical_friction_rel`` of d_v (``DiscrepancySettings``)."""
+    _load_for(p, plant, condition, effects, settings)
+    dv = p.loads[(plant, condition, effects)].friction_mismatch
+    c = plant.cylinder
+    lim = settings.mechanical_friction_rel * c.d_v_n_s_m
+    return replace(plant, cylinder=replace(c, d_v_n_s_m=c.d_v_n_s_m + float(np.clip(dv, -lim, lim))))
 
 
 def _holding(rec: Record, plant, condition, effects) -> tuple[np.ndarray, np.ndarray]:
@@ -409,8 +421,8 @@ def _mechanical_restarts(rec: Record, settings) -> tuple[np.ndarray, np.ndarray]
 
 def _mechanical_replay(rec: Record, plant, condition, effects, load, mstarts: np.ndarray) -> np.ndarray:
     """X [m] replayed on the record's pressures (Savitzky–Golay, sensor effects removed) with
-    ``load``, restarted at ``mstarts`` (:func:`_mechanical_restarts`) from the recorded X and its
-    Savitzky–Golay velocity."""
+    ``load`` and ``plant`` (:func:`_mechanical_plant`'s), restarted at ``mstarts``
+    (:func:`_mechanical_restarts`) from the recorded X and its Savitzky–Golay velocity."""
     x_src = _spool_source(rec)
     x_true, p1_true, p2_true = true_signals(x_src, rec.sg["p1"], rec.sg["p2"], effects)
     _, p1_rec, p2_rec = true_signals(x_src, rec.raw["p1"], rec.raw["p2"], effects)
@@ -439,7 +451,7 @@ def _replay_record(p: _Prepared, plant, condition, effects, settings, split: boo
     if split:
         p1h, p2h = _hydraulic_replay(p, plant, condition, effects, start, load)
         moving, mstarts = _mechanical_restarts(rec, settings)
-        out.update({"p1_hydraulic": p1h, "p2_hydraulic": p2h, "X_mechanical": _mechanical_replay(rec, plant, condition, effects, load, mstarts)})
+        out.update({"p1_hydraulic": p1h, "p2_hydraulic": p2h, "X_mechanical": _mechanical_replay(rec, _mechanical_plant(p, plant, condition, effects, settings), condition, effects, load, mstarts)})
     for k in out:
         out[k][n - h:] = np.nan  # the record's tail has no Savitzky–Golay regions
     if split:
@@ -477,8 +489,8 @@ def noise_floors(prepared, plant, condition, effects, settings, draws: int = NOI
     * hydraulic: the recorded noise of p1, p2 (what the X and spool position noise leave through the
       chamber replay, 0.03–0.04 bar, is not added: measured and left, docs/discrepancy.md);
     * mechanical: sqrt((X noise / 1 mm)² + (e / 1 mm)²), e the RMS over the moving samples of the
-      mechanical replay (:func:`_mechanical_replay`, the model ``plant``, ``condition``,
-      ``effects`` and its load) with fresh white noise of the estimated RMS added to the recorded
+      mechanical replay (:func:`_mechanical_replay`, the model ``plant`` with its
+      :func:`_mechanical_plant` friction, ``condition``, ``effects`` and its load) with fresh white noise of the estimated RMS added to the recorded
       p1, p2 and X (X enters through the restarts: the position and its Savitzky–Golay velocity)
       minus the replay of the records as they are, averaged over ``draws`` draws from ``seed``.
       The replay integrates the force twice, so the pressures' noise (0.05 bar: ~30 N on Table
@@ -501,14 +513,15 @@ def noise_floors(prepared, plant, condition, effects, settings, draws: int = NOI
         moving, mstarts = _mechanical_restarts(rec, settings)
         moving[rec.n - h:] = False
         load = _replay_load_for(p, plant, condition, effects, settings)
-        nominal = _mechanical_replay(rec, plant, condition, effects, load, mstarts)
+        mplant = _mechanical_plant(p, plant, condition, effects, settings)
+        nominal = _mechanical_replay(rec, mplant, condition, effects, load, mstarts)
         rng = np.random.default_rng([seed, i])
         for _ in range(draws):
             raw = dict(rec.raw)
             for k in tot:
                 raw[k] = raw[k] + rng.normal(0.0, rms[k], rec.n)
             noisy = prepare_record(Record(rec.valve_id, rec.start_us, rec.end_us, rec.dt, raw), settings)
-            d = (_mechanical_replay(noisy, plant, condition, effects, load, mstarts) - nominal)[moving]
+            d = (_mechanical_replay(noisy, mplant, condition, effects, load, mstarts) - nominal)[moving]
             ok = np.isfinite(d)
             sse += float(np.sum(d[ok] ** 2))
             n += int(ok.sum())

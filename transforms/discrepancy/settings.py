@@ -101,6 +101,12 @@ class DiscrepancySettings:
         The mechanical replay (X on the recorded pressures) restarts from the measured state
         every this many seconds: it integrates the force twice, open loop, so a force error of
         100 N moves X by ~2 µm over 0.5 s at Table 1's mass but by ~50 mm over 2.5 s. [s]
+    mechanical_friction_rel : float
+        The mechanical replay moves the model's viscous friction by what the load estimate leaves
+        of the force balance along v_X, by at most this fraction of it
+        (:func:`transforms.discrepancy.load.friction_mismatch`): a calibrated d_v 0.4–0.75 % off
+        put X 0.09–0.17 mm off on the reference plant (floor ~0.011 mm), while a friction change
+        of the library's typical 20 % still shows. [–]
     block_s : float
         Length of the cross-validation blocks. [s]
     max_effects : int
@@ -147,6 +153,7 @@ class DiscrepancySettings:
     corner_ratio: float = 1.5
     replay_segment_s: float = 2.5
     mechanical_segment_s: float = 0.5
+    mechanical_friction_rel: float = 0.01
     block_s: float = 1.0
     max_effects: int = 3
     min_t_stat: float = 4.0
