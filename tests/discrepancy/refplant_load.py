@@ -43,9 +43,11 @@ def window_figures(seed: int, n_windows: int, only: int | None = None, load_inte
     """Per window of valve ``seed`` (``n_windows`` drawn from 100 + ``seed``, as the study's; only
     window ``only`` if given; ``load_interval_s`` the range of the load's intervals between new
     levels [s], None: the plant's 1–4 s): the load (``"ramps"`` or ``"constant"``), its RMS error at speed [N],
-    the mechanical gap with the estimate and with the true load [mm], and the velocity part the
-    estimate leaves (least squares of F̂_l − load on v_X over the samples at speed) [N·s/m]: a
-    friction mismatch of the model, or, with the true cylinder, load error that follows v_X.
+    the velocity part the estimate leaves (:func:`transforms.discrepancy.load.friction_mismatch`)
+    [N·s/m]: a friction mismatch of the model, or, with the true cylinder, load error that follows
+    v_X; the RMS error at speed of the force the mechanical replay takes for the load, the load plus
+    the friction it moves by that part (``rows._mechanical_plant``) times v_X [N]; and the
+    mechanical gap with the estimate and with the true load (its own velocity part) [mm].
 
     ``model``: (plant, condition) to diagnose with instead of Table 1's with the plant's true
     cylinder (e.g. a commissioning calibration's; its true-load gap then carries the model's own
@@ -54,7 +56,8 @@ def window_figures(seed: int, n_windows: int, only: int | None = None, load_inte
     from tests.refplant import to_lake_frame
     from transforms.discrepancy import DiscrepancySettings, split_records
     from transforms.discrepancy.alignment import align_records
-    from transforms.discrepancy.rows import _force_balance, _replay_record, prepare_records
+    from transforms.discrepancy.load import friction_mismatch
+    from transforms.discrepancy.rows import _force_balance, _load_motion, _mechanical_plant, _replay_record, prepare_records
 
     s = DiscrepancySettings()
     truth = _simulated(seed, n_windows, None if load_interval_s is None else tuple(load_interval_s))
@@ -69,16 +72,19 @@ def window_figures(seed: int, n_windows: int, only: int | None = None, load_inte
         r = truth[i]
         est = p.loads[key]
         true_load = r.true["F_l"][:p.rec.n].astype(float)
+        at_speed = est.usable
+        moved = _mechanical_plant(p, plant, cond, fx, s).cylinder.d_v_n_s_m - plant.cylinder.d_v_n_s_m
+        force = est.load + moved * p.rec.sg["v"]
+        true_est = replace(est, load=true_load, hold_until=0,
+                           friction_mismatch=friction_mismatch(_force_balance(p.rec, plant, cond, fx, s), true_load, at_speed, _load_motion(p.rec, s)))
         gaps = []
-        for load in (est, replace(est, load=true_load, hold_until=0)):
+        for load in (est, true_est):
             p.loads[key] = load
             e = _replay_record(p, plant, cond, fx, s)["X_mechanical"] - p.rec.raw["X"]
             gaps.append(float(np.sqrt(np.nanmean(e ** 2))) * 1e3)
-        at_speed = est.usable
-        left = (_force_balance(p.rec, plant, cond, fx, s) - est.load)[at_speed]
-        v = p.rec.sg["v"][at_speed]
         out.append({"seed": seed, "window": i, "load": "ramps" if est.knot_samples else "constant",
                     "load_error_n": float(np.sqrt(np.mean((est.load[at_speed] - true_load[at_speed]) ** 2))),
-                    "mechanical_gap_mm": gaps[0], "true_load_gap_mm": gaps[1],
-                    "velocity_part_n_s_m": float(np.polyfit(v, left, 1)[0])})
+                    "velocity_part_n_s_m": est.friction_mismatch,
+                    "replayed_force_error_n": float(np.sqrt(np.mean((force[at_speed] - true_load[at_speed]) ** 2))),
+                    "mechanical_gap_mm": gaps[0], "true_load_gap_mm": gaps[1]})
     return out

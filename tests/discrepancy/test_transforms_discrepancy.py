@@ -221,34 +221,6 @@ def test_the_friction_mismatch_is_what_the_load_leaves_along_the_velocity():
     assert friction_mismatch(f, ramp, np.zeros(f.size, dtype=bool), (v, a)) == 0.0  # nothing at speed
 
 
-def test_a_long_piece_of_the_load_is_a_level():
-    """A steep ramp (5.1 kN over 0.13 s) into a 2.5 s level while the cylinder runs, with the
-    ramp's end knot 3 samples late (the kink filter finds corners within 2-8 samples): a free slope
-    over the level trades with the joint fit's velocity column (a friction mismatch that is not
-    there) and leaves the load ~100 N off over the move; the level's ends tied
-    (``load_level_s``), ~27 N (reference plant seed 2: 43 -> 15 N at speed), and less is left to
-    the motion columns, which is where ``ramp_load`` keeps the level."""
-    from transforms.discrepancy.load import _level_ties, _ramp_fit
-
-    t = np.arange(4000) * 1e-3
-    load = np.interp(t, [1.0, 1.13], [-1600.0, 3500.0])
-    v = np.where((t > 0.3) & (t < 3.7), 0.15 * np.sin(np.pi * (t - 0.3) / 3.4), 0.0)  # one move [m/s]
-    a = np.gradient(v, 1e-3)
-    f = load + 30.0 * np.random.default_rng(0).normal(size=t.size)
-    valid = np.abs(v) > 0.03
-    idx = np.flatnonzero(valid)
-    knots = [np.array([idx[0], 1000, 1133, idx[-1]], float)]
-    assert _level_ties(knots[0], valid, 500).tolist() == [0, 1, 2, 2]  # the ramp and the lead-in stay free
-    seg = np.zeros(t.size, dtype=np.int64)
-    err, motion = {}, {}
-    for level in (0, 500):
-        est, _, cm = _ramp_fit(f, valid, seg, knots, (v, a), level)
-        err[level] = np.sqrt(np.mean((est - load)[valid] ** 2))
-        motion[level] = np.sqrt(np.mean((np.column_stack([v, a]) @ cm)[valid] ** 2))
-    assert err[500] < 35.0 and err[500] < 0.4 * err[0], err  # N: 27 against 100
-    assert motion[500] < 0.5 * motion[0], motion  # what ramp_load keeps the level for: 25 N against 100 N
-
-
 def test_demean_by_group():
     v = np.array([1.0, 3.0, 10.0, 14.0, 5.0])
     g = np.array([0, 0, 1, 1, 2])

@@ -39,11 +39,7 @@ instants), so the estimate is made piecewise constant:
    then eliminates the same piecewise-linear load from the motion rows
    (:func:`load_projector`) instead of one constant per segment: a mass acts on the
    acceleration and a friction on the velocity, which change within a move (0.3–0.6 s), faster
-   than a load that is linear over 0.1 s can follow, so both stay separable from it. A piece
-   between two knots longer than ``load_level_s`` (a ramp lasts 0.1–0.4 s) is a level: its two
-   ends take one value (:func:`_level_ties`), for its free slope would trade with the velocity
-   column over a whole move -- where the levels leave less to the motion columns than free
-   slopes (a corner missed inside a level would make the motion columns take the missed ramp).
+   than a load that is linear over 0.1 s can follow, so both stay separable from it.
 
 What the final load leaves of F̂_l along the velocity (jointly with the acceleration) is the
 viscous friction the model lacks (:func:`friction_mismatch`); the mechanical replay moves the
@@ -245,24 +241,10 @@ def _grid_knots(valid, segment, n_segments, knot_samples) -> list[np.ndarray]:
     return [segment_knots(valid, segment, s, knot_samples) for s in range(n_segments)]
 
 
-def _level_ties(kn: np.ndarray, valid: np.ndarray, level_samples: int) -> np.ndarray:
-    """Column of each of ``kn``'s knot values after tying the two ends of every piece longer than
-    ``level_samples`` whose samples are mostly valid (a level between ramps: the same value)."""
-    col = np.arange(kn.size)
-    if level_samples <= 0 or kn.size < 2:
-        return col
-    for i in range(kn.size - 1):
-        a, b = int(kn[i]), int(kn[i + 1])
-        if b - a > level_samples and np.mean(valid[a:b]) > 0.5:
-            col[i + 1:] -= 1
-    return col
-
-
-def _ramp_fit(f_hat, valid, segment, knots: list[np.ndarray], motion, level_samples: int = 0):
+def _ramp_fit(f_hat, valid, segment, knots: list[np.ndarray], motion):
     """Least squares of ``f_hat`` over the valid samples on the segments' load (piecewise linear on
-    each segment's ``knots``, a constant where they are empty; a piece longer than ``level_samples``
-    one level, :func:`_level_ties`) and the ``motion`` columns; returns (load at every sample, RMS
-    residual, the motion columns' coefficients)."""
+    each segment's ``knots``, a constant where they are empty) and the ``motion`` columns; returns
+    (load at every sample, RMS residual, the motion columns' coefficients)."""
     n = f_hat.size
     m = valid & np.isfinite(f_hat)
     if motion is not None:
@@ -274,23 +256,18 @@ def _ramp_fit(f_hat, valid, segment, knots: list[np.ndarray], motion, level_samp
     for s, kn in enumerate(knots):
         if kn.size == 0:
             kn = np.zeros(1)
-        tie = _level_ties(kn, valid, level_samples)
-        B = hat_basis(kn, idx) * (segment[idx] == s)[:, None]
-        Bt = np.zeros((idx.size, tie[-1] + 1))
-        np.add.at(Bt.T, tie, B.T)
-        cols.append(Bt)
-        spans.append((off, kn, tie))
-        off += tie[-1] + 1
+        cols.append(hat_basis(kn, idx) * (segment[idx] == s)[:, None])
+        spans.append((off, kn))
+        off += kn.size
     Bm = np.hstack(cols)
     k = Bm.shape[1]
     X = Bm if motion is None else np.hstack([Bm, motion[idx]])
     D = []
-    for o, kn, tie in spans:
+    for o, kn in spans:
         if kn.size > 2:
             d = np.zeros((kn.size - 2, X.shape[1]))
             for i in range(kn.size - 2):
-                for j, w in zip(tie[i:i + 3], (1.0, -2.0, 1.0)):
-                    d[i, o + j] += w
+                d[i, o + i:o + i + 3] = (1.0, -2.0, 1.0)
             D.append(d)
     A = np.vstack([X] + [SMOOTHING * d for d in D])
     y = np.r_[f_hat[idx], np.zeros(A.shape[0] - idx.size)]
@@ -298,9 +275,9 @@ def _ramp_fit(f_hat, valid, segment, knots: list[np.ndarray], motion, level_samp
     res = f_hat[idx] - X @ c
     rms = float(np.sqrt(np.mean(res ** 2))) if idx.size else 0.0
     load = np.zeros(n)
-    for s, (o, kn, tie) in enumerate(spans):
+    for s, (o, kn) in enumerate(spans):
         sel = segment == s
-        load[sel] = hat_basis(kn, np.flatnonzero(sel)) @ c[o + tie] if kn.size > 1 else c[o]
+        load[sel] = hat_basis(kn, np.flatnonzero(sel)) @ c[o:o + kn.size] if kn.size > 1 else c[o]
     return load, rms, c[k:]
 
 
@@ -361,13 +338,13 @@ def ramp_load(f_hat: np.ndarray, valid: np.ndarray, usable: np.ndarray, segment:
        as its width^-1.5): a gentle ramp (a few hundred newtons over 0.3 s, 1–2.5 kN/s) hides in
        the noise of the ±W filter, and a load that misses it lets the velocity and acceleration
        columns take its error, so the load drifts over the whole record (reference plant seed 1:
-       75 N RMS off at speed, 10 N with this pass);
-    5. on the final knots, the same fit with every piece longer than ``settings.load_level_s`` one
-       level (:func:`_level_ties`), kept where its motion columns' part (RMS at speed) is smaller
-       than with free slopes: a corner found a few samples off the end of a steep ramp left a
-       misfit that a free slope over the following 1–2 s level traded with the velocity column
-       (reference plant seed 2: the load 43 N off at speed, 15 N with the level), but a corner
-       missed inside a level would make the motion columns take the missed ramp.
+       75 N RMS off at speed, 10 N with this pass).
+
+    A free slope over a long piece between ramps may trade with the velocity column (reference
+    plant seed 2: the load 43 N off at speed over 1–2 s levels after steep ramps); the mechanical
+    replay takes that column's part as friction (:func:`friction_mismatch`), so what it replays is
+    the joint fit. (Such pieces were once tied to one value, which left missed gentle ramps inside
+    them to the velocity column: docs/discrepancy.md, "A level is one value".)
 
     A segment without usable samples keeps its ``levels`` value."""
     W = max(2, int(round(settings.corner_half_width_s * knot_samples / settings.load_knot_s)))
@@ -390,11 +367,6 @@ def ramp_load(f_hat: np.ndarray, valid: np.ndarray, usable: np.ndarray, segment:
                 break
             knots = more
             load, _, cm = _ramp_fit(f_hat, usable, segment, knots, motion)
-    lv = int(round(settings.load_level_s / dt))
-    if lv > 0 and motion is not None:
-        level_load, _, cm_level = _ramp_fit(f_hat, usable, segment, knots, motion, lv)
-        if np.sqrt(np.mean(motion_part(cm_level)[usable] ** 2)) < np.sqrt(np.mean(motion_part(cm)[usable] ** 2)):
-            load = level_load
     for s in range(n_segments):
         if not np.any(usable[segment == s]):
             load[segment == s] = levels[s]

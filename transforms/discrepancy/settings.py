@@ -76,13 +76,6 @@ class DiscrepancySettings:
         The corners the fit missed are looked for once more with the filter this many times wider
         (±0.15 s) and the floor ``corner_min_n_s`` / factor^1.5 (its noise falls as width^-1.5):
         a gentle ramp of a few hundred newtons over 0.3 s. [–]
-    load_level_s : float
-        A piece of the piecewise-linear load between two knots longer than this, observed on most
-        of its samples, is a level between ramps: one value, no slope
-        (:func:`transforms.discrepancy.load.ramp_load`). The reference plant's loads ramp over
-        0.1–0.4 s; a free slope over a 1–2 s level traded with the velocity column of the joint fit
-        (a friction mismatch) and left the load 30–70 N off over whole moves. The levels are kept
-        where they leave less to the motion columns than free slopes. 0: free slopes. [s]
     ramp_ratio, ramp_min_n : float
         The piecewise-linear load is used where it leaves at most 1/``ramp_ratio`` of the
         residual RMS of one constant per segment, and that RMS is above ``ramp_min_n`` (about 3×
@@ -147,7 +140,6 @@ class DiscrepancySettings:
     corner_min_n_s: float = 3000.0
     corner_sigmas: float = 4.0
     corner_coarse_factor: float = 3.0
-    load_level_s: float = 0.5
     ramp_ratio: float = 3.0
     ramp_min_n: float = 120.0
     corner_ratio: float = 1.5
