@@ -25,7 +25,7 @@ from transforms.discrepancy import (
     prepare_record,
     split_records,
 )
-from transforms.discrepancy.load import friction_mismatch, step_filter
+from transforms.discrepancy.load import LoadEstimate, friction_mismatch, interval_load, step_filter
 from transforms.discrepancy.residuals import triangular_force_balance
 
 from .simdata import simulate_lake
@@ -207,6 +207,19 @@ def test_load_follows_one_small_ramp_at_the_start_of_a_move():
     assert _ramp_fit(f, est.valid, est.segment, [np.zeros(0)] * n_seg, (v, a))[1] < s.ramp_ratio * grid  # the grid alone keeps the constant
     assert np.sqrt(np.mean((const[u] - ramp[u]) ** 2)) > 120.0  # N
     assert np.sqrt(np.mean((est.load[u] - ramp[u]) ** 2)) < 12.0, est.corners  # N (noise 30 N)
+
+
+def test_a_replay_holds_a_ramp_at_its_mean_over_the_interval_and_a_step_from_its_sample():
+    # model.replay holds F_l between samples: a ramp within a segment is held at the mean of the
+    # interval's ends (the ramp's own mean over it), a step between segments from the sample it
+    # starts at (the level before it over the interval before), the last sample as it is
+    seg = np.repeat([0, 1], [5, 3])
+    load = np.array([0.0, 10.0, 20.0, 30.0, 40.0, 7.0, 7.0, 7.0])
+    est = LoadEstimate(seg, np.array([5]), np.array([20.0, 7.0]), load, np.full((1, 2), -1), np.ones(8, bool), np.ones(8, bool), knot_samples=2)
+    np.testing.assert_array_equal(interval_load(est), [5.0, 15.0, 25.0, 35.0, 40.0, 7.0, 7.0, 7.0])
+    # one constant per segment: as held before
+    flat = replace(est, load=np.repeat([20.0, 7.0], [5, 3]), knot_samples=0)
+    np.testing.assert_array_equal(interval_load(flat), flat.load)
 
 
 def test_the_friction_mismatch_is_what_the_load_leaves_along_the_velocity():

@@ -507,6 +507,21 @@ def stuck_spans(v: np.ndarray, v_stuck: float, min_samples: int = 5) -> np.ndarr
     return out
 
 
+def interval_load(est: LoadEstimate) -> np.ndarray:
+    """The load a replay holds over each sample interval [k, k + 1) [N] (``model.replay`` holds
+    F_l between samples): within a segment the mean of the estimate at the interval's two ends,
+    exact for its piecewise-linear ramps; across a step the level before it. Holding the sample's
+    value instead puts a ramp's force half a sample late: on the reference plant's load ramps of
+    up to 63 kN/s that is 32 N for the ramp's 0.1–0.4 s, and the mechanical replay of a clean
+    valve, noise-free and with the true load, was 0.039 mm off over such a 0.5 s piece (0.001 mm
+    elsewhere)."""
+    load = np.asarray(est.load, dtype=float)
+    out = load.copy()
+    within = est.segment[1:] == est.segment[:-1]
+    out[:-1][within] = 0.5 * (load[:-1][within] + load[1:][within])
+    return out
+
+
 def replay_load(levels_per_sample: np.ndarray, holding_force: np.ndarray, stuck: np.ndarray) -> np.ndarray:
     """The load a replay is driven with: the segment levels, except while the measured cylinder
     sticks, where the load cannot be observed and only decides when it breaks away: there the

@@ -13,7 +13,7 @@ from model.params import PlantParams, ValveCondition
 from model.replay import DRIVE_HYDRAULIC, DRIVE_MECHANICAL, replay
 from model.simulate import DEFAULT_REG_BAND_PA
 from transforms.discrepancy.gaps import GAP_SCALES, RECORDED_OF, GapAccumulator, noise_rms
-from transforms.discrepancy.load import LoadEstimate, estimate_load, load_projector, friction_mismatch, project_out, replay_load, robust_sigma, stuck_spans
+from transforms.discrepancy.load import LoadEstimate, estimate_load, load_projector, friction_mismatch, interval_load, project_out, replay_load, robust_sigma, stuck_spans
 from transforms.discrepancy.records import REGIONS, Record, operating_regions, prepare_record
 from transforms.discrepancy.residuals import (
     demean_by_group,
@@ -139,8 +139,9 @@ DEFAULT_STUCK_V = 1.0e-3
 
 
 def _replay_load_for(p: _Prepared, plant, condition, effects, settings) -> np.ndarray:
-    level = _load_for(p, plant, condition, effects, settings)
+    _load_for(p, plant, condition, effects, settings)
     est = p.loads[(plant, condition, effects)]
+    level = interval_load(est)
     if est.hold_until <= 0:
         return level
     hold, stuck = _holding(p.rec, plant, condition, effects)
