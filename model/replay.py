@@ -145,7 +145,8 @@ def replay(params: PlantParams, x_m, p_s_pa, p_r_pa, F_l_n, restart_at, restart_
     p_s_pa, p_r_pa : array_like, shape (n,)
         Supply and return pressure (the supply as measured upstream of a supply line). [Pa]
     F_l_n : array_like, shape (n,)
-        External load, held over each sample interval. [N]
+        External load, held over each sample interval: ``F_l_n[k]`` acts on [t_k, t_k+1) (for a
+        load that ramps, pass the interval's mean, not its value at t_k). [N]
     restart_at : sequence of int
         Sample indices, increasing, where the state is set to ``restart_states``; the replay
         starts at the first.

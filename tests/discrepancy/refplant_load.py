@@ -78,7 +78,8 @@ def window_figures(seed: int, n_windows: int, only: int | None = None, load_inte
         at_speed = est.usable
         moved = _mechanical_plant(p, plant, cond, fx, s).cylinder.d_v_n_s_m - plant.cylinder.d_v_n_s_m
         force = est.load + moved * p.rec.sg["v"]
-        true_est = replace(est, load=true_load, hold_until=0,
+        # the true load ramps (0.1-0.4 s), never jumps: one segment, held at its interval means
+        true_est = replace(est, load=true_load, segment=np.zeros(p.rec.n, dtype=int), hold_until=0,
                            friction_mismatch=friction_mismatch(_force_balance(p.rec, plant, cond, fx, s), true_load, at_speed, _load_motion(p.rec, s)))
         gaps = []
         for load in (est, true_est):

@@ -297,8 +297,11 @@ def test_the_mechanical_noise_floor_is_what_the_noise_leaves_through_the_replay(
     recorded = Record("V", 0, 0, 1e-3, {k: np.asarray(v[0], float) for k, v in zip(names, (m.ps, m.pr, m.p1, m.p2, m.x_spool, m.x_cyl))})
     noise_free = Record("V", 0, 0, 1e-3, {k: np.asarray(v[0], float) for k, v in zip(names, (res.ps_pa, res.pr_pa, res.p1_pa, res.p2_pa, res.x_m, res.X_m))})
     p = prepare_records([recorded], TABLE1, cond, s)[0]
-    # the true load, and so the model's own friction (nothing left along v_X: rows._mechanical_plant)
-    p.loads[key] = replace(p.loads[key], load=np.asarray(res.F_l_n[0], float), hold_until=0, friction_mismatch=0.0)
+    # the true load, and so the model's own friction (nothing left along v_X: rows._mechanical_plant);
+    # its segments its own steps, which the replay takes at their samples (load.interval_load)
+    true_load = np.asarray(res.F_l_n[0], float)
+    segment = np.concatenate([[0], np.cumsum(np.diff(true_load) != 0)])
+    p.loads[key] = replace(p.loads[key], load=true_load, segment=segment, hold_until=0, friction_mismatch=0.0)
     floor = noise_floors([p], TABLE1, cond, fx, s)["mechanical"]
     gaps = {kind: _gaps([q], TABLE1, cond, fx, s, set())[0].split_gap("mechanical")
             for kind, q in (("recorded", p), ("noise-free", replace(p, rec=prepare_record(noise_free, s))))}
