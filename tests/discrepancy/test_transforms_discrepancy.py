@@ -25,7 +25,7 @@ from transforms.discrepancy import (
     prepare_record,
     split_records,
 )
-from transforms.discrepancy.load import LoadEstimate, friction_mismatch, interval_load, step_filter
+from transforms.discrepancy.load import LoadEstimate, friction_mismatch, friction_within, interval_load, step_filter
 from transforms.discrepancy.residuals import triangular_force_balance
 
 from .simdata import simulate_lake
@@ -220,6 +220,39 @@ def test_a_replay_holds_a_ramp_at_its_mean_over_the_interval_and_a_step_from_its
     # one constant per segment: as held before
     flat = replace(est, load=np.repeat([20.0, 7.0], [5, 3]), knot_samples=0)
     np.testing.assert_array_equal(interval_load(flat), flat.load)
+
+
+def test_a_friction_mismatch_beyond_the_replays_limit_goes_into_the_load_where_the_load_can_follow_it():
+    # a long slow move whose speed is nearly linear between the load's knots: the velocity column
+    # and the load's slopes trade; the excess over the limit goes into the load along the part of
+    # v_X its basis follows, so the force the replay takes (load + limited friction times v_X) moves
+    # only by the excess times what the basis cannot follow
+    n = 3000
+    t = np.arange(n, dtype=float)
+    knots = np.array([0.0, 1000.0, 2000.0, 2999.0])
+    v = 0.05 + 0.1 * np.interp(t, knots, [0.0, 1.0, 0.6, 0.2]) + 0.004 * np.sin(2 * np.pi * t / 700)
+    load = np.interp(t, knots, [-5000.0, -4000.0, -4500.0, 800.0])
+    seg = np.zeros(n, dtype=int)
+    est = LoadEstimate(seg, np.zeros(0, int), np.array([-4000.0]), load, np.zeros((0, 2), int), np.ones(n, bool), np.ones(n, bool),
+                       knot_samples=100, corners=(knots,), friction_mismatch=-2620.0)
+    out = friction_within(est, v, 1000.0, 3000.0)
+    assert out.friction_mismatch == -1000.0
+    along = (out.load - load) / -1620.0
+    np.testing.assert_allclose(along, np.interp(t, knots, np.linalg.lstsq(
+        np.column_stack([np.interp(t, knots, np.eye(4)[i]) for i in range(4)]), v, rcond=None)[0]), atol=1e-12)
+    moved = (out.load + out.friction_mismatch * v) - (load + est.friction_mismatch * v)
+    np.testing.assert_allclose(moved, 1620.0 * (v - along), atol=1e-9)
+    assert np.sqrt(np.mean((v - along) ** 2)) < 0.003  # m/s: the sine the knots cannot follow, of v_X's ~0.1
+    # a friction change (20 % of d_v = 100 kN s/m) gives the load at most load_limit: most of it
+    # stays in the force balance, where the replay shows it
+    change = friction_within(replace(est, friction_mismatch=-20000.0), v, 1000.0, 3000.0)
+    assert change.friction_mismatch == -17000.0
+    np.testing.assert_allclose(change.load, load - 3000.0 * along, atol=1e-9)
+    # within the limit, or one constant per segment: as it is
+    np.testing.assert_array_equal(friction_within(replace(est, friction_mismatch=-900.0), v, 1000.0, 3000.0).load, load)
+    flat = replace(est, knot_samples=0, corners=())
+    np.testing.assert_array_equal(friction_within(flat, v, 1000.0, 3000.0).load, load)
+    assert friction_within(flat, v, 1000.0, 3000.0).friction_mismatch == -2620.0
 
 
 def test_the_friction_mismatch_is_what_the_load_leaves_along_the_velocity():

@@ -13,7 +13,7 @@ from model.params import PlantParams, ValveCondition
 from model.replay import DRIVE_HYDRAULIC, DRIVE_MECHANICAL, replay
 from model.simulate import DEFAULT_REG_BAND_PA
 from transforms.discrepancy.gaps import GAP_SCALES, RECORDED_OF, GapAccumulator, noise_rms
-from transforms.discrepancy.load import LoadEstimate, estimate_load, load_projector, friction_mismatch, interval_load, project_out, replay_load, robust_sigma, stuck_spans
+from transforms.discrepancy.load import LoadEstimate, estimate_load, load_projector, friction_mismatch, friction_within, interval_load, project_out, replay_load, robust_sigma, stuck_spans
 from transforms.discrepancy.records import REGIONS, Record, operating_regions, prepare_record
 from transforms.discrepancy.residuals import (
     demean_by_group,
@@ -104,7 +104,9 @@ def _estimate_load(rec: Record, plant, condition, effects, settings) -> LoadEsti
     v, a = _load_motion(rec, settings)
     load = estimate_load(f_hat, v, settings, f_point=t["force"] - t["mass"] * rec.sg["a"], accel=a, dt=rec.dt)
     load = _refine_rest_steps(rec, load, f_hat, plant, condition, effects, settings)
-    return replace(load, friction_mismatch=friction_mismatch(f_hat, load.load, load.usable, (v, a)))
+    load = replace(load, friction_mismatch=friction_mismatch(f_hat, load.load, load.usable, (v, a)))
+    d_v = plant.cylinder.d_v_n_s_m
+    return friction_within(load, v, settings.mechanical_friction_rel * d_v, settings.load_friction_rel * d_v)
 
 
 def _load_for(p: _Prepared, plant, condition, effects, settings) -> np.ndarray:
