@@ -43,7 +43,9 @@ instants), so the estimate is made piecewise constant:
 
 What the final load leaves of F̂_l along the velocity (jointly with the acceleration) is the
 viscous friction the model lacks (:func:`friction_mismatch`); the mechanical replay moves the
-model's by it, within ``mechanical_friction_rel``.
+model's by it, within ``mechanical_friction_rel``; beyond that, up to ``load_friction_rel`` more goes
+into a piecewise-linear load where its knots follow v_X (:func:`friction_within`). The replay
+holds the load over each sample interval at its mean there (:func:`interval_load`).
 
 While the cylinder sticks at the start of a record, before its first observable motion, the load
 is unknown (a step may have happened before); the workflow then tries driving the replay with the
