@@ -109,20 +109,24 @@ def _estimate_load(rec: Record, plant, condition, effects, settings) -> LoadEsti
     return friction_within(load, v, settings.mechanical_friction_rel * d_v, settings.load_friction_rel * d_v)
 
 
-def _load_for(p: _Prepared, plant, condition, effects, settings) -> np.ndarray:
-    """The load at every sample under the model with ``effects`` (estimated once per model)."""
+def _load_estimate_for(p: _Prepared, plant, condition, effects, settings) -> LoadEstimate:
+    """The record's load estimate under the model with ``effects`` (estimated once per model)."""
     key = (plant, condition, effects)
     if key not in p.loads:
         p.loads[key] = _estimate_load(p.rec, plant, condition, effects, settings)
-    return p.loads[key].load
+    return p.loads[key]
+
+
+def _load_for(p: _Prepared, plant, condition, effects, settings) -> np.ndarray:
+    """The load at every sample under the model with ``effects`` (estimated once per model)."""
+    return _load_estimate_for(p, plant, condition, effects, settings).load
 
 
 def _mechanical_plant(p: _Prepared, plant, condition, effects, settings) -> PlantParams:
     """The plant the mechanical replay integrates: the model's viscous friction d_v moved by the
     friction its load leaves in the record's force balance (:attr:`LoadEstimate.friction_mismatch`),
     by at most ``settings.mechanical_friction_rel`` of d_v (``DiscrepancySettings``)."""
-    _load_for(p, plant, condition, effects, settings)
-    dv = p.loads[(plant, condition, effects)].friction_mismatch
+    dv = _load_estimate_for(p, plant, condition, effects, settings).friction_mismatch
     c = plant.cylinder
     lim = settings.mechanical_friction_rel * c.d_v_n_s_m
     return replace(plant, cylinder=replace(c, d_v_n_s_m=c.d_v_n_s_m + float(np.clip(dv, -lim, lim))))
@@ -141,8 +145,7 @@ DEFAULT_STUCK_V = 1.0e-3
 
 
 def _replay_load_for(p: _Prepared, plant, condition, effects, settings) -> np.ndarray:
-    _load_for(p, plant, condition, effects, settings)
-    est = p.loads[(plant, condition, effects)]
+    est = _load_estimate_for(p, plant, condition, effects, settings)
     level = interval_load(est)
     if est.hold_until <= 0:
         return level
