@@ -30,13 +30,14 @@ def _simulated(seed: int, n_windows: int, load_interval_s: tuple[float, float] |
     return simulate_windows(ref, n_windows, 100 + seed)
 
 
-def true_cylinder_model(seed: int, n_windows: int, load_interval_s: tuple[float, float] | None = None, d_v_factor: float = 1.0) -> tuple:
+def true_cylinder_model(seed: int, n_windows: int, load_interval_s: tuple[float, float] | None = None, d_v_factor: float = 1.0,
+                        mass_factor: float = 1.0) -> tuple:
     """(plant, condition): Table 1's with valve ``seed``'s true cylinder (mass, friction), its
-    viscous friction d_v times ``d_v_factor``."""
+    viscous friction d_v times ``d_v_factor`` and its mass times ``mass_factor``."""
     from model import TABLE1
 
     tc = _simulated(seed, n_windows, None if load_interval_s is None else tuple(load_interval_s))[0].plant.cylinder
-    plant = replace(TABLE1, cylinder=replace(TABLE1.cylinder, mass_kg=tc.mass_kg, d_v_n_s_m=tc.d_v_n_s_m * d_v_factor, d_c_n=tc.d_c_n,
+    plant = replace(TABLE1, cylinder=replace(TABLE1.cylinder, mass_kg=tc.mass_kg * mass_factor, d_v_n_s_m=tc.d_v_n_s_m * d_v_factor, d_c_n=tc.d_c_n,
                                               d_s_n=tc.d_s_n, v0_m_s=tc.v0_m_s))
     return plant, plant.nominal_condition
 
@@ -46,11 +47,12 @@ def window_figures(seed: int, n_windows: int, only: int | None = None, load_inte
     """Per window of valve ``seed`` (``n_windows`` drawn from 100 + ``seed``, as the study's; only
     window ``only`` if given; ``load_interval_s`` the range of the load's intervals between new
     levels [s], None: the plant's 1–4 s): the load (``"ramps"`` or ``"constant"``), its RMS error at speed [N],
-    the velocity part the estimate leaves (:func:`transforms.discrepancy.load.friction_mismatch`)
-    [N·s/m]: a friction mismatch of the model, or, with the true cylinder, load error that follows
-    v_X; the RMS error at speed of the force the mechanical replay takes for the load, the load plus
-    the friction it moves by that part (``rows._mechanical_plant``) times v_X [N]; and the
-    mechanical gap with the estimate and with the true load (its own velocity part) [mm].
+    the velocity and acceleration parts the estimate leaves (:func:`transforms.discrepancy.load.motion_mismatch`)
+    [N·s/m], [kg]: a friction and mass mismatch of the model, or, with the true cylinder, load
+    error that follows v_X or the acceleration; the RMS error at speed of the force the mechanical
+    replay takes for the load, the load plus the friction and the mass it moves by those parts
+    (``rows._mechanical_model``) times v_X and the acceleration [N]; and the mechanical gap with
+    the estimate and with the true load (its own parts) [mm].
 
     ``model``: (plant, condition) to diagnose with instead of Table 1's with the plant's true
     cylinder (e.g. a commissioning calibration's; its true-load gap then carries the model's own
@@ -59,8 +61,8 @@ def window_figures(seed: int, n_windows: int, only: int | None = None, load_inte
     from tests.refplant import to_lake_frame
     from transforms.discrepancy import DiscrepancySettings, split_records
     from transforms.discrepancy.alignment import align_records
-    from transforms.discrepancy.load import friction_mismatch
-    from transforms.discrepancy.rows import _force_balance, _load_motion, _mechanical_plant, _replay_record, prepare_records
+    from transforms.discrepancy.load import motion_mismatch
+    from transforms.discrepancy.rows import _force_balance, _load_motion, _mechanical_model, _replay_record, prepare_records
 
     s = DiscrepancySettings()
     truth = _simulated(seed, n_windows, None if load_interval_s is None else tuple(load_interval_s), quiet)
@@ -76,11 +78,12 @@ def window_figures(seed: int, n_windows: int, only: int | None = None, load_inte
         est = p.loads[key]
         true_load = r.true["F_l"][:p.rec.n].astype(float)
         at_speed = est.usable
-        moved = _mechanical_plant(p, plant, cond, fx, s).cylinder.d_v_n_s_m - plant.cylinder.d_v_n_s_m
-        force = est.load + moved * p.rec.sg["v"]
+        mc = _mechanical_model(p, plant, cond, fx, s, est.load)[0].cylinder
+        v, a = _load_motion(p.rec, s)
+        force = est.load + (mc.d_v_n_s_m - plant.cylinder.d_v_n_s_m) * v + (mc.mass_kg - plant.cylinder.mass_kg) * a
         # the true load ramps (0.1-0.4 s), never jumps: one segment, held at its interval means
-        true_est = replace(est, load=true_load, segment=np.zeros(p.rec.n, dtype=int), hold_until=0,
-                           friction_mismatch=friction_mismatch(_force_balance(p.rec, plant, cond, fx, s), true_load, at_speed, _load_motion(p.rec, s)))
+        dv, dm = motion_mismatch(_force_balance(p.rec, plant, cond, fx, s), true_load, at_speed, (v, a))
+        true_est = replace(est, load=true_load, segment=np.zeros(p.rec.n, dtype=int), hold_until=0, friction_mismatch=dv, mass_mismatch=dm)
         gaps = []
         for load in (est, true_est):
             p.loads[key] = load
@@ -88,7 +91,7 @@ def window_figures(seed: int, n_windows: int, only: int | None = None, load_inte
             gaps.append(float(np.sqrt(np.nanmean(e ** 2))) * 1e3)
         out.append({"seed": seed, "window": i, "load": "ramps" if est.knot_samples else "constant",
                     "load_error_n": float(np.sqrt(np.mean((est.load[at_speed] - true_load[at_speed]) ** 2))),
-                    "velocity_part_n_s_m": est.friction_mismatch,
-                    "replayed_force_error_n": float(np.sqrt(np.mean((force[at_speed] - true_load[at_speed]) ** 2))),
+                    "velocity_part_n_s_m": est.friction_mismatch, "mass_part_kg": est.mass_mismatch,
+                    "replayed_force_error_n": float(np.sqrt(np.nanmean((force[at_speed] - true_load[at_speed]) ** 2))),
                     "mechanical_gap_mm": gaps[0], "true_load_gap_mm": gaps[1]})
     return out

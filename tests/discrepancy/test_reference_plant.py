@@ -81,9 +81,12 @@ def test_with_the_true_load_and_no_noise_the_mechanical_replay_is_the_plant():
     # replay's own. While the replay held each sample's load over the interval after it, a ramp's
     # force came half a sample late (32 N on window 0's ramps of up to 63 kN/s), and X was 0.039 mm
     # off over such a 0.5 s piece, 0.0145 mm RMS over the window (the noise floor is ~0.011 mm);
-    # held at the interval's mean (load.interval_load) it is 0.0011 and 0.0010 mm
+    # held at the interval's mean (load.interval_load) it was 0.0011 and 0.0010 mm. Since the
+    # replay moves the mass by what the load leaves along the acceleration (rows._mechanical_model),
+    # 0.0042 and 0.0026 mm: the 1 ms transmitter lag leaves -28 and -14 kg there (without the lag
+    # +2.6 and +18 kg, and 0.0008 and 0.0006 mm)
     for w in window_figures(0, 2, load_interval_s=(1.0, 1.0), quiet=True):
-        assert w["true_load_gap_mm"] < 0.003, w
+        assert w["true_load_gap_mm"] < 0.005, w
 
 
 @pytest.mark.slow
@@ -98,6 +101,21 @@ def test_the_mechanical_replay_takes_a_small_friction_error_but_not_a_friction_c
            for k in (1.0, 1.0075, 1.2)}
     assert gap[1.0075] < 1.2 * gap[1.0], gap
     assert gap[1.2] > 10.0 * gap[1.0], gap
+
+
+@pytest.mark.slow
+def test_the_mechanical_replay_takes_a_small_mass_error_but_not_a_mass_change():
+    # seed 5 with a new load level every second: its commissioning calibration put the mass 2.8 %
+    # low (5,830 kg for 6,000), which replayed X 2.8x its floor while the replay integrated the
+    # model's mass as it is. The replay now moves the mass by what the load leaves along the
+    # acceleration, by at most mechanical_mass_rel (2 %), keeping the weight the load estimate
+    # holds: a mass 2.8 % low replays as the plant's does, a 10 % change (the library's typical
+    # one) still shows (0.0133 / 0.0133 / 0.115 mm)
+    interval = (1.0, 1.0)
+    gap = {k: window_figures(5, 2, only=0, load_interval_s=interval, model=true_cylinder_model(5, 2, interval, mass_factor=k))[0]["mechanical_gap_mm"]
+           for k in (1.0, 0.972, 1.1)}
+    assert gap[0.972] < 1.1 * gap[1.0], gap
+    assert gap[1.1] > 5.0 * gap[1.0], gap
 
 
 @pytest.mark.slow

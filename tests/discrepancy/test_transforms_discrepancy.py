@@ -25,7 +25,7 @@ from transforms.discrepancy import (
     prepare_record,
     split_records,
 )
-from transforms.discrepancy.load import LoadEstimate, friction_mismatch, friction_within, interval_load, step_filter
+from transforms.discrepancy.load import LoadEstimate, friction_within, interval_load, motion_mismatch, step_filter
 from transforms.discrepancy.residuals import triangular_force_balance
 
 from .simdata import simulate_lake
@@ -255,16 +255,19 @@ def test_a_friction_mismatch_beyond_the_replays_limit_goes_into_the_load_where_t
     assert friction_within(flat, v, 1000.0, 3000.0).friction_mismatch == -2620.0
 
 
-def test_the_friction_mismatch_is_what_the_load_leaves_along_the_velocity():
+def test_the_friction_and_mass_mismatch_are_what_the_load_leaves_along_velocity_and_acceleration():
     """The force balance of a model whose viscous friction is 3 kN·s/m short and mass 600 kg
-    short, with a ramping load: what the estimated load leaves along v_X (jointly with the
-    acceleration) is the 3 kN·s/m, as with the true load; the mechanical replay's friction is moved
-    by it (``rows._mechanical_plant``, up to ``mechanical_friction_rel``)."""
+    short, with a ramping load: what the estimated load leaves along v_X and the acceleration is
+    the 3 kN·s/m and the 600 kg, as with the true load; the mechanical replay's friction and mass
+    are moved by them (``rows._mechanical_model``, up to ``mechanical_friction_rel`` and
+    ``mechanical_mass_rel``)."""
     s, _, v, a, ramp, f = _rolling_force(lambda t: np.interp(t, [3.5, 3.8], [1500.0, 2200.0]))
     est = estimate_load(f, v, s, accel=a, dt=1e-3)
-    assert friction_mismatch(f, est.load, est.usable, (v, a)) == pytest.approx(3000.0, rel=0.03)
-    assert friction_mismatch(f, ramp, est.usable, (v, a)) == pytest.approx(3000.0, rel=0.01)
-    assert friction_mismatch(f, ramp, np.zeros(f.size, dtype=bool), (v, a)) == 0.0  # nothing at speed
+    for load, rel in ((est.load, 0.03), (ramp, 0.01)):
+        dv, dm = motion_mismatch(f, load, est.usable, (v, a))
+        assert dv == pytest.approx(3000.0, rel=rel)
+        assert dm == pytest.approx(600.0, rel=rel)
+    assert motion_mismatch(f, ramp, np.zeros(f.size, dtype=bool), (v, a)) == (0.0, 0.0)  # nothing at speed
 
 
 def test_demean_by_group():
@@ -334,7 +337,7 @@ def test_the_mechanical_noise_floor_is_what_the_noise_leaves_through_the_replay(
     # its segments its own steps, which the replay takes at their samples (load.interval_load)
     true_load = np.asarray(res.F_l_n[0], float)
     segment = np.concatenate([[0], np.cumsum(np.diff(true_load) != 0)])
-    p.loads[key] = replace(p.loads[key], load=true_load, segment=segment, hold_until=0, friction_mismatch=0.0)
+    p.loads[key] = replace(p.loads[key], load=true_load, segment=segment, hold_until=0, friction_mismatch=0.0, mass_mismatch=0.0)
     floor = noise_floors([p], TABLE1, cond, fx, s)["mechanical"]
     gaps = {kind: _gaps([q], TABLE1, cond, fx, s, set())[0].split_gap("mechanical")
             for kind, q in (("recorded", p), ("noise-free", replace(p, rec=prepare_record(noise_free, s))))}

@@ -41,11 +41,12 @@ instants), so the estimate is made piecewise constant:
    acceleration and a friction on the velocity, which change within a move (0.3–0.6 s), faster
    than a load that is linear over 0.1 s can follow, so both stay separable from it.
 
-What the final load leaves of F̂_l along the velocity (jointly with the acceleration) is the
-viscous friction the model lacks (:func:`friction_mismatch`); the mechanical replay moves the
-model's by it, within ``mechanical_friction_rel``; beyond that, up to ``load_friction_rel`` more goes
-into a piecewise-linear load where its knots follow v_X (:func:`friction_within`). The replay
-holds the load over each sample interval at its mean there (:func:`interval_load`).
+What the final load leaves of F̂_l along the velocity and the acceleration is the viscous
+friction and the mass the model lacks (:func:`motion_mismatch`); the mechanical replay moves the
+model's by them, within ``mechanical_friction_rel`` and ``mechanical_mass_rel``; beyond the first,
+up to ``load_friction_rel`` more goes into a piecewise-linear load where its knots follow v_X
+(:func:`friction_within`). The replay holds the load over each sample interval at its mean there
+(:func:`interval_load`).
 
 While the cylinder sticks at the start of a record, before its first observable motion, the load
 is unknown (a step may have happened before); the workflow then tries driving the replay with the
@@ -64,7 +65,7 @@ import numpy as np
 
 from transforms.discrepancy.settings import DiscrepancySettings
 
-__all__ = ["LoadEstimate", "corners_pay", "estimate_load", "follows_ramps", "friction_mismatch", "friction_within", "load_projector", "project_out", "ramp_load",
+__all__ = ["LoadEstimate", "corners_pay", "estimate_load", "follows_ramps", "friction_within", "interval_load", "load_projector", "motion_mismatch", "project_out", "ramp_load",
            "replay_load", "segment_knots", "segment_levels", "step_filter", "stuck_spans"]
 
 
@@ -153,8 +154,11 @@ class LoadEstimate:
     valid sample, the ends of its standstills and the ramps' corners (:func:`ramp_load`); empty: the
     regular grid of ``knot_samples``."""
     friction_mismatch: float = 0.0
-    """The viscous friction the model lacks, by what the load leaves of the force balance
-    (:func:`friction_mismatch`). [N s/m]"""
+    """The viscous friction the model lacks, by what the load leaves of the force balance along
+    v_X (:func:`motion_mismatch`). [N s/m]"""
+    mass_mismatch: float = 0.0
+    """The mass the model lacks, by what the load leaves of the force balance along the
+    acceleration (:func:`motion_mismatch`). [kg]"""
 
     def knots(self, s: int) -> np.ndarray:
         """Knots (sample positions) of segment ``s``'s piecewise-linear load; empty: a constant."""
@@ -344,7 +348,7 @@ def ramp_load(f_hat: np.ndarray, valid: np.ndarray, usable: np.ndarray, segment:
 
     A free slope over a long piece between ramps may trade with the velocity column (reference
     plant seed 2: the load 43 N off at speed over 1–2 s levels after steep ramps); the mechanical
-    replay takes that column's part as friction (:func:`friction_mismatch`), so what it replays is
+    replay takes that column's part as friction (:func:`motion_mismatch`), so what it replays is
     the joint fit. (Such pieces were once tied to one value, which left missed gentle ramps inside
     them to the velocity column: docs/discrepancy.md, "A level is one value".)
 
@@ -403,17 +407,19 @@ def corners_pay(f_hat: np.ndarray, usable: np.ndarray, segment: np.ndarray, n_se
     return rms_corner * settings.corner_ratio <= rms_const
 
 
-def friction_mismatch(f_hat: np.ndarray, load: np.ndarray, usable: np.ndarray, motion: tuple) -> float:
-    """Δd_v [N s/m]: the velocity coefficient of the least squares of what ``load`` leaves of the
-    force balance ``f_hat`` on the ``motion`` columns (v_X, the acceleration) over the ``usable``
-    samples. The force balance is the load plus Δd_v v_X + Δm a where the model's viscous friction
-    and mass are Δd_v and Δm short of the plant's; where the load was fitted jointly with these
-    columns (:func:`ramp_load`) this is the joint fit's coefficient. 0 with fewer than 10 samples."""
+def motion_mismatch(f_hat: np.ndarray, load: np.ndarray, usable: np.ndarray, motion: tuple) -> tuple[float, float]:
+    """(Δd_v [N s/m], Δm [kg]): the least squares of what ``load`` leaves of the force balance
+    ``f_hat`` on the ``motion`` columns (v_X, the acceleration) over the ``usable`` samples. The
+    force balance is the load plus Δd_v v_X + Δm a where the model's viscous friction and mass are
+    Δd_v and Δm short of the plant's (the weight Δm g a load cannot tell from its own level); where
+    the load was fitted jointly with these columns (:func:`ramp_load`) these are the joint fit's
+    coefficients. (0, 0) with fewer than 10 samples."""
     M = np.column_stack(motion)
     m = usable & np.isfinite(f_hat) & np.isfinite(load) & np.all(np.isfinite(M), axis=1)
     if m.sum() < 10:
-        return 0.0
-    return float(np.linalg.lstsq(M[m], (f_hat - load)[m], rcond=None)[0][0])
+        return 0.0, 0.0
+    dv, dm = np.linalg.lstsq(M[m], (f_hat - load)[m], rcond=None)[0]
+    return float(dv), float(dm)
 
 
 def load_projector(group: np.ndarray, sample: np.ndarray, knots: dict) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -511,7 +517,7 @@ def stuck_spans(v: np.ndarray, v_stuck: float, min_samples: int = 5) -> np.ndarr
 
 def friction_within(est: LoadEstimate, v: np.ndarray, limit: float, load_limit: float) -> LoadEstimate:
     """``est`` with its friction mismatch beyond ±``limit`` [N s/m] (the most the mechanical replay
-    moves the model's viscous friction by, ``rows._mechanical_plant``) moved into the load, up to
+    moves the model's viscous friction by, ``rows._mechanical_model``) moved into the load, up to
     ``load_limit`` [N s/m] of it, where the load is piecewise linear (:func:`ramp_load`): along the
     part of ``v`` [m/s] that the load's own basis follows (least squares per segment over the
     usable samples), which the joint fit cannot tell from a load. In a long slow move whose speed

@@ -13,7 +13,7 @@ from model.params import PlantParams, ValveCondition
 from model.replay import DRIVE_HYDRAULIC, DRIVE_MECHANICAL, replay
 from model.simulate import DEFAULT_REG_BAND_PA
 from transforms.discrepancy.gaps import GAP_SCALES, RECORDED_OF, GapAccumulator, noise_rms
-from transforms.discrepancy.load import LoadEstimate, estimate_load, load_projector, friction_mismatch, friction_within, interval_load, project_out, replay_load, robust_sigma, stuck_spans
+from transforms.discrepancy.load import LoadEstimate, estimate_load, load_projector, friction_within, motion_mismatch, interval_load, project_out, replay_load, robust_sigma, stuck_spans
 from transforms.discrepancy.records import REGIONS, Record, operating_regions, prepare_record
 from transforms.discrepancy.residuals import (
     demean_by_group,
@@ -104,7 +104,8 @@ def _estimate_load(rec: Record, plant, condition, effects, settings) -> LoadEsti
     v, a = _load_motion(rec, settings)
     load = estimate_load(f_hat, v, settings, f_point=t["force"] - t["mass"] * rec.sg["a"], accel=a, dt=rec.dt)
     load = _refine_rest_steps(rec, load, f_hat, plant, condition, effects, settings)
-    load = replace(load, friction_mismatch=friction_mismatch(f_hat, load.load, load.usable, (v, a)))
+    dv, dm = motion_mismatch(f_hat, load.load, load.usable, (v, a))
+    load = replace(load, friction_mismatch=dv, mass_mismatch=dm)
     d_v = plant.cylinder.d_v_n_s_m
     return friction_within(load, v, settings.mechanical_friction_rel * d_v, settings.load_friction_rel * d_v)
 
@@ -122,14 +123,18 @@ def _load_for(p: _Prepared, plant, condition, effects, settings) -> np.ndarray:
     return _load_estimate_for(p, plant, condition, effects, settings).load
 
 
-def _mechanical_plant(p: _Prepared, plant, condition, effects, settings) -> PlantParams:
-    """The plant the mechanical replay integrates: the model's viscous friction d_v moved by the
-    friction its load leaves in the record's force balance (:attr:`LoadEstimate.friction_mismatch`),
-    by at most ``settings.mechanical_friction_rel`` of d_v (``DiscrepancySettings``)."""
-    dv = _load_estimate_for(p, plant, condition, effects, settings).friction_mismatch
+def _mechanical_model(p: _Prepared, plant, condition, effects, settings, load: np.ndarray) -> tuple[PlantParams, np.ndarray]:
+    """(plant, load [N]) the mechanical replay integrates: the model's viscous friction d_v and
+    mass moved by the friction and the mass its load leaves in the record's force balance
+    (:attr:`LoadEstimate.friction_mismatch`, :attr:`LoadEstimate.mass_mismatch`), by at most
+    ``settings.mechanical_friction_rel`` and ``mechanical_mass_rel`` of them
+    (``DiscrepancySettings``); ``load`` (the replay's, :func:`_replay_load_for`) plus the moved
+    mass's weight, which the load estimate already holds."""
+    est = _load_estimate_for(p, plant, condition, effects, settings)
     c = plant.cylinder
-    lim = settings.mechanical_friction_rel * c.d_v_n_s_m
-    return replace(plant, cylinder=replace(c, d_v_n_s_m=c.d_v_n_s_m + float(np.clip(dv, -lim, lim))))
+    lim_v, lim_m = settings.mechanical_friction_rel * c.d_v_n_s_m, settings.mechanical_mass_rel * c.mass_kg
+    dv, dm = float(np.clip(est.friction_mismatch, -lim_v, lim_v)), float(np.clip(est.mass_mismatch, -lim_m, lim_m))
+    return replace(plant, cylinder=replace(c, d_v_n_s_m=c.d_v_n_s_m + dv, mass_kg=c.mass_kg + dm)), load + dm * c.g_m_s2
 
 
 def _holding(rec: Record, plant, condition, effects) -> tuple[np.ndarray, np.ndarray]:
@@ -427,7 +432,7 @@ def _mechanical_restarts(rec: Record, settings) -> tuple[np.ndarray, np.ndarray]
 
 def _mechanical_replay(rec: Record, plant, condition, effects, load, mstarts: np.ndarray) -> np.ndarray:
     """X [m] replayed on the record's pressures (Savitzky–Golay, sensor effects removed) with
-    ``load`` and ``plant`` (:func:`_mechanical_plant`'s), restarted at ``mstarts``
+    ``load`` and ``plant`` (:func:`_mechanical_model`'s), restarted at ``mstarts``
     (:func:`_mechanical_restarts`) from the recorded X and its Savitzky–Golay velocity."""
     x_src = _spool_source(rec)
     x_true, p1_true, p2_true = true_signals(x_src, rec.sg["p1"], rec.sg["p2"], effects)
@@ -457,7 +462,8 @@ def _replay_record(p: _Prepared, plant, condition, effects, settings, split: boo
     if split:
         p1h, p2h = _hydraulic_replay(p, plant, condition, effects, start, load)
         moving, mstarts = _mechanical_restarts(rec, settings)
-        out.update({"p1_hydraulic": p1h, "p2_hydraulic": p2h, "X_mechanical": _mechanical_replay(rec, _mechanical_plant(p, plant, condition, effects, settings), condition, effects, load, mstarts)})
+        mplant, mload = _mechanical_model(p, plant, condition, effects, settings, load)
+        out.update({"p1_hydraulic": p1h, "p2_hydraulic": p2h, "X_mechanical": _mechanical_replay(rec, mplant, condition, effects, mload, mstarts)})
     for k in out:
         out[k][n - h:] = np.nan  # the record's tail has no Savitzky–Golay regions
     if split:
@@ -496,7 +502,7 @@ def noise_floors(prepared, plant, condition, effects, settings, draws: int = NOI
       chamber replay, 0.03–0.04 bar, is not added: measured and left, docs/discrepancy.md);
     * mechanical: sqrt((X noise / 1 mm)² + (e / 1 mm)²), e the RMS over the moving samples of the
       mechanical replay (:func:`_mechanical_replay`, the model ``plant`` with its
-      :func:`_mechanical_plant` friction, ``condition``, ``effects`` and its load) with fresh white noise of the estimated RMS added to the recorded
+      :func:`_mechanical_model` friction and mass, ``condition``, ``effects`` and its load) with fresh white noise of the estimated RMS added to the recorded
       p1, p2 and X (X enters through the restarts: the position and its Savitzky–Golay velocity)
       minus the replay of the records as they are, averaged over ``draws`` draws from ``seed``.
       The replay integrates the force twice, so the pressures' noise (0.05 bar: ~30 N on Table
@@ -518,8 +524,7 @@ def noise_floors(prepared, plant, condition, effects, settings, draws: int = NOI
         rec = p.rec
         moving, mstarts = _mechanical_restarts(rec, settings)
         moving[rec.n - h:] = False
-        load = _replay_load_for(p, plant, condition, effects, settings)
-        mplant = _mechanical_plant(p, plant, condition, effects, settings)
+        mplant, load = _mechanical_model(p, plant, condition, effects, settings, _replay_load_for(p, plant, condition, effects, settings))
         nominal = _mechanical_replay(rec, mplant, condition, effects, load, mstarts)
         rng = np.random.default_rng([seed, i])
         for _ in range(draws):
