@@ -10,10 +10,11 @@ again with its viscous friction d_v set to the plant's: what the calibrated d_v 
 
     taskset -c 0 .venv/bin/python bench/refplant_load.py --seeds 5 [--load-interval-s 1,1] [--commissioning]
 
-Prints one line per window (the velocity part is what the load estimate leaves proportional to
-v_X: a friction mismatch of the model, or load error that follows the motion; the mechanical replay
-moves the model's friction by it, within 1 %, so the force it takes for the load is the load plus
-that part times v_X) and the CPU seconds.
+Prints one line per window (the velocity and mass parts are what the load estimate leaves
+proportional to v_X and to the acceleration: a friction and mass mismatch of the model, or load
+error that follows the motion; the mechanical replay moves the model's friction and mass by them,
+within 1 % and 2 %, so the force it takes for the load is the load plus those parts times v_X and
+the acceleration) and the CPU seconds.
 """
 
 from __future__ import annotations
@@ -51,7 +52,7 @@ def main(argv=None) -> None:
         for name, model in models.items():
             for r in window_figures(seed, a.windows, load_interval_s=interval, model=model):
                 print(f"seed {r['seed']} window {r['window']}, {name}: load ({r['load']}) off by {r['load_error_n']:.0f} N RMS at speed, "
-                      f"velocity part {r['velocity_part_n_s_m']:.0f} N s/m, the force the replay takes off by {r['replayed_force_error_n']:.0f} N; "
+                      f"velocity part {r['velocity_part_n_s_m']:.0f} N s/m, mass part {r['mass_part_kg']:.0f} kg, the force the replay takes off by {r['replayed_force_error_n']:.0f} N; "
                       f"mechanical gap {r['mechanical_gap_mm']:.3f} mm, with the true load {r['true_load_gap_mm']:.3f} mm", flush=True)
     print(f"CPU {time.process_time() - t0:.0f} s")
 

@@ -123,17 +123,25 @@ def _load_for(p: _Prepared, plant, condition, effects, settings) -> np.ndarray:
     return _load_estimate_for(p, plant, condition, effects, settings).load
 
 
+def tapered(x: float, limit: float) -> float:
+    """``x`` up to ±``limit``; beyond, less, down to 0 at ±2 ``limit`` and after: what the
+    mechanical replay takes of a mass mismatch, a calibration's error, while a mismatch several
+    times larger is a finding and stays whole in the gap where it is judged."""
+    return float(np.sign(x) * np.clip(2.0 * limit - abs(x), 0.0, limit)) if abs(x) > limit else float(x)
+
+
 def _mechanical_model(p: _Prepared, plant, condition, effects, settings, load: np.ndarray) -> tuple[PlantParams, np.ndarray]:
     """(plant, load [N]) the mechanical replay integrates: the model's viscous friction d_v and
     mass moved by the friction and the mass its load leaves in the record's force balance
-    (:attr:`LoadEstimate.friction_mismatch`, :attr:`LoadEstimate.mass_mismatch`), by at most
-    ``settings.mechanical_friction_rel`` and ``mechanical_mass_rel`` of them
-    (``DiscrepancySettings``); ``load`` (the replay's, :func:`_replay_load_for`) plus the moved
-    mass's weight, which the load estimate already holds."""
+    (:attr:`LoadEstimate.friction_mismatch`, :attr:`LoadEstimate.mass_mismatch`): d_v by at most
+    ``settings.mechanical_friction_rel`` of it, the mass by at most ``mechanical_mass_rel`` of it
+    and not at all beyond twice that (:func:`tapered`; ``DiscrepancySettings``); ``load`` (the
+    replay's, :func:`_replay_load_for`) plus the moved mass's weight, which the load estimate
+    already holds."""
     est = _load_estimate_for(p, plant, condition, effects, settings)
     c = plant.cylinder
-    lim_v, lim_m = settings.mechanical_friction_rel * c.d_v_n_s_m, settings.mechanical_mass_rel * c.mass_kg
-    dv, dm = float(np.clip(est.friction_mismatch, -lim_v, lim_v)), float(np.clip(est.mass_mismatch, -lim_m, lim_m))
+    lim_v = settings.mechanical_friction_rel * c.d_v_n_s_m
+    dv, dm = float(np.clip(est.friction_mismatch, -lim_v, lim_v)), tapered(est.mass_mismatch, settings.mechanical_mass_rel * c.mass_kg)
     return replace(plant, cylinder=replace(c, d_v_n_s_m=c.d_v_n_s_m + dv, mass_kg=c.mass_kg + dm)), load + dm * c.g_m_s2
 
 

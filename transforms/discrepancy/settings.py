@@ -111,11 +111,12 @@ class DiscrepancySettings:
         its mechanical gap before fell from 4.5 mm to 0.3 mm on seed 2 with commissioning). [–]
     mechanical_mass_rel : float
         The mechanical replay moves the model's mass by what the load estimate leaves of the
-        force balance along the acceleration, by at most this fraction of it (the weight stays
-        as the load estimate took it): with a new load level every second, commissioning
-        calibrations of the reference plant put the mass 2.1–2.8 % low, the diagnosed windows'
-        fits found 11–108 kg of it, and on seed 5 X was replayed 2.8× its floor without this,
-        1.4× with it; a mass change of the library's typical 10 % still shows. [–]
+        force balance along the acceleration, by at most this fraction of it, and not at all
+        beyond twice it (``rows.tapered``; the weight stays as the load estimate took it): with a
+        new load level every second, commissioning calibrations of the reference plant put the
+        mass 2.1–2.8 % low, the diagnosed windows' fits found 11–108 kg of it, and on seed 5 X
+        was replayed 2.8× its floor without this, 1.4× with it; a mass change of the library's
+        typical 10 % stays whole in the mechanical gap. [–]
     block_s : float
         Length of the cross-validation blocks. [s]
     max_effects : int
