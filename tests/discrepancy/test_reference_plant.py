@@ -110,7 +110,7 @@ def test_the_mechanical_replay_takes_a_small_mass_error_but_not_a_mass_change():
     # model's mass as it is. The replay now moves the mass by what the load leaves along the
     # acceleration, by at most mechanical_mass_rel (2 %), keeping the weight the load estimate
     # holds: a mass 2.8 % low replays as the plant's does, a 10 % change (the library's typical
-    # one) still shows (0.0133 / 0.0133 / 0.115 mm)
+    # one) stays whole, the replay taking none of it beyond twice the limit (0.0133 / 0.0133 / 0.143 mm)
     interval = (1.0, 1.0)
     gap = {k: window_figures(5, 2, only=0, load_interval_s=interval, model=true_cylinder_model(5, 2, interval, mass_factor=k))[0]["mechanical_gap_mm"]
            for k in (1.0, 0.972, 1.1)}

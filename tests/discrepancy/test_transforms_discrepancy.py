@@ -7,6 +7,8 @@ from pathlib import Path
 import numpy as np
 import polars as pl
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 import transforms.discrepancy as td
 from model import TABLE1, measure, simulate_windows
@@ -27,6 +29,7 @@ from transforms.discrepancy import (
 )
 from transforms.discrepancy.load import LoadEstimate, friction_within, interval_load, motion_mismatch, step_filter
 from transforms.discrepancy.residuals import triangular_force_balance
+from transforms.discrepancy.rows import tapered
 
 from .simdata import simulate_lake
 
@@ -268,6 +271,20 @@ def test_the_friction_and_mass_mismatch_are_what_the_load_leaves_along_velocity_
         assert dv == pytest.approx(3000.0, rel=rel)
         assert dm == pytest.approx(600.0, rel=rel)
     assert motion_mismatch(f, ramp, np.zeros(f.size, dtype=bool), (v, a)) == (0.0, 0.0)  # nothing at speed
+
+
+@given(st.floats(-1000.0, 1000.0), st.floats(-1000.0, 1000.0), st.floats(1.0, 500.0))
+def test_the_replay_takes_a_small_mass_mismatch_whole_and_a_large_one_not_at_all(x, y, limit):
+    """``rows.tapered``: within ±limit as it is; never more than the limit nor against its sign;
+    nothing beyond twice the limit (a mass change stays whole in the gap); continuous (a change of
+    the mismatch never moves the replayed mass by more)."""
+    t = tapered(x, limit)
+    if abs(x) <= limit:
+        assert t == x
+    assert abs(t) <= min(abs(x), limit) and t * x >= 0.0
+    if abs(x) >= 2.0 * limit:
+        assert t == 0.0
+    assert abs(tapered(y, limit) - t) <= abs(y - x) + 1e-9
 
 
 def test_demean_by_group():
