@@ -307,7 +307,7 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
     from transforms.discrepancy.calibration import CLEARANCE, NuisanceModel, calibrate_best, calibrate_prepared, joint_fit, refine_breakaway
     from transforms.discrepancy.alignment import PRESSURES, align_prepared
     from transforms.discrepancy.transmitter import GAIN_OR_OFFSET, gain_or_offset
-    from transforms.discrepancy.verdict import acting_gap, lagging_transmitter, unexplained
+    from transforms.discrepancy.verdict import acting_gap, far_beyond_the_floor, lagging_transmitter, unexplained
 
     settings = settings or DiscrepancySettings()
     condition = plant.nominal_condition if condition is None else condition
@@ -484,6 +484,7 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
     lag = delays.finding()
     if lag:  # a transmitter lagging the others: a finding of its own (aligned for, not absorbed)
         verdict = lagging_transmitter(verdict, bool(named), lag, stage_acc[0].split_gap("hydraulic"), floors["hydraulic"])
+    verdict = far_beyond_the_floor(verdict, bool(named), stage_acc[0], floors)
     return Diagnosis(
         n_records=len(prepared), records=[(p.rec.start_us, p.rec.end_us) for p in prepared], named=named,
         candidates=candidates, gap_rows=gap_rows, residual_rows=residual_rows, stage_effects=stage_effects,
