@@ -196,6 +196,8 @@ def test_nothing_found_with_a_gap_far_beyond_its_floor_is_unexplained():
     assert (v.verdict, v.effect, v.gap_kind, v.floor) == ("unexplained", None, "mechanical", 0.0114), v
     assert v.gap_before == v.gap_after == pytest.approx(4.05) and "the motion (Eq. 5, X)" in v.where and "region extending" in v.where, v.where
     assert "355× its noise floor" in v.reason, v.reason
+    hint = "the equations' strongest candidate, friction_change, takes 70% of their residual at t = 3.5 (a name needs t ≥ 4)"
+    assert far_beyond_the_floor(None, False, acc(4.05), floors, hint).reason.endswith("; " + hint)
     none = Verdict("none", 0.9, None, float("nan"), nuisances=[{"name": "d_v"}], scores=[{"key": "friction_change"}])
     v = far_beyond_the_floor(none, False, acc(4.05), floors)
     assert v.verdict == "unexplained" and v.nuisances == none.nuisances and v.scores == none.scores

@@ -484,7 +484,13 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
     lag = delays.finding()
     if lag:  # a transmitter lagging the others: a finding of its own (aligned for, not absorbed)
         verdict = lagging_transmitter(verdict, bool(named), lag, stage_acc[0].split_gap("hydraulic"), floors["hydraulic"])
-    verdict = far_beyond_the_floor(verdict, bool(named), stage_acc[0], floors)
+    strongest = ""
+    if candidates and candidates[0]["relative_gain"] > 0.0:  # sorted by gain
+        top = candidates[0]
+        key = top["effect"] + (f"[{top['variant']}]" if top["variant"] else "")
+        strongest = (f"the equations' strongest candidate, {key}, takes {top['relative_gain']:.0%} of their residual at "
+                     f"t = {top['t_stat']:.2g} (a name needs t ≥ {settings.min_t_stat:g})")
+    verdict = far_beyond_the_floor(verdict, bool(named), stage_acc[0], floors, strongest)
     return Diagnosis(
         n_records=len(prepared), records=[(p.rec.start_us, p.rec.end_us) for p in prepared], named=named,
         candidates=candidates, gap_rows=gap_rows, residual_rows=residual_rows, stage_effects=stage_effects,

@@ -214,13 +214,14 @@ def lagging_transmitter(verdict: "Verdict | None", named: bool, finding: str, ga
     return verdict
 
 
-def far_beyond_the_floor(verdict: "Verdict | None", named: bool, acc, floors: dict) -> "Verdict | None":
+def far_beyond_the_floor(verdict: "Verdict | None", named: bool, acc, floors: dict, strongest: str = "") -> "Verdict | None":
     """The verdict when nothing was found (``none``, or no verdict and nothing ``named`` of the model
     taken as exact) while the base model's replay (``acc``, its
     :class:`~transforms.discrepancy.gaps.GapAccumulator`) leaves a split gap at least
     ``FAR_BEYOND_FLOOR`` × its noise floor (``floors``): ``unexplained``, the gap furthest beyond
-    its floor as where the data disagree. A gap that large is not the noise and not the base
-    model's tolerances; "nothing found" would be a false all-clear."""
+    its floor as where the data disagree, and ``strongest`` (the equations' strongest candidate
+    below the selection's line, if any) in the reason. A gap that large is not the noise and not
+    the base model's tolerances; "nothing found" would be a false all-clear."""
     if not ((verdict is None and not named) or (verdict is not None and verdict.verdict == "none")):
         return verdict
     ratio = {k: acc.split_gap(k) / floors[k] for k in SPLIT_GAPS if floors.get(k, 0.0) > 0.0 and np.isfinite(acc.split_gap(k))}
@@ -231,7 +232,8 @@ def far_beyond_the_floor(verdict: "Verdict | None", named: bool, acc, floors: di
     kw = dict(nuisances=verdict.nuisances, scores=verdict.scores) if verdict is not None else {}
     return Verdict("unexplained", MAX_CONFIDENCE, None, float("nan"), separate_by="",
                    reason=(f"the data disagree with the model in a way no library effect explains: no effect stands out in the equations, "
-                           f"but the base model's {kind} gap is {gap:.3g}, {ratio[kind]:.3g}× its noise floor {floor:.2g} (≥ {FAR_BEYOND_FLOOR:g}×)"),
+                           f"but the base model's {kind} gap is {gap:.3g}, {ratio[kind]:.3g}× its noise floor {floor:.2g} (≥ {FAR_BEYOND_FLOOR:g}×)"
+                           + (f"; {strongest}" if strongest else "")),
                    gap_before=gap, gap_after=gap, where=where_it_disagrees(acc, kind, floor), gap_kind=kind, floor=floor, **kw)
 
 
