@@ -21,7 +21,7 @@ from transforms.discrepancy.calibration import _split_gains, calibrate
 from transforms.discrepancy.load import LoadEstimate
 from transforms.discrepancy.nuisance import NUISANCES, NuisancePriors, apply_nuisances, nuisance_sigmas, nuisance_values
 from transforms.discrepancy.pipeline import _project_out, diagnose
-from transforms.discrepancy.verdict import FAR_BEYOND_FLOOR, Verdict, acting_gap, beyond_selection, confirmed, far_beyond_the_floor, whole_replay_refutes
+from transforms.discrepancy.verdict import FAR_BEYOND_FLOOR, Verdict, acting_gap, beyond_selection, confirmed, far_beyond_the_floor, strongest_candidate, whole_replay_refutes
 
 from .simdata import perturbed_plant, simulate_lake, study_conditions
 
@@ -196,8 +196,12 @@ def test_nothing_found_with_a_gap_far_beyond_its_floor_is_unexplained():
     assert (v.verdict, v.effect, v.gap_kind, v.floor) == ("unexplained", None, "mechanical", 0.0114), v
     assert v.gap_before == v.gap_after == pytest.approx(4.05) and "the motion (Eq. 5, X)" in v.where and "region extending" in v.where, v.where
     assert "355× its noise floor" in v.reason, v.reason
-    hint = "the equations' strongest candidate, friction_change, takes 70% of their residual at t = 3.5 (a name needs t ≥ 4)"
+    candidates = [{"effect": "friction_change", "variant": "", "relative_gain": 0.705, "t_stat": 3.454},
+                  {"effect": "entrained_air", "variant": "", "relative_gain": 0.0, "t_stat": -0.2}]
+    hint = strongest_candidate(candidates, 4.0)
+    assert hint == "the equations' strongest candidate, friction_change, takes 70% of their residual at t = 3.5 (a name needs t ≥ 4)"
     assert far_beyond_the_floor(None, False, acc(4.05), floors, hint).reason.endswith("; " + hint)
+    assert strongest_candidate(candidates[1:], 4.0) == strongest_candidate([], 4.0) == ""  # nothing reduced the residual
     none = Verdict("none", 0.9, None, float("nan"), nuisances=[{"name": "d_v"}], scores=[{"key": "friction_change"}])
     v = far_beyond_the_floor(none, False, acc(4.05), floors)
     assert v.verdict == "unexplained" and v.nuisances == none.nuisances and v.scores == none.scores

@@ -307,7 +307,7 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
     from transforms.discrepancy.calibration import CLEARANCE, NuisanceModel, calibrate_best, calibrate_prepared, joint_fit, refine_breakaway
     from transforms.discrepancy.alignment import PRESSURES, align_prepared
     from transforms.discrepancy.transmitter import GAIN_OR_OFFSET, gain_or_offset
-    from transforms.discrepancy.verdict import acting_gap, far_beyond_the_floor, lagging_transmitter, unexplained
+    from transforms.discrepancy.verdict import acting_gap, far_beyond_the_floor, lagging_transmitter, strongest_candidate, unexplained
 
     settings = settings or DiscrepancySettings()
     condition = plant.nominal_condition if condition is None else condition
@@ -484,13 +484,7 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
     lag = delays.finding()
     if lag:  # a transmitter lagging the others: a finding of its own (aligned for, not absorbed)
         verdict = lagging_transmitter(verdict, bool(named), lag, stage_acc[0].split_gap("hydraulic"), floors["hydraulic"])
-    strongest = ""
-    if candidates and candidates[0]["relative_gain"] > 0.0:  # sorted by gain
-        top = candidates[0]
-        key = top["effect"] + (f"[{top['variant']}]" if top["variant"] else "")
-        strongest = (f"the equations' strongest candidate, {key}, takes {top['relative_gain']:.0%} of their residual at "
-                     f"t = {top['t_stat']:.2g} (a name needs t ≥ {settings.min_t_stat:g})")
-    verdict = far_beyond_the_floor(verdict, bool(named), stage_acc[0], floors, strongest)
+    verdict = far_beyond_the_floor(verdict, bool(named), stage_acc[0], floors, strongest_candidate(candidates, settings.min_t_stat))
     return Diagnosis(
         n_records=len(prepared), records=[(p.rec.start_us, p.rec.end_us) for p in prepared], named=named,
         candidates=candidates, gap_rows=gap_rows, residual_rows=residual_rows, stage_effects=stage_effects,

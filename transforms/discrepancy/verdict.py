@@ -61,7 +61,7 @@ from transforms.discrepancy.gaps import GAP_SCALES, NOISE_GAP, SPLIT_GAPS
 from transforms.discrepancy.nuisance import NUISANCE_UNITS
 
 __all__ = ["FAR_BEYOND_FLOOR", "GAP_SHRINK", "SEPARATE_BY", "Verdict", "Z_AMBIGUOUS", "Z_NAMED", "acting_gap", "beats_base_model", "beyond_selection",
-           "confirmed", "far_beyond_the_floor", "lagging_transmitter", "nuisance_verdict", "unexplained", "whole_replay_refutes"]
+           "confirmed", "far_beyond_the_floor", "lagging_transmitter", "nuisance_verdict", "strongest_candidate", "unexplained", "whole_replay_refutes"]
 
 Z_AMBIGUOUS = 3.0
 """Prior σ (along an effect's nuisance pattern) above which the nuisance reading is reported as doubtful."""
@@ -204,14 +204,34 @@ def lagging_transmitter(verdict: "Verdict | None", named: bool, finding: str, ga
     ``unexplained`` with the lag as where the data disagree (``gap``: the hydraulic gap of the
     base model on the aligned records, ``floor`` its noise floor); otherwise the lag is added to
     the verdict's reason."""
-    if (verdict is None and not named) or (verdict is not None and verdict.verdict == "none"):
-        kw = dict(nuisances=verdict.nuisances, scores=verdict.scores) if verdict is not None else {}
+    if _found_nothing(verdict, named):
         return Verdict("unexplained", MAX_CONFIDENCE, None, float("nan"), separate_by="the transmitter's step response, or a reference transmitter on the same port",
                        reason=f"the data disagree with the model in a way no library effect explains: {finding}", gap_before=gap, gap_after=gap,
-                       where=finding, gap_kind="hydraulic", floor=floor, **kw)
+                       where=finding, gap_kind="hydraulic", floor=floor, **_readings(verdict))
     if verdict is not None:
         verdict.reason += f"; besides, {finding}"
     return verdict
+
+
+def _found_nothing(verdict: "Verdict | None", named: bool) -> bool:
+    """A ``none`` verdict, or no verdict and nothing ``named`` of the model taken as exact."""
+    return (verdict is None and not named) or (verdict is not None and verdict.verdict == "none")
+
+
+def _readings(verdict: "Verdict | None") -> dict:
+    """The calibrated nuisances and candidate scores of ``verdict`` (none without one), kept when
+    another verdict replaces it."""
+    return dict(nuisances=verdict.nuisances, scores=verdict.scores) if verdict is not None else {}
+
+
+def strongest_candidate(candidates: list[dict], min_t_stat: float) -> str:
+    """The equations' strongest candidate (``pipeline.Diagnosis.candidates``, sorted by gain) as a
+    clause, '' where none reduced their residual."""
+    if not candidates or candidates[0]["relative_gain"] <= 0.0:
+        return ""
+    top = candidates[0]
+    key = top["effect"] + (f"[{top['variant']}]" if top["variant"] else "")
+    return f"the equations' strongest candidate, {key}, takes {top['relative_gain']:.0%} of their residual at t = {top['t_stat']:.2g} (a name needs t ≥ {min_t_stat:g})"
 
 
 def far_beyond_the_floor(verdict: "Verdict | None", named: bool, acc, floors: dict, strongest: str = "") -> "Verdict | None":
@@ -219,22 +239,21 @@ def far_beyond_the_floor(verdict: "Verdict | None", named: bool, acc, floors: di
     taken as exact) while the base model's replay (``acc``, its
     :class:`~transforms.discrepancy.gaps.GapAccumulator`) leaves a split gap at least
     ``FAR_BEYOND_FLOOR`` × its noise floor (``floors``): ``unexplained``, the gap furthest beyond
-    its floor as where the data disagree, and ``strongest`` (the equations' strongest candidate
-    below the selection's line, if any) in the reason. A gap that large is not the noise and not
-    the base model's tolerances; "nothing found" would be a false all-clear."""
-    if not ((verdict is None and not named) or (verdict is not None and verdict.verdict == "none")):
+    its floor as where the data disagree, and ``strongest`` (:func:`strongest_candidate`) in the
+    reason. A gap that large is not the noise and not the base model's tolerances; "nothing
+    found" would be a false all-clear."""
+    if not _found_nothing(verdict, named):
         return verdict
     ratio = {k: acc.split_gap(k) / floors[k] for k in SPLIT_GAPS if floors.get(k, 0.0) > 0.0 and np.isfinite(acc.split_gap(k))}
     kind = max(ratio, key=ratio.get, default=None)
     if kind is None or ratio[kind] < FAR_BEYOND_FLOOR:
         return verdict
     gap, floor = acc.split_gap(kind), floors[kind]
-    kw = dict(nuisances=verdict.nuisances, scores=verdict.scores) if verdict is not None else {}
     return Verdict("unexplained", MAX_CONFIDENCE, None, float("nan"), separate_by="",
                    reason=(f"the data disagree with the model in a way no library effect explains: no effect stands out in the equations, "
                            f"but the base model's {kind} gap is {gap:.3g}, {ratio[kind]:.3g}× its noise floor {floor:.2g} (≥ {FAR_BEYOND_FLOOR:g}×)"
                            + (f"; {strongest}" if strongest else "")),
-                   gap_before=gap, gap_after=gap, where=where_it_disagrees(acc, kind, floor), gap_kind=kind, floor=floor, **kw)
+                   gap_before=gap, gap_after=gap, where=where_it_disagrees(acc, kind, floor), gap_kind=kind, floor=floor, **_readings(verdict))
 
 
 SEPARATE_BY: dict[str, str] = {
