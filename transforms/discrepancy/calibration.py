@@ -323,20 +323,19 @@ def refine_breakaway(prepared, nm: NuisanceModel, z, settings, effects: Effects 
     """The breakaway force d_s that makes the replay fit best (a grid over ±``BREAKAWAY_RANGE`` σ,
     then golden-section search), the other nuisances held at z and the loads those of the model at
     the start. Returns the nuisance model with ``breakaway_z`` set."""
-    from transforms.discrepancy.rows import _gaps, _load_for
+    from transforms.discrepancy.rows import _gaps, _load_estimate_for
 
     if nm.sigma[BREAKAWAY] <= 0:
         return nm
     fx = Effects() if effects is None else effects
     ref = nm.model(z)
-    for p in prepared:
-        _load_for(p, *ref, fx, settings)
+    ref_loads = [_load_estimate_for(p, *ref, fx, settings) for p in prepared]
 
     def gap(zb: float) -> float:
         m = replace(nm, breakaway_z=float(zb))
         plant, cond = m.model(z)
-        for p in prepared:
-            p.loads.setdefault((plant, cond, fx), p.loads[(*ref, fx)])
+        for p, est in zip(prepared, ref_loads):
+            p.loads.setdefault((plant, cond, fx), est)
         return _gaps(prepared, plant, cond, fx, settings, set(), split=False)[0].gap()
 
     grid = np.linspace(-BREAKAWAY_RANGE, BREAKAWAY_RANGE, 13)
