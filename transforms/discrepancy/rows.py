@@ -424,18 +424,28 @@ def hydraulic_gap(prepared, plant, condition, effects, settings) -> float:
     return acc.split_gap("hydraulic")
 
 
-def _mechanical_restarts(rec: Record, settings) -> tuple[np.ndarray, np.ndarray]:
-    """(moving mask, restart indices) of the mechanical replay: it restarts every
-    ``mechanical_segment_s`` and where a move leaves the breakaway (|v_X| rises past
-    ``v_move_m_s``): while the cylinder sticks or creeps the load does not show, so when and how it
-    breaks away is not the motion's to judge; X is judged at speed (the moving samples)."""
+def _mechanical_restarts(rec: Record, settings, est: LoadEstimate) -> tuple[np.ndarray, np.ndarray]:
+    """(judged mask, restart indices) of the mechanical replay: it restarts every
+    ``mechanical_segment_s``, where a move leaves the breakaway (|v_X| rises past ``v_move_m_s``)
+    and after every load step of ``est`` (the load estimate the replay is driven by): while the
+    cylinder sticks or creeps the load does not show, so when and how it breaks away is not the
+    motion's to judge; within ``step_guard_samples`` of a step the estimate's levels hold no sample
+    (the load is unknown there: two steps 36 ms apart read as one put X 1 mm off for the rest of
+    its 0.5 s piece), so the replay restarts at the guard's end and is not judged within it. X is
+    judged at speed (the moving samples) away from the steps."""
     h = settings.savgol_window // 2
     n = rec.n
     v_all = _velocity(rec)
     moving = np.abs(v_all) > settings.v_move_m_s
     begins = np.flatnonzero(moving[1:] & ~moving[:-1]) + 1
-    starts = np.union1d(np.arange(h, n - h - 1, max(2, int(round(settings.mechanical_segment_s / rec.dt)))), begins[(begins > h) & (begins < n - h - 1)])
-    return moving, starts
+    g = settings.step_guard_samples
+    judged = moving.copy()
+    for k in est.steps:
+        judged[max(0, k - g):k + g] = False
+    resumes = est.steps + g
+    extra = np.union1d(begins, resumes)
+    starts = np.union1d(np.arange(h, n - h - 1, max(2, int(round(settings.mechanical_segment_s / rec.dt)))), extra[(extra > h) & (extra < n - h - 1)])
+    return judged, starts
 
 
 def _mechanical_replay(rec: Record, plant, condition, effects, load, mstarts: np.ndarray) -> np.ndarray:
@@ -469,13 +479,13 @@ def _replay_record(p: _Prepared, plant, condition, effects, settings, split: boo
     out = {"p1": np.asarray(p1r, float).copy(), "p2": np.asarray(p2r, float).copy(), "X": res.X_m.copy()}
     if split:
         p1h, p2h = _hydraulic_replay(p, plant, condition, effects, start, load)
-        moving, mstarts = _mechanical_restarts(rec, settings)
+        moving, mstarts = _mechanical_restarts(rec, settings, _load_estimate_for(p, plant, condition, effects, settings))
         mplant, mload = _mechanical_model(p, plant, condition, effects, settings, load)
         out.update({"p1_hydraulic": p1h, "p2_hydraulic": p2h, "X_mechanical": _mechanical_replay(rec, mplant, condition, effects, mload, mstarts)})
     for k in out:
         out[k][n - h:] = np.nan  # the record's tail has no Savitzky–Golay regions
     if split:
-        out["X_mechanical"][~moving] = np.nan  # judged at speed only (_mechanical_restarts)
+        out["X_mechanical"][~moving] = np.nan  # judged at speed, away from load steps (_mechanical_restarts)
     return out
 
 
@@ -530,7 +540,7 @@ def noise_floors(prepared, plant, condition, effects, settings, draws: int = NOI
     sse, n = 0.0, 0
     for i, p in enumerate(prepared):
         rec = p.rec
-        moving, mstarts = _mechanical_restarts(rec, settings)
+        moving, mstarts = _mechanical_restarts(rec, settings, _load_estimate_for(p, plant, condition, effects, settings))
         moving[rec.n - h:] = False
         mplant, load = _mechanical_model(p, plant, condition, effects, settings, _replay_load_for(p, plant, condition, effects, settings))
         nominal = _mechanical_replay(rec, mplant, condition, effects, load, mstarts)
