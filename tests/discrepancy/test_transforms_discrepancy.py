@@ -350,7 +350,7 @@ def test_the_mechanical_noise_floor_is_what_the_noise_leaves_through_the_replay(
     recorded = Record("V", 0, 0, 1e-3, {k: np.asarray(v[0], float) for k, v in zip(names, (m.ps, m.pr, m.p1, m.p2, m.x_spool, m.x_cyl))})
     noise_free = Record("V", 0, 0, 1e-3, {k: np.asarray(v[0], float) for k, v in zip(names, (res.ps_pa, res.pr_pa, res.p1_pa, res.p2_pa, res.x_m, res.X_m))})
     p = prepare_records([recorded], TABLE1, cond, s)[0]
-    # the true load, and so the model's own friction (nothing left along v_X: rows._mechanical_plant);
+    # the true load, and so the model's own friction and mass (nothing left along v_X or the acceleration: rows._mechanical_model);
     # its segments its own steps, which the replay takes at their samples (load.interval_load)
     true_load = np.asarray(res.F_l_n[0], float)
     segment = np.concatenate([[0], np.cumsum(np.diff(true_load) != 0)])
@@ -362,6 +362,33 @@ def test_the_mechanical_noise_floor_is_what_the_noise_leaves_through_the_replay(
     assert floor > 8.0 * x_noise, floor  # ~12 um against 1 um
     assert floor / 1.5 < gaps["recorded"] < 1.5 * floor, (gaps, floor)  # seeds 0-7: 0.74-1.15x
     assert gaps["noise-free"] < 0.1 * floor, (gaps, floor)  # integration alone: 0.1-0.5 um
+
+
+def test_the_mechanical_replay_is_not_judged_through_a_load_step():
+    """The robustness study's ``model/`` plant of seed 4, window 1: near the end of a move the load
+    steps 11.2 -> 8.1 -> 0 kN, 36 ms apart, which the estimate reads as one step (its step filter
+    keeps peaks ``step_half_width`` apart). Within ``step_guard_samples`` of a step the estimate's
+    levels hold no sample: the mechanical replay restarts at the guard's end and is not judged
+    within it. While it replayed through, the 3.1 kN for 36 ms put X 1 mm off for the rest of its
+    0.5 s piece, and the true model's mechanical gap was 21x its noise floor (0.23 mm; now 1.4x)."""
+    from tests.discrepancy.simdata import perturbed_plant, study_conditions
+    from transforms.discrepancy.rows import _gaps, _mechanical_restarts, noise_floors, prepare_records
+
+    s, fx = DiscrepancySettings(), Effects()
+    plant = study_conditions(perturbed_plant(4, clip=2.0, stream=17017)[0])
+    cond = plant.nominal_condition
+    recs = split_records(simulate_lake(None, n_windows=2, seed=104, params=plant), s)[1:]
+    p = prepare_records(recs, plant, cond, s)
+    est = p[0].loads[(plant, cond, fx)]
+    assert np.any((est.steps > 9640) & (est.steps < 9700)), est.steps
+    judged, starts = _mechanical_restarts(p[0].rec, s, est)
+    g = s.step_guard_samples
+    for k in est.steps:
+        assert not judged[max(0, k - g):k + g].any()
+        assert k + g in starts or k + g >= p[0].rec.n - s.savgol_window // 2 - 1
+    gap = _gaps(p, plant, cond, fx, s, set())[0].split_gap("mechanical")
+    floor = noise_floors(p, plant, cond, fx, s)["mechanical"]
+    assert gap < 3.0 * floor, (gap, floor)
 
 
 def test_operating_regions_partition_motion():

@@ -22,10 +22,11 @@ each effect is judged where it acts and an error in the load estimate cannot hid
 * the **mechanical gap** (signal ``X_mechanical``): X replayed from the recorded pressures with
   the load estimate, mass and friction (the viscous friction and the mass moved by up to 1 % and
   2 % by what the load leaves along v_X and the acceleration: ``rows._mechanical_model``),
-  restarted from the measured state every ``mechanical_segment_s`` and at the start of every
-  move, e_X/1 mm over the moving samples (|v_X| > ``v_standstill_m_s``: while the cylinder
-  sticks the load does not show, so when it breaks away is the load estimate's, not the
-  motion's); mass and friction act here.
+  restarted from the measured state every ``mechanical_segment_s``, at the start of every
+  move and after every load step the estimate found, e_X/1 mm over the moving samples (|v_X| >
+  ``v_move_m_s``: while the cylinder sticks the load does not show, so when it breaks away is
+  the load estimate's, not the motion's) away from the steps (within ``step_guard_samples`` of a
+  step the estimate holds no sample: ``rows._mechanical_restarts``); mass and friction act here.
 
 Their **noise floors** are what the sensor noise alone leaves through the replay, on the same
 scales (``rows.noise_floors``; each signal's noise RMS from its high-frequency part,
