@@ -307,7 +307,8 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
     from transforms.discrepancy.calibration import CLEARANCE, NuisanceModel, calibrate_best, calibrate_prepared, joint_fit, refine_breakaway
     from transforms.discrepancy.alignment import PRESSURES, align_prepared
     from transforms.discrepancy.transmitter import GAIN_OR_OFFSET, gain_or_offset
-    from transforms.discrepancy.verdict import acting_gap, far_beyond_the_floor, lagging_transmitter, strongest_candidate, unexplained
+    from transforms.discrepancy.verdict import (CANDIDATE_REPLAY_FLOOR, acting_gap, far_beyond_the_floor, farthest_beyond, found_nothing,
+                                               lagging_transmitter, replay_closes, strongest_candidate, unexplained)
 
     settings = settings or DiscrepancySettings()
     condition = plant.nominal_condition if condition is None else condition
@@ -484,6 +485,17 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
     lag = delays.finding()
     if lag:  # a transmitter lagging the others: a finding of its own (aligned for, not absorbed)
         verdict = lagging_transmitter(verdict, bool(named), lag, stage_acc[0].split_gap("hydraulic"), floors["hydraulic"])
+    kind, ratio = farthest_beyond(stage_acc[0], floors)
+    top = max(sel.first_step, key=lambda c: c.gain, default=None)
+    top_spec = specs[top.column] if top is not None else None
+    if (ratio >= CANDIDATE_REPLAY_FLOOR and found_nothing(verdict, bool(named)) and top is not None and top.gain > 0.0
+            and acting_gap(top_spec) == kind and (top_spec.lower is None or top_spec.neutral + top.theta > top_spec.lower)):
+        # nothing stood out, yet a gap lies far beyond its floor: the equations' strongest
+        # (physical) candidate, fitted (with the nuisances), replayed on that gap (verdict.replay_closes)
+        fx, _, model, _ = refine([top_spec], perturbed(base, top_spec, top.theta))
+        acc = _gaps(prepared, *model, fx, settings, set())[0]
+        verdict = replay_closes(verdict, bool(named), top_spec, top_spec.value(fx), top.t_stat, floors[kind], stage_acc[0].split_gap(kind),
+                                acc.split_gap(kind), stage_gaps[0], acc.gap())
     verdict = far_beyond_the_floor(verdict, bool(named), stage_acc[0], floors, strongest_candidate(candidates, settings.min_t_stat))
     return Diagnosis(
         n_records=len(prepared), records=[(p.rec.start_us, p.rec.end_us) for p in prepared], named=named,
