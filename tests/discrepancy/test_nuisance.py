@@ -177,8 +177,8 @@ def test_typical_effect_named_or_honestly_ambiguous_without_commissioning(key, v
 def test_nothing_found_with_a_gap_far_beyond_its_floor_is_unexplained():
     # the reference plant's seed 5 with commissioning (the study's commands with --first-seed 3):
     # a typical friction change, which the equations' selection did not see, replayed X 4.05 mm off
-    # (355x its floor of 0.0114 mm) and was reported `none`; the clean valves' split gaps reached 7.7x
-    # (test_clean_valve_of_another_family_is_none[sharp], until the step detector read newtons)
+    # (355x its floor of 0.0114 mm) and was reported `none`; the clean valves' split gaps reach 7.7x
+    # (test_clean_valve_of_another_family_is_none[sharp]: a load step the estimate did not find)
     from transforms.discrepancy import GapAccumulator
 
     n = 1000
@@ -206,7 +206,7 @@ def test_nothing_found_with_a_gap_far_beyond_its_floor_is_unexplained():
     none = Verdict("none", 0.9, None, float("nan"), nuisances=[{"name": "d_v"}], scores=[{"key": "friction_change"}])
     v = far_beyond_the_floor(none, False, acc(4.05), floors)
     assert v.verdict == "unexplained" and v.nuisances == none.nuisances and v.scores == none.scores
-    assert far_beyond_the_floor(none, False, acc(7.7 * floors["mechanical"]), floors) is none  # that clean valve
+    assert far_beyond_the_floor(none, False, acc(7.7 * floors["mechanical"]), floors) is none  # the sharp-edged clean valve
     # below the line, a named effect, or what the model taken as exact named: as it is
     below = 0.99 * FAR_BEYOND_FLOOR * floors["mechanical"]
     assert far_beyond_the_floor(None, False, acc(below), floors) is None

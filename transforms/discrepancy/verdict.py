@@ -104,13 +104,12 @@ by at least this factor: reaching the floor confirms nothing there, and a shrink
 is out of reach (the exact model itself leaves ~1.2× the hydraulic floor, 0.7–1.2× the mechanical one)."""
 FAR_BEYOND_FLOOR = 30.0
 """Nothing found while a split gap of the base model is at least this many times its noise floor
-is ``unexplained`` (:func:`far_beyond_the_floor`). The clean valves' split gaps reach 2.6× their
-floors (the study's 36 clean valves of both plants, seeds 0–5), and reached 7.7× (a sharp-edged
-valve of ``model/``'s plant in the tests, the mechanical gap, until the load-step detector read
-steps in newtons) and 15× (``model/``'s seed 4, until the mechanical replay restarted after load
-steps): the line keeps that margin for valves not yet seen. On the reference plant with
-commissioning a typical friction change that the equations' selection, the load eliminated, did
-not see replayed X 4.05 mm off (355× its floor)."""
+is ``unexplained`` (:func:`far_beyond_the_floor`). The clean valves' split gaps reach 7.7× their
+floors (a sharp-edged valve of ``model/``'s plant in the tests, the mechanical gap: a 0.9 kN load
+step in a long steady move that the load estimate did not find; 2.6× on the study's 36 clean valves
+of both plants, seeds 0–5), while on the reference plant with commissioning a typical friction
+change that the equations' selection, the load eliminated, did not see replayed X 4.05 mm off (355×
+its floor)."""
 CANDIDATE_REPLAY_FLOOR = 6.0
 """Nothing found while a split gap of the base model is at least this many times its noise floor:
 the equations' strongest candidate is fitted and replayed on that gap (:func:`replay_closes`). On
