@@ -66,7 +66,7 @@ import numpy as np
 from transforms.discrepancy.settings import DiscrepancySettings
 
 __all__ = ["LoadEstimate", "corners_pay", "estimate_load", "follows_ramps", "friction_within", "interval_load", "load_projector", "motion_mismatch", "project_out", "ramp_load",
-           "replay_load", "segment_knots", "segment_levels", "step_filter", "stuck_spans", "triangle_step_gain"]
+           "replay_load", "segment_knots", "segment_levels", "step_filter", "stuck_spans"]
 
 
 @lru_cache(maxsize=8)
@@ -86,18 +86,6 @@ def step_filter(f: np.ndarray, w: int) -> np.ndarray:
         return out
     out[w:-w] = np.convolve(f, k[::-1], mode="valid")
     return out
-
-
-@lru_cache(maxsize=8)
-def triangle_step_gain(w: int, L: int) -> float:
-    """What :func:`step_filter` (half-width ``w``) reads of a unit load step in the triangular force
-    balance over ±``L`` samples (:func:`transforms.discrepancy.residuals.triangular_force_balance`),
-    which spreads the step over 2 ``L`` samples: 0.46 for w = 40, L = 20. The detector's output is
-    divided by it, so its threshold is in newtons of load step."""
-    k = np.arange(-L, L + 1)
-    tri = (L - np.abs(k)) / float(L * L)
-    unit = np.convolve(np.r_[np.zeros(2 * (w + L)), np.ones(2 * (w + L))], tri, mode="valid")
-    return float(np.nanmax(np.abs(step_filter(unit, w))))
 
 
 @lru_cache(maxsize=8)
@@ -604,7 +592,7 @@ def estimate_load(f_hat: np.ndarray, v: np.ndarray, settings: DiscrepancySetting
     steps: list[int] = []
     brackets: dict[int, tuple[int, int]] = {}
     if idx.size >= 2 * w + 1:
-        jump = step_filter(f_hat[idx], w) / triangle_step_gain(w, L)  # in newtons of load step
+        jump = step_filter(f_hat[idx], w)
         ok = np.isfinite(jump)
         thr = max(settings.step_threshold_n, settings.step_threshold_sigmas * robust_sigma(jump))
         aj = np.where(ok, np.abs(jump), 0.0)
