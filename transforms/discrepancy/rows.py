@@ -479,13 +479,13 @@ def _replay_record(p: _Prepared, plant, condition, effects, settings, split: boo
     out = {"p1": np.asarray(p1r, float).copy(), "p2": np.asarray(p2r, float).copy(), "X": res.X_m.copy()}
     if split:
         p1h, p2h = _hydraulic_replay(p, plant, condition, effects, start, load)
-        moving, mstarts = _mechanical_restarts(rec, settings, _load_estimate_for(p, plant, condition, effects, settings))
+        judged, mstarts = _mechanical_restarts(rec, settings, _load_estimate_for(p, plant, condition, effects, settings))
         mplant, mload = _mechanical_model(p, plant, condition, effects, settings, load)
         out.update({"p1_hydraulic": p1h, "p2_hydraulic": p2h, "X_mechanical": _mechanical_replay(rec, mplant, condition, effects, mload, mstarts)})
     for k in out:
         out[k][n - h:] = np.nan  # the record's tail has no Savitzky–Golay regions
     if split:
-        out["X_mechanical"][~moving] = np.nan  # judged at speed, away from load steps (_mechanical_restarts)
+        out["X_mechanical"][~judged] = np.nan  # at speed, away from load steps (_mechanical_restarts)
     return out
 
 
@@ -518,7 +518,7 @@ def noise_floors(prepared, plant, condition, effects, settings, draws: int = NOI
 
     * hydraulic: the recorded noise of p1, p2 (what the X and spool position noise leave through the
       chamber replay, 0.03–0.04 bar, is not added: measured and left, docs/discrepancy.md);
-    * mechanical: sqrt((X noise / 1 mm)² + (e / 1 mm)²), e the RMS over the moving samples of the
+    * mechanical: sqrt((X noise / 1 mm)² + (e / 1 mm)²), e the RMS over the judged samples of the
       mechanical replay (:func:`_mechanical_replay`, the model ``plant`` with its
       :func:`_mechanical_model` friction and mass, ``condition``, ``effects`` and its load) with fresh white noise of the estimated RMS added to the recorded
       p1, p2 and X (X enters through the restarts: the position and its Savitzky–Golay velocity)
@@ -540,8 +540,8 @@ def noise_floors(prepared, plant, condition, effects, settings, draws: int = NOI
     sse, n = 0.0, 0
     for i, p in enumerate(prepared):
         rec = p.rec
-        moving, mstarts = _mechanical_restarts(rec, settings, _load_estimate_for(p, plant, condition, effects, settings))
-        moving[rec.n - h:] = False
+        judged, mstarts = _mechanical_restarts(rec, settings, _load_estimate_for(p, plant, condition, effects, settings))
+        judged[rec.n - h:] = False
         mplant, load = _mechanical_model(p, plant, condition, effects, settings, _replay_load_for(p, plant, condition, effects, settings))
         nominal = _mechanical_replay(rec, mplant, condition, effects, load, mstarts)
         rng = np.random.default_rng([seed, i])
@@ -550,7 +550,7 @@ def noise_floors(prepared, plant, condition, effects, settings, draws: int = NOI
             for k in tot:
                 raw[k] = raw[k] + rng.normal(0.0, rms[k], rec.n)
             noisy = prepare_record(Record(rec.valve_id, rec.start_us, rec.end_us, rec.dt, raw), settings)
-            d = (_mechanical_replay(noisy, mplant, condition, effects, load, mstarts) - nominal)[moving]
+            d = (_mechanical_replay(noisy, mplant, condition, effects, load, mstarts) - nominal)[judged]
             ok = np.isfinite(d)
             sse += float(np.sum(d[ok] ** 2))
             n += int(ok.sum())
