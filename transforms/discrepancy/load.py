@@ -65,7 +65,7 @@ import numpy as np
 
 from transforms.discrepancy.settings import DiscrepancySettings
 
-__all__ = ["LoadEstimate", "corners_pay", "estimate_load", "follows_ramps", "friction_within", "interval_load", "load_projector", "motion_mismatch", "project_out", "ramp_load",
+__all__ = ["LoadEstimate", "away_from_steps", "corners_pay", "estimate_load", "follows_ramps", "friction_within", "interval_load", "load_projector", "motion_mismatch", "project_out", "ramp_load",
            "replay_load", "segment_knots", "segment_levels", "step_filter", "stuck_spans"]
 
 
@@ -195,8 +195,7 @@ class LoadEstimate:
         steps = np.insert(self.steps, i, k)
         segment = self.segment + (np.arange(self.segment.size) >= k)
         levels = np.insert(self.levels, i + 1, self.levels[i])
-        away = np.ones(self.segment.size, dtype=bool)
-        away[max(0, k - guard):k + guard] = False
+        away = away_from_steps(self.segment.size, [k], guard)
         brackets = np.insert(self.brackets, i, (-1, -1), axis=0)
         valid = self.valid & away
         corners = self.corners
@@ -206,6 +205,15 @@ class LoadEstimate:
             halves = tuple(np.unique(np.r_[e[0], kn[(kn > e[0]) & (kn < e[-1])], e[-1]]) if e.size > 1 else np.zeros(0) for e in ends)
             corners = corners[:i] + halves + corners[i + 1:]
         return LoadEstimate(segment, steps, levels, self.load, brackets, valid, self.usable & away, self.hold_until, self.knot_samples, corners)
+
+
+def away_from_steps(n: int, steps, guard: int) -> np.ndarray:
+    """Mask of ``n`` samples: False within ``guard`` samples of any of ``steps``, where a load
+    estimate's levels hold no sample (the load is unknown there)."""
+    away = np.ones(n, dtype=bool)
+    for k in steps:
+        away[max(0, int(k) - guard):int(k) + guard] = False
+    return away
 
 
 def segment_knots(valid: np.ndarray, segment: np.ndarray, s: int, knot_samples: int) -> np.ndarray:
@@ -614,11 +622,7 @@ def estimate_load(f_hat: np.ndarray, v: np.ndarray, settings: DiscrepancySetting
     segment = np.zeros(n, dtype=np.int64)
     for s in steps_arr:
         segment[s:] += 1
-    g = settings.step_guard_samples
-    away = np.ones(n, dtype=bool)
-    for s in steps_arr:
-        away[max(0, s - g):min(n, s + g)] = False
-    valid = valid & away
+    valid = valid & away_from_steps(n, steps_arr, settings.step_guard_samples)
     levels = segment_levels(f_hat, valid, segment, len(steps_arr) + 1)
     usable = valid & (np.abs(v) > settings.v_move_m_s)
     br = np.array([brackets.get(int(s), (-1, -1)) for s in steps_arr], dtype=np.int64).reshape(-1, 2)

@@ -13,7 +13,7 @@ from model.params import PlantParams, ValveCondition
 from model.replay import DRIVE_HYDRAULIC, DRIVE_MECHANICAL, replay
 from model.simulate import DEFAULT_REG_BAND_PA
 from transforms.discrepancy.gaps import GAP_SCALES, RECORDED_OF, GapAccumulator, noise_rms
-from transforms.discrepancy.load import LoadEstimate, estimate_load, load_projector, friction_within, motion_mismatch, interval_load, project_out, replay_load, robust_sigma, stuck_spans
+from transforms.discrepancy.load import LoadEstimate, away_from_steps, estimate_load, load_projector, friction_within, motion_mismatch, interval_load, project_out, replay_load, robust_sigma, stuck_spans
 from transforms.discrepancy.records import REGIONS, Record, operating_regions, prepare_record
 from transforms.discrepancy.residuals import (
     demean_by_group,
@@ -439,9 +439,7 @@ def _mechanical_restarts(rec: Record, settings, est: LoadEstimate) -> tuple[np.n
     moving = np.abs(v_all) > settings.v_move_m_s
     begins = np.flatnonzero(moving[1:] & ~moving[:-1]) + 1
     g = settings.step_guard_samples
-    judged = moving.copy()
-    for k in est.steps:
-        judged[max(0, k - g):k + g] = False
+    judged = moving & away_from_steps(n, est.steps, g)
     resumes = est.steps + g
     extra = np.union1d(begins, resumes)
     starts = np.union1d(np.arange(h, n - h - 1, max(2, int(round(settings.mechanical_segment_s / rec.dt)))), extra[(extra > h) & (extra < n - h - 1)])
