@@ -16,8 +16,8 @@ The same record is also replayed split in two (:func:`model.replay.replay`'s ``d
 each effect is judged where it acts and an error in the load estimate cannot hide or invent it:
 
 * the **hydraulic gap** (signals ``p1_hydraulic``, ``p2_hydraulic``): p1, p2 replayed from the
-  recorded spool position, supply, return and the recorded cylinder motion (no load, mass or
-  friction), sqrt(((e_p1/1 bar)² + (e_p2/1 bar)²)/2); leakage, air, the supply line and the sensor
+  recorded spool position, supply, return and the recorded cylinder motion (the positions
+  Savitzky–Golay smoothed; no load, mass or friction), sqrt(((e_p1/1 bar)² + (e_p2/1 bar)²)/2); leakage, air, the supply line and the sensor
   effects act here;
 * the **mechanical gap** (signal ``X_mechanical``): X replayed from the recorded pressures with
   the load estimate, mass and friction (the viscous friction and the mass moved by up to 1 % and

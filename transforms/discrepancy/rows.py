@@ -198,6 +198,13 @@ def _spool_source(rec: Record) -> np.ndarray:
     return np.where(np.isfinite(rec.sg["x"]), rec.sg["x"], rec.raw["x"])
 
 
+def _position_source(rec: Record) -> np.ndarray:
+    """The cylinder position the hydraulic replay is driven with [m]: Savitzky–Golay, raw at the
+    record's ends. The replay takes the velocity as the slope between samples, so the raw
+    position's noise (1 µm) would drive the chambers with ~1.4 mm/s of velocity noise."""
+    return np.where(np.isfinite(rec.sg["X"]), rec.sg["X"], rec.raw["X"])
+
+
 def _velocity(rec: Record) -> np.ndarray:
     """The cylinder velocity the replays restart with [m/s]: Savitzky–Golay, 0 at the record's ends."""
     return np.where(np.isfinite(rec.sg["v"]), rec.sg["v"], 0.0)
@@ -407,7 +414,7 @@ def _hydraulic_replay(p: _Prepared, plant, condition, effects, start: tuple, loa
     rec = p.rec
     _, x_true, _, _, _, starts, states = start
     hyd = replay(plant, x_true, rec.raw["ps"], rec.raw["pr"], load, starts, states, condition=condition, effects=effects,
-                 drive=DRIVE_HYDRAULIC, given=rec.raw["X"])
+                 drive=DRIVE_HYDRAULIC, given=_position_source(rec))
     _, p1h, p2h = sensor_readings(np.zeros(1), hyd.p1_pa, hyd.p2_pa, effects)
     return np.asarray(p1h, float).copy(), np.asarray(p2h, float).copy()
 
@@ -514,8 +521,9 @@ def noise_floors(prepared, plant, condition, effects, settings, draws: int = NOI
     """The split gaps (``gaps.SPLIT_GAPS``) the recorded sensor noise alone leaves through the
     replay, on the gap scales (:func:`gaps.noise_rms` estimates each signal's noise from the records).
 
-    * hydraulic: the recorded noise of p1, p2 (what the X and spool position noise leave through the
-      chamber replay, 0.03–0.04 bar, is not added: measured and left, docs/discrepancy.md);
+    * hydraulic: the recorded noise of p1, p2 (what the spool position's noise leaves through the
+      chamber replay, ~0.027 bar, and the smoothed X's, ~0.010 bar, is not added: measured and
+      left, docs/discrepancy.md);
     * mechanical: sqrt((X noise / 1 mm)² + (e / 1 mm)²), e the RMS over the judged samples of the
       mechanical replay (:func:`_mechanical_replay`, the model ``plant`` with its
       :func:`_mechanical_model` friction and mass, ``condition``, ``effects`` and its load) with fresh white noise of the estimated RMS added to the recorded

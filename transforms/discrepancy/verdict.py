@@ -101,7 +101,7 @@ FLOOR_NARROWS = 1.05
 """A reading named by the prior alone (no residual for the selection) against a calibrated base
 model that already replays its gap within ``FLOOR_FACTOR`` × the noise floor must narrow that gap
 by at least this factor: reaching the floor confirms nothing there, and a shrink of ``GAP_SHRINK``
-is out of reach (the exact model itself leaves ~1.2× the hydraulic floor, 0.7–1.2× the mechanical one)."""
+is out of reach (the exact model itself leaves ~1.1× the hydraulic floor, 0.7–1.2× the mechanical one)."""
 FAR_BEYOND_FLOOR = 30.0
 """Nothing found while a split gap of the base model is at least this many times its noise floor
 is ``unexplained`` (:func:`far_beyond_the_floor`). The clean valves' split gaps reach 7.7× their
