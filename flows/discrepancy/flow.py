@@ -116,6 +116,8 @@ class DiscrepancyReport:
     gap_before: float
     gap_after: float
     condition_source: str = "design"
+    model_note: str = ""
+    """What the commissioning calibration found about the model itself (``ConditionFit.reason``)."""
 
 
 def nuisance_priors(valve: ValveSpec) -> NuisancePriors:
@@ -150,7 +152,7 @@ def valve_condition(valve: ValveSpec, plant: PlantParams, warehouse: Path, mode:
     se = np.zeros(sig.size)
     se[list(cal.nm.active)] = cal.z_se * sig[list(cal.nm.active)]
     fit = ConditionFit(condition=cal.condition, alpha_se=tuple(float(x) for x in se[0:4]), underlap_se_m=tuple(float(x) for x in se[4:8]),
-                       gap_design=cal.gap_nominal, gap_fitted=cal.gap_calibrated, n_records=len(records))
+                       gap_design=cal.gap_nominal, gap_fitted=cal.gap_calibrated, n_records=len(records), reason=cal.reason)
     return "commissioning", cal.plant, cal.condition, fit
 
 
@@ -344,6 +346,7 @@ def discrepancy_valve(config, valve_id: str, warehouse: Path, start: datetime | 
     return DiscrepancyReport(
         valve_id=valve.id, run_id=run_id, n_records=d.n_records, findings=tables["discrepancy_findings"].to_dicts(),
         plots=[p for p in plots if p is not None], gap_before=d.gap_before, gap_after=d.gap_after, condition_source=source,
+        model_note=fit.reason if fit is not None else "",
     )
 
 
@@ -389,6 +392,8 @@ def summary_lines(report: DiscrepancyReport) -> list[str]:
     src = ("the base model calibrated on the commissioning window" if report.condition_source == "commissioning"
            else "the design data, its uncertain parameters calibrated within their tolerances")
     lines = [f"{report.valve_id}: model from {src}, {report.n_records} records"]
+    if report.model_note:
+        lines.append(f"    {report.model_note}")
     first = report.findings[0] if report.findings else {}
     if first.get("verdict"):
         conf = f", confidence {first['confidence']:.0%}" if first.get("confidence") is not None else ""

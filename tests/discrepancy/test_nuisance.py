@@ -315,6 +315,25 @@ def test_effect_on_another_family_is_named_or_honestly_ambiguous(plant, design, 
     if v.effect.key == key:
         assert abs(v.value - value) <= 0.2 * abs(value), (v.value, value)
 
+
+@pytest.mark.slow
+def test_a_commissioning_window_shows_sharp_edges_as_the_diagnosis_does():
+    """A sharp-edged valve configured as Eq. 3, commissioned: its radial clearance calibrates below
+    ``SHARP_CLEARANCE`` of Eq. 3's, so the commissioning model has the sharp-edged law, as the
+    diagnosis without one switches to it. Kept at Eq. 3 with the clearance near 0 (the sharp law
+    only to ~1 % at larger openings), the diagnosis that takes it as exact named the robustness
+    study's 600 kg mass change on this valve (``--family sharp --declared eq3 --commissioning yes``,
+    seed 2) an external leak, with an internal leak as the other reading; now the mass is the first
+    reading (503 kg)."""
+    plant = study_conditions(perturbed_plant(2, clip=2.0, family="sharp", stream=17017)[0])
+    cal = calibrate(_records(None, seed=5002, plant=plant), TABLE1, NOM, PRIORS, SETTINGS)
+    assert cal.plant.geometry.area_law == "sharp"
+    assert cal.reason.startswith("the edges are sharp") and 'configure area_law = "sharp"' in cal.reason, cal.reason
+    d = diagnose(_records(library_entry("load_mass_change").effects(600.0), seed=102, plant=plant), cal.plant, cal.condition, SETTINGS,
+                 monitoring=False)
+    assert d.named and d.named[0].spec.key == "load_mass_change", [n.spec.key for n in d.named]
+    assert abs(d.named[0].value - 600.0) < 0.25 * 600.0, d.named[0].value
+
 # --- with a commissioning window ---------------------------------------------------------------
 
 CLEAR_GAP = [  # the effects a commissioning calibration decides: nuisance patterns (the spool offset is the underlap

@@ -29,6 +29,13 @@ __all__ = ["Calibration", "NuisanceModel", "calibrate", "calibrate_best", "effec
 
 BREAKAWAY = NUISANCES.index("d_s")
 CLEARANCE = NUISANCES.index("clearance")
+SHARP_CLEARANCE = 0.1
+"""A valve configured with Eq. 3's edges whose radial clearance calibrates below this fraction of
+its configured one has sharp edges (issue 16's other family): it is calibrated and diagnosed with
+the sharp-edged law, and the verdict says so (an Eq. 3 model left a gap of 0.5–1.6 there and named
+p1 offsets; a commissioning calibration that kept Eq. 3 with the clearance near 0, which is the
+sharp law only to ~1 % at larger openings, led the diagnosis taken as exact to name a 600 kg mass
+change a small external leak)."""
 BREAKAWAY_RANGE = 3.0
 """The breakaway force is searched within ±this many prior σ."""
 Z_STEP = 0.05
@@ -303,6 +310,9 @@ class Calibration:
     gap_nominal: float = float("nan")
     gap_calibrated: float = float("nan")
     """Normalised replay gaps of the records with the nominal and the calibrated model."""
+    reason: str = ""
+    """What the calibration found about the model itself: the records show sharp edges where Eq. 3
+    is configured (:func:`is_sharp`), so it calibrated the sharp-edged law; empty if nothing."""
 
     def table(self) -> list[dict]:
         """One dict per nuisance: name, nominal, value, prior σ, z (SI units, :data:`NUISANCE_UNITS`)."""
@@ -423,6 +433,18 @@ def calibrate_prepared(prepared, nm: NuisanceModel, settings, effects: Effects |
     return fit, rows0, 1.0 / sig[rows0.eq], sig
 
 
+def is_sharp(nm: NuisanceModel, z: np.ndarray) -> bool:
+    """Do the nuisances ``z`` calibrate the radial clearance of a valve configured with Eq. 3's
+    edges below ``SHARP_CLEARANCE`` of its configured value: sharp edges."""
+    return bool(CLEARANCE in nm.active and nm.values(z)[CLEARANCE] < SHARP_CLEARANCE * nm.theta0[CLEARANCE])
+
+
+def sharp_edges_reason(nm: NuisanceModel, z: np.ndarray, what: str) -> str:
+    """'the edges are sharp (…): ``what`` with the sharp-edged law (configure area_law = "sharp")'."""
+    return (f"the edges are sharp (radial clearance calibrated to {nm.values(z)[CLEARANCE] * 1e6:.2g} µm of the configured "
+            f"{nm.theta0[CLEARANCE] * 1e6:.3g} µm): {what} with the sharp-edged law (configure area_law = \"sharp\")")
+
+
 def calibrate_best(prepared, nm: NuisanceModel, settings, effects: Effects | None = None,
                    split: bool = False) -> tuple[JointFit, object, np.ndarray, np.ndarray]:
     """:func:`calibrate_prepared` from the design data and, when the radial clearance is a
@@ -468,6 +490,10 @@ def calibrate(records, plant: PlantParams, condition: ValveCondition, priors: Nu
         raise ValueError("no record long enough to calibrate on")
     g0 = _gaps(prepared, plant, condition, fx, settings, set(), split=False)[0].gap()
     fit, _, _, sig = calibrate_best(prepared, nm, settings, effects, split=True)
+    if is_sharp(nm, fit.z):
+        # the window shows sharp edges, not the configured Eq. 3's: calibrate with that law (as diagnose does)
+        cal = calibrate(records, replace(plant, geometry=replace(plant.geometry, area_law="sharp")), condition, priors, settings, effects)
+        return replace(cal, reason=sharp_edges_reason(nm, fit.z, "calibrated"))
     nm = refine_breakaway(prepared, nm, fit.z, settings, effects)
     p1, c1 = nm.model(fit.z)
     prepared = prepare_records(records, p1, c1, settings)

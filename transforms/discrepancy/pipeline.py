@@ -234,12 +234,6 @@ def _project_out(Nw: np.ndarray, *cols: np.ndarray) -> list[np.ndarray]:
 NUISANCE_COLLINEAR = 0.05
 """A candidate whose regressor keeps less than this fraction of its norm once the nuisance
 directions are projected out is not selected on the residuals (it is a nuisance pattern)."""
-SHARP_CLEARANCE = 0.1
-"""A valve configured with Eq. 3's edges whose radial clearance calibrates below this fraction of
-its configured one has sharp edges (issue 16's other family): it is diagnosed with the sharp-edged
-law, and the verdict says so (an Eq. 3 model left a gap of 0.5–1.6 there and named p1 offsets)."""
-
-
 def _select(prepared, plant, condition, specs, settings, nuisance=None):
     """Rows, weights and forward selection against the base model (module docstring). With
     ``nuisance`` = (NuisanceModel, z) the plant and condition are the nuisance model at z and the
@@ -304,7 +298,7 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
     """
     from scipy import stats as _stats
 
-    from transforms.discrepancy.calibration import CLEARANCE, NuisanceModel, calibrate_best, calibrate_prepared, joint_fit, refine_breakaway
+    from transforms.discrepancy.calibration import NuisanceModel, calibrate_best, calibrate_prepared, is_sharp, joint_fit, refine_breakaway, sharp_edges_reason
     from transforms.discrepancy.alignment import PRESSURES, align_prepared
     from transforms.discrepancy.transmitter import GAIN_OR_OFFSET, gain_or_offset
     from transforms.discrepancy.verdict import (CANDIDATE_REPLAY_FLOOR, acting_gap, far_beyond_the_floor, farthest_beyond, found_nothing,
@@ -326,13 +320,11 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
         # calibrate the nuisances (loads from the nominal model), then again on the loads of the
         # calibrated model; the calibrated base model is stage 0
         z_cal = calibrate_best(prepared, nm, settings)[0].z
-        if nm.values(z_cal)[CLEARANCE] < SHARP_CLEARANCE * nm.theta0[CLEARANCE]:
+        if is_sharp(nm, z_cal):
             # the data show sharp edges, not the configured Eq. 3's: diagnose with that family
             sharp = replace(nominal[0], geometry=replace(nominal[0].geometry, area_law="sharp"))
             d = diagnose(recorded, sharp, nominal[1], settings, library=library, trace_records=trace_records, monitoring=monitoring, priors=priors)
-            d.verdict.reason = (f"the edges are sharp (radial clearance calibrated to {nm.values(z_cal)[CLEARANCE] * 1e6:.2g} µm of the "
-                                f"configured {nm.theta0[CLEARANCE] * 1e6:.3g} µm): diagnosed with the sharp-edged law (configure "
-                                f"area_law = \"sharp\"); " + d.verdict.reason)
+            d.verdict.reason = sharp_edges_reason(nm, z_cal, "diagnosed") + "; " + d.verdict.reason
             return d
         nm = refine_breakaway(prepared, nm, z_cal, settings)
         plant, condition = nm.model(z_cal)
@@ -684,6 +676,9 @@ class ConditionFit:
         Normalised replay gap of the commissioning records with the start and the fitted
         condition.
     n_records : int
+    reason : str
+        What the calibration found about the model itself (e.g. sharp edges where Eq. 3 is
+        configured: :attr:`transforms.discrepancy.calibration.Calibration.reason`); empty if nothing.
     """
 
     condition: ValveCondition
@@ -692,6 +687,7 @@ class ConditionFit:
     gap_design: float
     gap_fitted: float
     n_records: int
+    reason: str = ""
 
 
 def _with_condition_params(cond: ValveCondition, z: np.ndarray) -> ValveCondition:
