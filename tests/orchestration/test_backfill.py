@@ -256,7 +256,10 @@ def test_killed_process_is_continued(clean, archive, tmp_path):
     try:
         deadline = time.monotonic() + 120
         while time.monotonic() < deadline and proc.poll() is None:
-            time.sleep(0.5)
+            # the backfill holds the database only while it writes a unit: poll often, so the count
+            # is read between units, not once the run has ended (polled every 0.5 s, a CI run read
+            # it only after the backfill had finished, which then could not be killed)
+            time.sleep(0.05)
             try:
                 con = duckdb.connect(str(wh / "valvemon.duckdb"), read_only=True)
             except (duckdb.IOException, duckdb.CatalogException, duckdb.InvalidInputException):
