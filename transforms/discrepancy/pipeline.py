@@ -234,6 +234,8 @@ def _project_out(Nw: np.ndarray, *cols: np.ndarray) -> list[np.ndarray]:
 NUISANCE_COLLINEAR = 0.05
 """A candidate whose regressor keeps less than this fraction of its norm once the nuisance
 directions are projected out is not selected on the residuals (it is a nuisance pattern)."""
+
+
 def _select(prepared, plant, condition, specs, settings, nuisance=None):
     """Rows, weights and forward selection against the base model (module docstring). With
     ``nuisance`` = (NuisanceModel, z) the plant and condition are the nuisance model at z and the

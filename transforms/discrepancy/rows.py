@@ -183,7 +183,7 @@ def _replay_span(rec: Record, plant, condition, effects, a: int, b: int, load: n
         if prefix is None:
             return None
     if k < b - a:
-        x_true = true_signals(_spool_source(rec)[a:b], rec.sg["p1"][a:a + 1], rec.sg["p2"][a:a + 1], effects)[0]
+        x_true = true_signals(_smoothed(rec, "x")[a:b], rec.sg["p1"][a:a + 1], rec.sg["p2"][a:a + 1], effects)[0]
         try:
             r = replay(plant, x_true, rec.raw["ps"][a:b], rec.raw["pr"][a:b], load, [k], prefix[:, k], condition=condition, effects=effects)
         except FloatingPointError:
@@ -193,16 +193,12 @@ def _replay_span(rec: Record, plant, condition, effects, a: int, b: int, load: n
     return p1r, p2r, prefix[0]
 
 
-def _spool_source(rec: Record) -> np.ndarray:
-    """The spool position the replays are driven with [m]: Savitzky–Golay, raw at the record's ends."""
-    return np.where(np.isfinite(rec.sg["x"]), rec.sg["x"], rec.raw["x"])
-
-
-def _position_source(rec: Record) -> np.ndarray:
-    """The cylinder position the hydraulic replay is driven with [m]: Savitzky–Golay, raw at the
-    record's ends. The replay takes the velocity as the slope between samples, so the raw
-    position's noise (1 µm) would drive the chambers with ~1.4 mm/s of velocity noise."""
-    return np.where(np.isfinite(rec.sg["X"]), rec.sg["X"], rec.raw["X"])
+def _smoothed(rec: Record, key: str) -> np.ndarray:
+    """A recorded position the replays are driven with [m]: Savitzky–Golay, raw at the record's
+    ends. The spool position ``"x"``, and the cylinder position ``"X"`` of the hydraulic replay,
+    which takes the velocity as the slope between samples: the raw position's noise (1 µm) would
+    drive the chambers with ~1.4 mm/s of velocity noise."""
+    return np.where(np.isfinite(rec.sg[key]), rec.sg[key], rec.raw[key])
 
 
 def _velocity(rec: Record) -> np.ndarray:
@@ -213,7 +209,7 @@ def _velocity(rec: Record) -> np.ndarray:
 def _replay_span_states(rec: Record, plant, condition, effects, a: int, b: int, load: np.ndarray) -> np.ndarray | None:
     """The true states (X, v_X, p1, p2) of samples [a, b) replayed from the measured state at a,
     shape (4, b − a), or None if the replay diverged."""
-    x_true, p1_true, p2_true = true_signals(_spool_source(rec)[a:b], rec.sg["p1"][a:a + 1], rec.sg["p2"][a:a + 1], effects)
+    x_true, p1_true, p2_true = true_signals(_smoothed(rec, "x")[a:b], rec.sg["p1"][a:a + 1], rec.sg["p2"][a:a + 1], effects)
     v0 = rec.sg["v"][a]
     state = [[rec.raw["X"][a], 0.0 if abs(v0) < 1e-3 else v0, p1_true[0], p2_true[0]]]
     try:
@@ -398,7 +394,7 @@ def _replay_starts(p: _Prepared, effects, settings) -> tuple:
     the measured true states there) of the whole and the hydraulic replay."""
     rec = p.rec
     h = settings.savgol_window // 2
-    x_src = _spool_source(rec)
+    x_src = _smoothed(rec, "x")
     x_true, p1_true, p2_true = true_signals(x_src, rec.sg["p1"], rec.sg["p2"], effects)
     starts = np.arange(h, rec.n - h - 1, max(2, int(round(settings.replay_segment_s / rec.dt))))
     v_all = _velocity(rec)
@@ -414,7 +410,7 @@ def _hydraulic_replay(p: _Prepared, plant, condition, effects, start: tuple, loa
     rec = p.rec
     _, x_true, _, _, _, starts, states = start
     hyd = replay(plant, x_true, rec.raw["ps"], rec.raw["pr"], load, starts, states, condition=condition, effects=effects,
-                 drive=DRIVE_HYDRAULIC, given=_position_source(rec))
+                 drive=DRIVE_HYDRAULIC, given=_smoothed(rec, "X"))
     _, p1h, p2h = sensor_readings(np.zeros(1), hyd.p1_pa, hyd.p2_pa, effects)
     return np.asarray(p1h, float).copy(), np.asarray(p2h, float).copy()
 
@@ -457,7 +453,7 @@ def _mechanical_replay(rec: Record, plant, condition, effects, load, mstarts: np
     """X [m] replayed on the record's pressures (Savitzky–Golay, sensor effects removed) with
     ``load`` and ``plant`` (:func:`_mechanical_model`'s), restarted at ``mstarts``
     (:func:`_mechanical_restarts`) from the recorded X and its Savitzky–Golay velocity."""
-    x_src = _spool_source(rec)
+    x_src = _smoothed(rec, "x")
     x_true, p1_true, p2_true = true_signals(x_src, rec.sg["p1"], rec.sg["p2"], effects)
     _, p1_rec, p2_rec = true_signals(x_src, rec.raw["p1"], rec.raw["p2"], effects)
     given_p = np.vstack([np.where(np.isfinite(p1_true), p1_true, p1_rec), np.where(np.isfinite(p2_true), p2_true, p2_rec)])
