@@ -493,7 +493,7 @@ def calibrate(records, plant: PlantParams, condition: ValveCondition, priors: Nu
     if is_sharp(nm, fit.z):
         # the window shows sharp edges, not the configured Eq. 3's: calibrate with that law (as diagnose does)
         cal = calibrate(records, replace(plant, geometry=replace(plant.geometry, area_law="sharp")), condition, priors, settings, effects)
-        return replace(cal, reason=sharp_edges_reason(nm, fit.z, "calibrated"))
+        return replace(cal, reason=sharp_edges_reason(nm, fit.z, "calibrated"), gap_nominal=g0)  # the configured design's gap
     nm = refine_breakaway(prepared, nm, fit.z, settings, effects)
     p1, c1 = nm.model(fit.z)
     prepared = prepare_records(records, p1, c1, settings)
