@@ -87,6 +87,15 @@ class DiscrepancySettings:
         (both with the motion columns, on the samples at speed;
         :func:`transforms.discrepancy.load.corners_pay`): one ramp at the start of a move (a
         260 N ramp over 0.5 s: 1.8). [–]
+    knot_insertions, knot_rss_share, knot_velocity_corr2 : int, float, float
+        After the corner filters, up to ``knot_insertions`` more knots, one at a time: the one
+        that takes most of the joint fit's residual, kept if that is at least ``knot_rss_share``
+        of what the residual holds below the force balance's noise (its mean over the triangle's
+        2L + 1 samples), and only where the knot's tent function, apart from the other load columns
+        and the acceleration, shares at most ``knot_velocity_corr2`` (squared correlation) with
+        v_X, so that a knot never trades with the friction
+        (:func:`transforms.discrepancy.load.missed_knot`): a 200 N ramp over 0.4 s while the
+        cylinder slows to a stop. [–]
     replay_segment_s : float
         The replay restarts from the measured state every this many seconds (multiple
         shooting), so a small flow error cannot make the position drift over a whole record. [s]
@@ -160,6 +169,9 @@ class DiscrepancySettings:
     ramp_ratio: float = 3.0
     ramp_min_n: float = 120.0
     corner_ratio: float = 1.5
+    knot_insertions: int = 3
+    knot_rss_share: float = 0.15
+    knot_velocity_corr2: float = 0.05
     replay_segment_s: float = 2.5
     mechanical_segment_s: float = 0.5
     mechanical_friction_rel: float = 0.01
