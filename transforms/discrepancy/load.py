@@ -354,10 +354,18 @@ def ramp_load(f_hat: np.ndarray, valid: np.ndarray, usable: np.ndarray, segment:
        columns take its error, so the load drifts over the whole record (reference plant seed 1:
        75 N RMS off at speed, 10 N with this pass);
     5. up to ``settings.knot_insertions`` single knots, each where it takes most of the fit's
-       residual (:func:`missed_knot`): a ramp whose slope change is under both filters' thresholds
-       (reference plant seed 4 with 1 s loads: 200 N over 0.4 s as the cylinder slows to a stop,
-       its slope change 535 N/s against the ±0.15 s filter's 614 N/s; the velocity column took
-       −2,620 N s/m for it).
+       residual (:func:`missed_knot`): a corner both filters miss or misplace (reference plant
+       seed 3 with a new load level every second, window 0: an 8 kN ramp ends at 6.51 s, the
+       filters bent the load at 6.35 s; with the plant's true cylinder the mechanical replay went
+       0.023 → 0.015 mm, the true load's 0.013 mm). A ramp while the cylinder slows to a stop is
+       not taken where its tent follows v_X (seed 4, window 1: 200 N over 8.25–8.63 s, 0.027 mm
+       with the true load's 0.011 mm): there the load and the friction cannot be told apart.
+       These knots shape the load the replay integrates only: the knots returned, which the
+       regression eliminates the load on (:func:`load_projector`) and the fits above decide with,
+       are the filters'. Chosen where the residual under one model holds most, they took part of
+       an effect's pattern there (reference plant seed 4 without commissioning: the clean valve's
+       excess along a p1 gain 2.5σ → 4σ, `ambiguous`, and a friction change and a spool offset
+       read as that gain).
 
     A free slope over a long piece between ramps may trade with the velocity column (reference
     plant seed 2: the load 43 N off at speed over 1–2 s levels after steep ramps); the mechanical
@@ -386,13 +394,14 @@ def ramp_load(f_hat: np.ndarray, valid: np.ndarray, usable: np.ndarray, segment:
                 break
             knots = more
             load, _, cm = _ramp_fit(f_hat, usable, segment, knots, motion)
+    more = list(knots)  # the load's knots; the regression's stay those of the filters (step 5)
     for _ in range(settings.knot_insertions):
-        k = missed_knot(f_hat, usable, segment, knots, motion, W, settings.knot_rss_share, 2 * settings.interval_samples + 1,
-                         settings.knot_velocity_corr2)
+        k = missed_knot(f_hat, usable, segment, more, motion, W, settings.knot_rss_share, 2 * settings.interval_samples + 1,
+                        settings.knot_velocity_corr2)
         if k is None:
             break
-        knots[k[0]] = np.unique(np.r_[knots[k[0]], float(k[1])])
-        load, _, cm = _ramp_fit(f_hat, usable, segment, knots, motion)
+        more[k[0]] = np.unique(np.r_[more[k[0]], float(k[1])])
+        load = _ramp_fit(f_hat, usable, segment, more, motion)[0]
     for s in range(n_segments):
         if not np.any(usable[segment == s]):
             load[segment == s] = levels[s]
