@@ -90,12 +90,13 @@ class DiscrepancySettings:
     knot_insertions, knot_rss_share, knot_velocity_corr2 : int, float, float
         After the corner filters, up to ``knot_insertions`` more knots, one at a time: the one
         that takes most of the joint fit's residual, kept if that is at least ``knot_rss_share``
-        of what the residual holds below the force balance's noise (its mean over the triangle's
-        2L + 1 samples), and only where the knot's tent function, apart from the other load columns
-        and the acceleration, shares at most ``knot_velocity_corr2`` (squared correlation) with
-        v_X, so that a knot never trades with the friction
-        (:func:`transforms.discrepancy.load.missed_knot`): a 200 N ramp over 0.4 s while the
-        cylinder slows to a stop. [–]
+        of the residual's slow part (its mean over the triangle's 2L + 1 samples, where the force
+        balance's noise has little power), and only where the knot's tent function, apart from
+        the other load columns and the acceleration, shares at most ``knot_velocity_corr2``
+        (squared correlation) with v_X, so that a knot does not trade with the friction
+        (:func:`transforms.discrepancy.load.missed_knot`). They shape the load the replays
+        integrate, not the one the regression eliminates: a corner the filters miss or misplace,
+        such as the end of an 8 kN ramp (the filters 0.16 s early). [–], [–], [–]
     replay_segment_s : float
         The replay restarts from the measured state every this many seconds (multiple
         shooting), so a small flow error cannot make the position drift over a whole record. [s]
