@@ -66,7 +66,7 @@ import numpy as np
 from transforms.discrepancy.settings import DiscrepancySettings
 
 __all__ = ["LoadEstimate", "away_from_steps", "corners_pay", "estimate_load", "follows_ramps", "friction_within", "interval_load", "load_projector", "missed_knot", "motion_mismatch", "project_out", "ramp_load",
-           "replay_load", "segment_knots", "segment_levels", "step_filter", "stuck_spans"]
+           "replay_load", "segment_knots", "segment_levels", "step_filter", "stuck_spans", "with_missed_knots"]
 
 
 @lru_cache(maxsize=8)
@@ -182,6 +182,7 @@ class LoadEstimate:
         corners = ()
         if self.knot_samples:
             knots, load = ramp_load(f_hat, self.valid, self.usable, segment, len(steps) + 1, self.knot_samples, settings, levels, motion)
+            load = with_missed_knots(f_hat, self.usable, segment, knots, load, levels, self.knot_samples, settings, motion)
             corners = tuple(knots)
         return LoadEstimate(segment, steps, levels, load, self.brackets, self.valid, self.usable, self.hold_until, self.knot_samples, corners)
 
@@ -353,16 +354,17 @@ def ramp_load(f_hat: np.ndarray, valid: np.ndarray, usable: np.ndarray, segment:
        the noise of the ±W filter, and a load that misses it lets the velocity and acceleration
        columns take its error, so the load drifts over the whole record (reference plant seed 1:
        75 N RMS off at speed, 10 N with this pass);
-    5. up to ``settings.knot_insertions`` single knots, each where it takes most of the fit's
+    5. (:func:`with_missed_knots`, where the ramps are followed) up to
+       ``settings.knot_insertions`` single knots, each where it takes most of the fit's
        residual (:func:`missed_knot`): a corner both filters miss or misplace (reference plant
        seed 3 with a new load level every second, window 0: an 8 kN ramp ends at 6.51 s, the
        filters bent the load at 6.35 s; with the plant's true cylinder the mechanical replay went
        0.023 → 0.015 mm, the true load's 0.013 mm). A ramp while the cylinder slows to a stop is
        not taken where its tent follows v_X (seed 4, window 1: 200 N over 8.25–8.63 s, 0.027 mm
        with the true load's 0.011 mm): there the load and the friction cannot be told apart.
-       These knots shape the load the replay integrates only: the knots returned, which the
-       regression eliminates the load on (:func:`load_projector`) and the fits above decide with,
-       are the filters'. Chosen where the residual under one model holds most, they took part of
+       These knots shape the load the replay integrates only: the knots this function returns,
+       which the regression eliminates the load on (:func:`load_projector`) and the fits above
+       decide with, are the filters'. Chosen where the residual under one model holds most, they took part of
        an effect's pattern there (reference plant seed 4 without commissioning: the clean valve's
        excess along a p1 gain 2.5σ → 4σ, `ambiguous`, and a friction change and a spool offset
        read as that gain).
@@ -394,18 +396,36 @@ def ramp_load(f_hat: np.ndarray, valid: np.ndarray, usable: np.ndarray, segment:
                 break
             knots = more
             load, _, cm = _ramp_fit(f_hat, usable, segment, knots, motion)
-    more = list(knots)  # the load's knots; the regression's stay those of the filters (step 5)
+    return knots, _held(load, usable, segment, levels)
+
+
+def _held(load: np.ndarray, usable: np.ndarray, segment: np.ndarray, levels: np.ndarray) -> np.ndarray:
+    """``load`` with each segment without usable samples at its ``levels`` value."""
+    for s in range(levels.size):
+        if not np.any(usable[segment == s]):
+            load[segment == s] = levels[s]
+    return load
+
+
+def with_missed_knots(f_hat: np.ndarray, usable: np.ndarray, segment: np.ndarray, knots: list[np.ndarray], load: np.ndarray, levels: np.ndarray,
+                      knot_samples: int, settings: DiscrepancySettings, motion: tuple | None = None) -> np.ndarray:
+    """The load [N] of :func:`ramp_load` (its ``knots`` and ``load``) with up to
+    ``settings.knot_insertions`` more knots, one at a time where the joint fit's residual holds most
+    (:func:`missed_knot`; :func:`ramp_load`'s step 5). Made only where the ramps are followed: the
+    decision and the regression keep the filters' knots."""
+    W = max(2, int(round(settings.corner_half_width_s * knot_samples / settings.load_knot_s)))
+    more = list(knots)
+    added = False
     for _ in range(settings.knot_insertions):
         k = missed_knot(f_hat, usable, segment, more, motion, W, settings.knot_rss_share, 2 * settings.interval_samples + 1,
                         settings.knot_velocity_corr2)
         if k is None:
             break
         more[k[0]] = np.unique(np.r_[more[k[0]], float(k[1])])
-        load = _ramp_fit(f_hat, usable, segment, more, motion)[0]
-    for s in range(n_segments):
-        if not np.any(usable[segment == s]):
-            load[segment == s] = levels[s]
-    return knots, load
+        added = True
+    if not added:
+        return load
+    return _held(_ramp_fit(f_hat, usable, segment, more, motion)[0], usable, segment, levels)
 
 
 def missed_knot(f_hat: np.ndarray, usable: np.ndarray, segment: np.ndarray, knots: list[np.ndarray], motion: tuple | None, W: int,
@@ -729,4 +749,5 @@ def estimate_load(f_hat: np.ndarray, v: np.ndarray, settings: DiscrepancySetting
     knots, load = ramp_load(f_hat, valid, usable, segment, n_seg, k, settings, levels, motion)
     if not (ramps or corners_pay(f_hat, usable, segment, n_seg, knots, settings, motion)):
         return est
+    load = with_missed_knots(f_hat, usable, segment, knots, load, levels, k, settings, motion)
     return replace(est, knot_samples=k, corners=tuple(knots), load=load)
