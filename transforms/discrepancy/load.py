@@ -256,27 +256,35 @@ def _grid_knots(valid, segment, n_segments, knot_samples) -> list[np.ndarray]:
     return [segment_knots(valid, segment, s, knot_samples) for s in range(n_segments)]
 
 
+def _load_design(f_hat, valid, segment, knots: list[np.ndarray], motion):
+    """(the ``valid`` samples where ``f_hat`` and the ``motion`` columns are finite, each segment's
+    load columns there: hat functions on its ``knots``, one constant where they are empty, zero
+    outside the segment; the motion columns there, or None)."""
+    m = valid & np.isfinite(f_hat)
+    M = None
+    if motion is not None:
+        M = np.column_stack(motion)
+        m &= np.all(np.isfinite(M), axis=1)
+    idx = np.flatnonzero(m)
+    cols = [hat_basis(kn if kn.size else np.zeros(1), idx) * (segment[idx] == s)[:, None] for s, kn in enumerate(knots)]
+    return idx, cols, None if M is None else M[idx]
+
+
 def _ramp_fit(f_hat, valid, segment, knots: list[np.ndarray], motion):
     """Least squares of ``f_hat`` over the valid samples on the segments' load (piecewise linear on
     each segment's ``knots``, a constant where they are empty) and the ``motion`` columns; returns
     (load at every sample, RMS residual, the motion columns' coefficients)."""
     n = f_hat.size
-    m = valid & np.isfinite(f_hat)
-    if motion is not None:
-        motion = np.column_stack(motion)
-        m &= np.all(np.isfinite(motion), axis=1)
-    idx = np.flatnonzero(m)
-    cols, spans = [], []
+    idx, cols, M = _load_design(f_hat, valid, segment, knots, motion)
+    spans = []
     off = 0
-    for s, kn in enumerate(knots):
-        if kn.size == 0:
-            kn = np.zeros(1)
-        cols.append(hat_basis(kn, idx) * (segment[idx] == s)[:, None])
+    for kn in knots:
+        kn = kn if kn.size else np.zeros(1)
         spans.append((off, kn))
         off += kn.size
     Bm = np.hstack(cols)
     k = Bm.shape[1]
-    X = Bm if motion is None else np.hstack([Bm, motion[idx]])
+    X = Bm if M is None else np.hstack([Bm, M])
     D = []
     for o, kn in spans:
         if kn.size > 2:
@@ -446,27 +454,18 @@ def missed_knot(f_hat: np.ndarray, usable: np.ndarray, segment: np.ndarray, knot
     A candidate whose tent, apart from the other load columns and the acceleration, has a squared
     correlation above ``max_corr2`` with v_X (the first ``motion`` column) is not taken: it would
     trade with the friction, which is a finding, not load."""
-    m = usable & np.isfinite(f_hat)
-    M = None
-    if motion is not None:
-        M = np.column_stack(motion)
-        m &= np.all(np.isfinite(M), axis=1)
-    idx = np.flatnonzero(m)
+    idx, cols, M = _load_design(f_hat, usable, segment, knots, motion)
     if idx.size < 50:
         return None
-    cols = []
-    for s, kn in enumerate(knots):
-        kn = kn if kn.size else np.zeros(1)
-        cols.append(hat_basis(kn, idx) * (segment[idx] == s)[:, None])
-    X = np.hstack(cols if M is None else cols + [M[idx]])
+    X = np.hstack(cols if M is None else cols + [M])
     Q, R = np.linalg.qr(X)
     Q = Q[:, np.abs(np.diag(R)) > 1e-9 * np.abs(np.diag(R)).max()]
     r = f_hat[idx] - Q @ (Q.T @ f_hat[idx])
     v0 = None
     if M is not None:  # v_X apart from the load and the acceleration: what tells the friction
-        Q0, R0 = np.linalg.qr(np.hstack(cols + [M[idx, 1:]]))
+        Q0, R0 = np.linalg.qr(np.hstack(cols + [M[:, 1:]]))
         Q0 = Q0[:, np.abs(np.diag(R0)) > 1e-9 * np.abs(np.diag(R0)).max()]
-        v0 = M[idx, 0] - Q0 @ (Q0.T @ M[idx, 0])
+        v0 = M[:, 0] - Q0 @ (Q0.T @ M[:, 0])
         vv = float(v0 @ v0)
     best = (0.0, None)
     for s, kn in enumerate(knots):
