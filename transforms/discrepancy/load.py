@@ -340,6 +340,12 @@ def _corners(rest: np.ndarray, valid: np.ndarray, segment: np.ndarray, n_segment
     return out
 
 
+def _corner_width(knot_samples: int, settings: DiscrepancySettings) -> int:
+    """Half-width of the ±``settings.corner_half_width_s`` kink filter in samples (the sample
+    interval being ``settings.load_knot_s`` / ``knot_samples``); at least 2."""
+    return max(2, int(round(settings.corner_half_width_s * knot_samples / settings.load_knot_s)))
+
+
 def ramp_load(f_hat: np.ndarray, valid: np.ndarray, usable: np.ndarray, segment: np.ndarray, n_segments: int, knot_samples: int,
               settings: DiscrepancySettings, levels: np.ndarray, motion: tuple | None = None) -> tuple[list[np.ndarray], np.ndarray]:
     """(per segment the knots, the load at every sample [N]) of a load that is piecewise linear
@@ -372,8 +378,8 @@ def ramp_load(f_hat: np.ndarray, valid: np.ndarray, usable: np.ndarray, segment:
        with the true load's 0.011 mm): there the load and the friction cannot be told apart.
        These knots shape the load the replay integrates only: the knots this function returns,
        which the regression eliminates the load on (:func:`load_projector`) and the fits above
-       decide with, are the filters'. Chosen where the residual under one model holds most, they took part of
-       an effect's pattern there (reference plant seed 4 without commissioning: the clean valve's
+       decide with, are the filters'. Chosen where the residual under one model holds most, they
+       took part of an effect's pattern there (reference plant seed 4 without commissioning: the clean valve's
        excess along a p1 gain 2.5σ → 4σ, `ambiguous`, and a friction change and a spool offset
        read as that gain).
 
@@ -384,7 +390,7 @@ def ramp_load(f_hat: np.ndarray, valid: np.ndarray, usable: np.ndarray, segment:
     them to the velocity column: docs/discrepancy.md, "A level is one value".)
 
     A segment without usable samples keeps its ``levels`` value."""
-    W = max(2, int(round(settings.corner_half_width_s * knot_samples / settings.load_knot_s)))
+    W = _corner_width(knot_samples, settings)
     dt = settings.load_knot_s / knot_samples
 
     def motion_part(cm):
@@ -421,7 +427,7 @@ def with_missed_knots(f_hat: np.ndarray, usable: np.ndarray, segment: np.ndarray
     ``settings.knot_insertions`` more knots, one at a time where the joint fit's residual holds most
     (:func:`missed_knot`; :func:`ramp_load`'s step 5). Made only where the ramps are followed: the
     decision and the regression keep the filters' knots."""
-    W = max(2, int(round(settings.corner_half_width_s * knot_samples / settings.load_knot_s)))
+    W = _corner_width(knot_samples, settings)
     more = list(knots)
     added = False
     for _ in range(settings.knot_insertions):
@@ -434,6 +440,14 @@ def with_missed_knots(f_hat: np.ndarray, usable: np.ndarray, segment: np.ndarray
     if not added:
         return load
     return _held(_ramp_fit(f_hat, usable, segment, more, motion)[0], usable, segment, levels)
+
+
+def _column_basis(X: np.ndarray) -> np.ndarray:
+    """An orthonormal basis of the columns of ``X`` (QR, columns with a negligible diagonal of R
+    dropped)."""
+    Q, R = np.linalg.qr(X)
+    d = np.abs(np.diag(R))
+    return Q[:, d > 1e-9 * d.max()]
 
 
 def missed_knot(f_hat: np.ndarray, usable: np.ndarray, segment: np.ndarray, knots: list[np.ndarray], motion: tuple | None, W: int,
@@ -458,13 +472,11 @@ def missed_knot(f_hat: np.ndarray, usable: np.ndarray, segment: np.ndarray, knot
     if idx.size < 50:
         return None
     X = np.hstack(cols if M is None else cols + [M])
-    Q, R = np.linalg.qr(X)
-    Q = Q[:, np.abs(np.diag(R)) > 1e-9 * np.abs(np.diag(R)).max()]
+    Q = _column_basis(X)
     r = f_hat[idx] - Q @ (Q.T @ f_hat[idx])
     v0 = None
     if M is not None:  # v_X apart from the load and the acceleration: what tells the friction
-        Q0, R0 = np.linalg.qr(np.hstack(cols + [M[:, 1:]]))
-        Q0 = Q0[:, np.abs(np.diag(R0)) > 1e-9 * np.abs(np.diag(R0)).max()]
+        Q0 = _column_basis(np.hstack(cols + [M[:, 1:]]))
         v0 = M[:, 0] - Q0 @ (Q0.T @ M[:, 0])
         vv = float(v0 @ v0)
     best = (0.0, None)
