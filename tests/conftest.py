@@ -1,6 +1,7 @@
 """Shared test set-up: an isolated Prefect home, and a Prefect test server for flow tests."""
 
 import os
+import sys
 import tempfile
 
 os.environ.setdefault("PREFECT_SERVER_ANALYTICS_ENABLED", "false")
@@ -29,3 +30,13 @@ def prefect_server():
 
     with prefect_test_harness(server_startup_timeout=120):
         yield
+
+
+def pytest_runtest_teardown(item):
+    """Close Prefect's events client after each test that opened it. Left open, its websocket pings
+    the test server every ~20 s from Prefect's event-loop thread and draws each ping's payload from
+    the global ``random`` module; a Hypothesis test that a worker runs later then sees the state
+    change mid-draw and warns "Do not use the `random` module inside strategies"."""
+    worker = sys.modules.get("prefect.events.worker")
+    if worker is not None and worker.EventsWorker._instances:
+        worker.EventsWorker.drain_all()
