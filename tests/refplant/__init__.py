@@ -13,7 +13,10 @@ What differs from ``model/`` on purpose:
 * loads: a new level every 1-4 s (0 or uniform in +-6 kN), reached by a linear ramp (a rolling
   force: continuous, piecewise linear);
 * transmitters: first-order lag of 1 ms on every pressure, the pressures recorded one sample late
-  against the positions, noise and 16-bit quantisation;
+  against the positions, noise and 16-bit quantisation; positions at 1 um by default, or as a
+  plant records them (:func:`plant_grade` draws spool 0.05-0.3 % of x_max and cylinder 1-20 um in
+  steps of 1-5 um per plant; :func:`noisy_end`: spool 0.2 %, cylinder 10 um in 5 um steps);
+* operation: busy (dwells 0.2-0.8 s) by default, or :func:`sparse` (dwells 2-10 s between moves);
 * edge families per edge: Eq. 3 (written again), a sharp edge without radial clearance, a linear
   gradient with a hard corner (alpha A = C_q g max(u + x_u, 0), g = sin(phi) pi 2R per port);
 * a valve as built (underlap and alpha scatter per edge, beta 2.5 % off its nameplate), wear per
@@ -36,13 +39,15 @@ what ``flows.common.lake.write_partition`` writes per (valve, date).
 from .edges import edge_area, valve_areas
 from .lake import COLUMNS, simulate_windows, to_lake_frame
 from .params import (EDGES, LAWS, NAMEPLATE, Channel, Controller, Cylinder, Edge, Fluid, Integration,
-                     Operation, RefPlant, Sensors, Spool, Supply, Valve, family, idealised, manufactured, worn)
+                     Operation, RefPlant, Sensors, Spool, Supply, Valve, family, idealised, manufactured,
+                     noisy_end, plant_grade, position_sensors, sparse, worn)
 from .recording import RefRecording, simulate, without_noise
 from .scenarios import LIBRARY, OUTSIDE, TYPICAL, Effects, Load, Trajectory, draw_load, draw_trajectory, effect
 
 __all__ = [
     "EDGES", "LAWS", "NAMEPLATE", "Channel", "Controller", "Cylinder", "Edge", "Fluid", "Integration",
-    "Operation", "RefPlant", "Sensors", "Spool", "Supply", "Valve", "family", "idealised", "manufactured", "worn",
+    "Operation", "RefPlant", "Sensors", "Spool", "Supply", "Valve", "family", "idealised", "manufactured",
+    "noisy_end", "plant_grade", "position_sensors", "sparse", "worn",
     "edge_area", "valve_areas", "RefRecording", "simulate", "without_noise", "COLUMNS", "simulate_windows",
     "to_lake_frame", "LIBRARY", "OUTSIDE", "TYPICAL", "Effects", "Load", "Trajectory", "draw_load",
     "draw_trajectory", "effect",

@@ -338,6 +338,39 @@ def worn(plant: RefPlant, *, alpha_scale=(1.0,) * 4, underlap_shift_m=(0.0,) * 4
         underlap_m=tuple(e.underlap_m + d for e, d in zip(v.edges, s))))
 
 
+def position_sensors(plant: RefPlant, *, spool_noise_fraction: float, cylinder_noise_m: float,
+                     cylinder_step_m: float) -> RefPlant:
+    """``plant`` whose position transmitters record as a plant's do: spool noise
+    ``spool_noise_fraction`` of x_max with 16-bit steps over its range, cylinder noise
+    ``cylinder_noise_m`` [m] in steps of ``cylinder_step_m`` [m] (pressures unchanged)."""
+    s = plant.sensors
+    spool = replace(s.x_spool, noise=spool_noise_fraction * plant.valve.x_max_m)
+    cyl = replace(s.x_cyl, noise=float(cylinder_noise_m), step=float(cylinder_step_m))
+    return replace(plant, sensors=replace(s, x_spool=spool, x_cyl=cyl))
+
+
+def plant_grade(plant: RefPlant = NAMEPLATE, seed: int = 0) -> RefPlant:
+    """``plant`` with position transmitters drawn from what plants record, per plant (``seed``):
+    spool noise uniform in 0.05-0.3 % of x_max (16-bit steps), cylinder noise uniform in 1-20 um
+    in steps drawn from 1-5 um."""
+    rng = np.random.default_rng([int(seed), 4747])
+    return position_sensors(plant, spool_noise_fraction=float(rng.uniform(0.5e-3, 3.0e-3)),
+                            cylinder_noise_m=float(rng.uniform(1.0e-6, 20.0e-6)),
+                            cylinder_step_m=float(rng.integers(1, 6)) * 1.0e-6)
+
+
+def noisy_end(plant: RefPlant = NAMEPLATE) -> RefPlant:
+    """``plant`` at the noisy end of plant sensor quality: spool 0.2 % of x_max (7 um),
+    cylinder 10 um in 5 um steps."""
+    return position_sensors(plant, spool_noise_fraction=2.0e-3, cylinder_noise_m=10.0e-6, cylinder_step_m=5.0e-6)
+
+
+def sparse(plant: RefPlant = NAMEPLATE) -> RefPlant:
+    """``plant`` operated as a positioning cylinder on a mill: it moves between positions and
+    dwells there 2-10 s (a window starts with 0.5-3 s; the default dwells 0.2-0.8 s)."""
+    return replace(plant, operation=replace(plant.operation, dwell_s=(2.0, 10.0), first_dwell_s=(0.5, 3.0)))
+
+
 def idealised(plant: RefPlant = NAMEPLATE) -> RefPlant:
     """Every deliberate difference from ``model/`` off: no transmitter lag, no skew, a stick band
     of 1 um/s (Karnopp's band shrunk to a near-exact stick condition), Eq. 3 edges, no load steps

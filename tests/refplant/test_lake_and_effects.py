@@ -7,9 +7,9 @@ import numpy as np
 import polars as pl
 import pytest
 
-from . import (COLUMNS, NAMEPLATE, Effects, Load, Trajectory, effect, manufactured, simulate, simulate_windows, to_lake_frame,
-               without_noise)
-from .scenarios import LIBRARY, OUTSIDE, draw_load
+from . import (COLUMNS, NAMEPLATE, Effects, Load, Trajectory, effect, manufactured, noisy_end, plant_grade, simulate,
+               simulate_windows, sparse, to_lake_frame, without_noise)
+from .scenarios import LIBRARY, OUTSIDE, draw_load, draw_trajectory
 from .sensors import first_order_lag
 
 START = datetime(2025, 3, 1, 23, 59, 59, 999_000, tzinfo=timezone.utc)
@@ -109,3 +109,25 @@ def test_manufactured_valve_scatters_per_edge_and_misstates_beta():
     al = np.array([e.alpha for e in a.valve.edges])
     assert np.all(np.abs(xu - 40e-6) < 20e-6) and len(set(xu)) == 4
     assert np.all(np.abs(al / 0.675 - 1) < 0.12) and len(set(al)) == 4
+
+
+def test_plant_grade_positions_carry_a_plants_noise_in_its_steps():
+    """The noisy end records the spool at 0.2 % of x_max (7 um) and the cylinder at 10 um in 5 um
+    steps; per-plant draws stay inside what plants record."""
+    rec = simulate(noisy_end(NAMEPLATE), 1.0, 3)
+    ds, dc = rec.x_spool - rec.true["x"], rec.x_cyl - rec.true["X"]
+    assert 6.3e-6 < ds.std() < 7.7e-6 and 10.0e-6 < dc.std() < 11.6e-6  # + the step's own 5/sqrt(12) um
+    np.testing.assert_allclose(rec.x_cyl / 5e-6, np.round(rec.x_cyl / 5e-6), atol=1e-6)
+    for seed in range(20):
+        s = plant_grade(NAMEPLATE, seed).sensors
+        assert 0.5e-3 * 3.5e-3 <= s.x_spool.noise <= 3.0e-3 * 3.5e-3 and s.x_spool.step == 8e-3 / 2**16
+        assert 1e-6 <= s.x_cyl.noise <= 20e-6 and s.x_cyl.step in {k * 1e-6 for k in range(1, 6)}
+        assert s.p1 == NAMEPLATE.sensors.p1
+
+
+def test_a_sparse_valve_dwells_two_to_ten_seconds_between_moves():
+    op = sparse(NAMEPLATE).operation
+    t0, T, _, _ = draw_trajectory(op, 600.0, np.random.default_rng(5)).arrays()
+    dwell = t0[1:] - (t0 + T)[:-1]
+    assert 40 < dwell.size < 150 and dwell.min() >= 2.0 and dwell.max() <= 10.0
+    assert 0.5 <= t0[0] <= 3.0
