@@ -197,7 +197,8 @@ def report(
 def query(
     sql: Annotated[str, typer.Argument(help="SQL against the warehouse (tables and views; docs/warehouse.md).")],
     fmt: Annotated[str, typer.Option("--format", help="table | csv | json | parquet (parquet needs --out).")] = "table",
-    out: Annotated[Optional[Path], typer.Option("--out", help="Write the result to this file instead of standard output.")] = None,
+    out: Annotated[Optional[Path], typer.Option("--out", help="Write the result to this file instead of standard output (never inside the warehouse folder).")] = None,
+    force: Annotated[bool, typer.Option("--force", help="Replace an existing --out file.")] = False,
     live: Annotated[bool, typer.Option("--live", help="Query the live database (read-only; waits while a writer holds it, and keeps writers out) instead of the snapshot every writing command publishes.")] = False,
     max_rows: Annotated[int, typer.Option("--max-rows", help="Rows shown by --format table (the others write all rows).")] = 200,
     warehouse: Warehouse = None,
@@ -205,7 +206,7 @@ def query(
     """An ad-hoc query against the warehouse, printed as a table."""
     from flows.report.query import run_query
 
-    run_query(sql, warehouse_dir(warehouse), fmt=fmt, out=out, live=live, max_rows=max_rows)
+    run_query(sql, warehouse_dir(warehouse), fmt=fmt, out=out, live=live, max_rows=max_rows, force=force)
 
 
 DaskAddress = Annotated[
