@@ -141,6 +141,10 @@ def _table(frame: pl.DataFrame, max_rows: int):
     return t
 
 
+def _broken_pipe() -> None:
+    raise BrokenPipeError
+
+
 def _print(frame: pl.DataFrame, fmt: str, max_rows: int, fh: IO | None) -> None:
     """Write ``frame`` in ``fmt`` to ``fh`` (standard output when None)."""
     if fmt == "parquet":
@@ -154,6 +158,7 @@ def _print(frame: pl.DataFrame, fmt: str, max_rows: int, fh: IO | None) -> None:
 
         wide = fh is not None or not sys.stdout.isatty()
         console = Console(file=fh, width=250 if wide else None)
+        console.on_broken_pipe = _broken_pipe  # rich's own exits 1; the command line decides (flows.cli.main)
         console.print(_table(frame, max_rows))
         note = f"{frame.height} row(s)" + (f", first {max_rows} shown" if frame.height > max_rows else "")
         console.print(f"[dim]{note}[/dim]")
