@@ -139,6 +139,20 @@ class Samples:
     block's columns are read without a copy); None: rows in file order (long)."""
 
 
+def refuse_repeated_columns(names: list[str], *, line: int | None = None) -> None:
+    """Refuse a header (``line``: its line in a text file) that names a column twice: which of the
+    two holds the tag cannot be told (a decoder would take the first). Unnamed columns (a
+    trailing separator) are no names."""
+    seen: dict[str, int] = {}
+    for j, name in enumerate(names):
+        key = name.strip()
+        if not key:
+            continue
+        if key in seen:
+            raise IngestError(f"column {key!r} is named twice, columns {seen[key] + 1} and {j + 1}; expected one column per tag", line=line)
+        seen[key] = j
+
+
 def _require_columns(df: pl.DataFrame, wanted: dict[str, str]) -> None:
     for key, name in wanted.items():
         if name not in df.columns:

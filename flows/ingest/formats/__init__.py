@@ -223,6 +223,8 @@ def iload(
             yield Batch(df, first_line, final)
     except ValvemonError:
         raise
+    except IngestError as exc:  # what the reader refuses in the file's content (a header naming a column twice)
+        raise ValvemonError(f"{src.path}: {exc}") from None
     except (EOFError, gzip.BadGzipFile, zlib.error) as exc:
         raise ValvemonError(f"{src.path}: truncated or corrupt gzip file ({exc})") from None
     except (pl.exceptions.PolarsError, pa.ArrowException, OSError, ValueError) as exc:

@@ -27,11 +27,13 @@ from flows.ingest.formats.header_rows import read_header_rows
 from flows.ingest.hashing import _mapped
 from schemas.plant_config import ExportSpec
 from transforms.ingest import TagTable
+from transforms.ingest.samples import refuse_repeated_columns
 from transforms.ingest.text_rows import (
     FIELD_COUNT,
     ROW_FAULT_COLUMN,
     TRUNCATED,
     first_row,
+    header_fields,
     ragged_rows,
     unterminated,
     width_bounds,
@@ -185,6 +187,9 @@ def iload(src, export: ExportSpec, tags: TagTable | None, batch_samples: int, bl
                 raise ValvemonError(f"{src.path}: empty file inside the gzip (expected a {export.layout} export with a header line)")
             fh = _Prefixed(header + head, fh)
             header = b""
+        if header.strip():
+            tag_line = 1 if src.layout is None else export.header_rows.index("tag") + 1
+            refuse_repeated_columns(header_fields(header, export.separator), line=tag_line)
         any_block = False
         for block, final in lookahead(line_blocks(fh, block_bytes)):
             if not any_block:
