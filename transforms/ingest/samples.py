@@ -493,7 +493,9 @@ def long_samples(df: pl.DataFrame, export: ExportSpec, timezone: str, tags: TagT
     n = df.height
     tag_id = tag.to_physical()
     ts_raw = df[export.timestamp_column]
-    ts = parse_timestamps(ts_raw, export.timestamp_format, timezone, groups=tag_id, lines=lines, tags=tag, unreadable="null", origin_ns=origin_ns)
+    ts = parse_timestamps(
+        ts_raw, export.timestamp_format, timezone, groups=tag_id, lines=lines, tags=tag, unreadable="null", origin_ns=origin_ns, ambiguous=export.ambiguous_time
+    )
     bad_ts = None
     if ts.null_count():
         bad_ts = ts.is_null() if missing_tag is None else ts.is_null() & ~missing_tag
@@ -570,7 +572,7 @@ def wide_samples(
     df, lines, broken, broken_lines = _take_broken(df, lines)
     n = df.height
     ts_raw = df[export.timestamp_column]
-    ts = parse_timestamps(ts_raw, export.timestamp_format, timezone, lines=lines, unreadable="null", origin_ns=origin_ns).cast(UTC_NS)  # once, not per tag
+    ts = parse_timestamps(ts_raw, export.timestamp_format, timezone, lines=lines, unreadable="null", origin_ns=origin_ns, ambiguous=export.ambiguous_time).cast(UTC_NS)  # once, not per tag
     bad_ts = ts.is_null() if ts.null_count() else None
     after_step = None if clock is None else clock.after_step(ts.to_physical(), lines)
     faults = _Faults(tags, time.time_ns() if now_ns is None else now_ns)

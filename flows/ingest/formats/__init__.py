@@ -188,7 +188,7 @@ def time_origin(path: Path, start: tuple[str, int] | None, export: ExportSpec, t
                 f"written in export.start_time_format {fmt!r} (export.timestamp_format {export.timestamp_format!r} counts from the start)"
             )
     try:
-        return parse_start_time(written, fmt, timezone)
+        return parse_start_time(written, fmt, timezone, ambiguous=export.ambiguous_time)
     except IngestError as exc:
         raise ValvemonError(f"{where}: {exc}") from None
 

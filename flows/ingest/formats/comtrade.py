@@ -290,7 +290,7 @@ def comtrade_layout(path: Path, export: ExportSpec, timezone: str) -> ComtradeLa
         origin = int(naive.to_physical()[0]) - cfg.utc_offset_s * 10**9
     else:
         try:
-            origin = int(localize(naive, timezone).to_physical()[0])
+            origin = int(localize(naive, timezone, ambiguous=export.ambiguous_time).to_physical()[0])
         except IngestError as exc:
             raise ValvemonError(f"{path}: line {cfg.start_line}: {exc.detail}") from None
     return ComtradeLayout(cfg, dat, columns, units, origin)
