@@ -2,8 +2,8 @@
 
 Reads the read-only snapshot the last writing command published (``--live``: the live
 database, read-only), so a query never waits for the nightly writer and never holds it up
-(:mod:`flows.report.views`). Output: a rich table (default), CSV, JSON (an array of objects, times as
-ISO-8601 UTC) or Parquet (``--out`` required).
+(:mod:`flows.report.views`). Output: a rich table (default), CSV (nested columns as JSON text), JSON (an array of objects,
+times as ISO-8601 UTC) or Parquet (``--out`` required).
 
 A query never changes the warehouse or writes a file (:func:`check_read_only`,
 :func:`lock_down`): the database is attached read-only, only a single ``SELECT`` (or
@@ -16,11 +16,13 @@ exits with 130 and the database is released.
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import sys
 import tempfile
 from contextlib import contextmanager
+from decimal import Decimal
 from pathlib import Path
 from typing import IO, Iterator
 
@@ -141,6 +143,23 @@ def _table(frame: pl.DataFrame, max_rows: int):
     return t
 
 
+def _jsonable(value: object) -> str | float:
+    """A value ``json`` cannot write: a decimal as a number, times as ISO-8601, the rest as text."""
+    if isinstance(value, Decimal):
+        return float(value)
+    return value.isoformat() if hasattr(value, "isoformat") else str(value)
+
+
+def flat_columns(frame: pl.DataFrame) -> pl.DataFrame:
+    """``frame`` with every nested column (list, array, struct; CSV has no cells for them) as
+    compact JSON text, e.g. ``[1,2]`` or ``{"a":1}``; null stays null."""
+    nested = [c for c, dtype in frame.schema.items() if dtype.is_nested()]
+    return frame.with_columns(
+        pl.Series(c, [None if v is None else json.dumps(v, separators=(",", ":"), default=_jsonable) for v in frame[c].to_list()], dtype=pl.String)
+        for c in nested
+    )
+
+
 def _broken_pipe() -> None:
     raise BrokenPipeError
 
@@ -150,7 +169,7 @@ def _print(frame: pl.DataFrame, fmt: str, max_rows: int, fh: IO | None) -> None:
     if fmt == "parquet":
         frame.write_parquet(fh)
     elif fmt == "csv":
-        (fh or sys.stdout).write(frame.write_csv())
+        (fh or sys.stdout).write(flat_columns(frame).write_csv())
     elif fmt == "json":
         (fh or sys.stdout).write(frame.write_json() + "\n")
     else:
@@ -172,6 +191,8 @@ def run_query(
         raise ValvemonError(f"--format: {fmt!r} is not one of {', '.join(FORMATS)}")
     if fmt == "parquet" and out is None:
         raise ValvemonError("--format parquet needs --out FILE")
+    if max_rows < 0:
+        raise ValvemonError(f"--max-rows: {max_rows} is negative; expected the number of rows to show (0 or more)")
     if out is not None:
         check_out(out, warehouse, force=force)
     frame = fetch(sql, warehouse, live=live)
