@@ -197,7 +197,8 @@ def report(
 def query(
     sql: Annotated[str, typer.Argument(help="SQL against the warehouse (tables and views; docs/warehouse.md).")],
     fmt: Annotated[str, typer.Option("--format", help="table | csv | json | parquet (parquet needs --out).")] = "table",
-    out: Annotated[Optional[Path], typer.Option("--out", help="Write the result to this file instead of standard output.")] = None,
+    out: Annotated[Optional[Path], typer.Option("--out", help="Write the result to this file instead of standard output (never inside the warehouse folder).")] = None,
+    force: Annotated[bool, typer.Option("--force", help="Replace an existing --out file.")] = False,
     live: Annotated[bool, typer.Option("--live", help="Query the live database (read-only; waits while a writer holds it, and keeps writers out) instead of the snapshot every writing command publishes.")] = False,
     max_rows: Annotated[int, typer.Option("--max-rows", help="Rows shown by --format table (the others write all rows).")] = 200,
     warehouse: Warehouse = None,
@@ -205,7 +206,7 @@ def query(
     """An ad-hoc query against the warehouse, printed as a table."""
     from flows.report.query import run_query
 
-    run_query(sql, warehouse_dir(warehouse), fmt=fmt, out=out, live=live, max_rows=max_rows)
+    run_query(sql, warehouse_dir(warehouse), fmt=fmt, out=out, live=live, max_rows=max_rows, force=force)
 
 
 DaskAddress = Annotated[
@@ -364,15 +365,60 @@ def _fail(message: str, code: int = 1) -> None:
     sys.exit(code)
 
 
+class _PipeClosed(Exception):
+    """Standard output's reader went away (``valvemon ... | head -1``)."""
+
+
+def _stdout_closed() -> bool:
+    """Whether standard output is a pipe whose reading end is closed (poll reports an error)."""
+    import select
+
+    try:
+        poll = select.poll()
+        poll.register(sys.__stdout__.fileno(), select.POLLOUT)
+        return any(events & select.POLLERR for _, events in poll.poll(0))
+    except (AttributeError, OSError, ValueError):
+        return False
+
+
+def _pipe_closed_is_done(invoke):
+    """``invoke`` with a broken pipe on standard output raised as :class:`_PipeClosed`: click
+    would turn it into exit status 1 (``typer.core``), though the output is written after the
+    command's work, which stands."""
+
+    def wrapped(ctx):
+        try:
+            return invoke(ctx)
+        except BrokenPipeError:
+            if _stdout_closed():
+                raise _PipeClosed() from None
+            raise
+
+    return wrapped
+
+
+def _silence_stdout() -> None:
+    """Point standard output at ``/dev/null``, so that what is still buffered flushes quietly."""
+    null = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(null, sys.__stdout__.fileno())
+    os.close(null)
+
+
 def main() -> None:
     """Entry point: every failure is one line on stderr and a non-zero exit status: 1, or 2 for
-    a usage error (bad option or argument); an interrupt exits with 130, silently."""
+    a usage error (bad option or argument); an interrupt exits with 130, silently. Standard
+    output closed by its reader (``| head -1``) once the work is done exits 0, silently."""
     from flows.common.cli_values import convert_plainly
 
     try:
         command = typer.main.get_command(app)
         convert_plainly(command)  # the values converted without pydantic (~0.15–0.2 CPU-s a command)
+        command.invoke = _pipe_closed_is_done(command.invoke)
         code = command(standalone_mode=False, prog_name="valvemon")
+        sys.stdout.flush()  # a closed pipe shows here when the output was still buffered
+    except (_PipeClosed, BrokenPipeError):  # the latter from the flush: standard output's
+        _silence_stdout()
+        sys.exit(0)
     except (ValvemonError, ConfigError) as exc:  # the reason, naming file, row, key …
         _fail(_first_line(exc))
     except typer.TyperException as exc:  # click's usage errors (click as vendored by typer)

@@ -207,7 +207,7 @@ QUARANTINE_REASONS: tuple[str, ...] = (
 )  # fmt: skip
 """Why a sample is quarantined (``transforms.ingest.samples``; ``docs/ingest.md``)."""
 
-FAULT_REASONS: tuple[str, ...] = ("bad_timestamp", "implausible_time", "out_of_range")
+FAULT_REASONS: tuple[str, ...] = ("bad_timestamp", "implausible_time", "out_of_range", "field_count")
 """The quarantine reasons whose share per tag and file ``export.max_bad_share`` bounds; each is
 also a column of ``ingest_manifest``."""
 

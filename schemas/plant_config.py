@@ -108,6 +108,10 @@ class ExportSpec:
     clock_steps: str = "quarantine"
     """A wide export whose clock steps back: ``"quarantine"`` the rows after the step, or ``"accept"``
     (sort them in, as the long layout does)."""
+    ambiguous_time: str = "refuse"
+    """A local time in the hour the clocks repeat in autumn that nothing else resolves (a start
+    time; local times that never leave that hour): ``"refuse"`` the file, or take the
+    ``"earlier"`` (summer time) or ``"later"`` instant."""
 
     @property
     def relative_time(self) -> bool:
@@ -137,6 +141,9 @@ range for a minute of an hour file 1.7 %); ``docs/ingest.md``, "Quarantine or re
 
 OTHER_TAGS_RULES: tuple[str, ...] = ("ignore", "error")
 CLOCK_STEP_RULES: tuple[str, ...] = ("quarantine", "accept")
+
+AMBIGUOUS_TIME_RULES: tuple[str, ...] = ("refuse", "earlier", "later")
+"""``export.ambiguous_time``: what a local time in the repeated autumn hour is when nothing tells."""
 
 DEFAULT_WINDOW_S = 60.0
 """Default monitoring window length (docs/monitoring.md, "Continuous recordings", measured on
@@ -488,7 +495,7 @@ _EXPORT_KEYS = {
     "layout", "timestamp_column", "timestamp_format", "tag_column", "value_column",
     "quality_column", "good_quality", "separator", "decimal", "sample_rate_hz", "max_gap_s",
     "duplicate_rule", "max_bad_share", "other_tags", "header_rows", "tdms_group", "start_time_format",
-    "clock_steps",
+    "clock_steps", "ambiguous_time",
 }  # fmt: skip
 
 
@@ -536,6 +543,7 @@ def _parse_export(raw: Any) -> ExportSpec:
     if "start_time" in kw.get("header_rows", ()) and not relative:
         raise ConfigError(f"export.header_rows: a 'start_time' line needs a relative export.timestamp_format ({' or '.join(map(repr, RELATIVE_TIME_FORMATS))})")
     kw["clock_steps"] = _str(t.get("clock_steps", "quarantine"), "export.clock_steps", CLOCK_STEP_RULES)
+    kw["ambiguous_time"] = _str(t.get("ambiguous_time", ExportSpec.ambiguous_time), "export.ambiguous_time", AMBIGUOUS_TIME_RULES)
     return ExportSpec(**kw)
 
 
@@ -903,6 +911,8 @@ def plant_config_to_dict(config: PlantConfig) -> dict:
         export["start_time_format"] = e.start_time_format
     if e.clock_steps != ExportSpec.clock_steps:
         export["clock_steps"] = e.clock_steps
+    if e.ambiguous_time != ExportSpec.ambiguous_time:
+        export["ambiguous_time"] = e.ambiguous_time
     valves = []
     for v in config.valves:
         d: dict[str, Any] = {"id": v.id, "type": v.type, "commissioned": _iso(v.commissioned)}

@@ -27,6 +27,7 @@ and justified in ``docs/ingest.md``; they are the constants below.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import shutil
@@ -83,6 +84,14 @@ row group, the uniform runs ``[first_us, step_us, rows]`` its ``timestamp_utc`` 
 exactly (value i of a run is ``first_us + i * step_us``), written by the lake's writer. A reader
 that trusts it (:func:`time_grid`, checked against the row groups' row counts and time
 statistics) builds the time column without decoding it (``docs/ingest.md``, "Storage")."""
+TIME_DIGEST_KEY = "valvemon.time_digest"
+"""Key of what binds the time grid record to the file's rows: for each row group, the BLAKE2b-128
+(hex) of its ``timestamp_utc`` column chunk's bytes as written. Another program that rewrites the
+file and carries the footer's key-value metadata over (pyarrow does) but reorders or moves rows
+writes other bytes there, so the record is not trusted (:func:`time_grid`) even where row counts,
+minima and maxima still agree. Equal bytes decode to equal time stamps."""
+_PENDING_DIGEST = "?" * 32
+"""What the writer puts in the footer before the digests are known (the same length)."""
 TIME_GRID_MAX_RUNS = 64
 """A row group whose time stamps are more runs than this (an irregular clock) gets no record;
 a file with such a row group is read by decoding its time column, as one without a record."""
@@ -218,16 +227,50 @@ def grid_runs(t_us: np.ndarray, max_runs: int = TIME_GRID_MAX_RUNS) -> list[list
     return runs
 
 
-def time_grid(md: pq.FileMetaData) -> list[tuple[int, int, int]] | None:
+def _time_digests(fh, md: pq.FileMetaData) -> list[str]:
+    """Per row group, the BLAKE2b-128 (hex) of its ``timestamp_utc`` column chunk's bytes in the
+    open file ``fh`` (:data:`TIME_DIGEST_KEY`)."""
+    col = md.schema.names.index("timestamp_utc")
+    out = []
+    for g in range(md.num_row_groups):
+        chunk = md.row_group(g).column(col)
+        fh.seek(chunk.dictionary_page_offset if chunk.has_dictionary_page else chunk.data_page_offset)
+        out.append(hashlib.blake2b(fh.read(chunk.total_compressed_size), digest_size=16).hexdigest())
+    return out
+
+
+def _seal_digests(fh, groups: int) -> None:
+    """Put the time column chunks' digests in place of the placeholder the writer left in the
+    closed Parquet file ``fh`` (opened for reading and writing): the footer's length is
+    unchanged (a Parquet footer carries no checksum)."""
+    pending = json.dumps([_PENDING_DIGEST] * groups).encode()
+    size = fh.seek(0, os.SEEK_END)
+    fh.seek(size - 8)
+    length = int.from_bytes(fh.read(4), "little")
+    fh.seek(size - 8 - length)
+    footer = fh.read(length)
+    at = footer.rfind(pending)
+    md = pq.ParquetFile(fh).metadata
+    sealed = json.dumps(_time_digests(fh, md)).encode()
+    if at < 0 or len(sealed) != len(pending):
+        raise RuntimeError("the lake writer's time digest placeholder is not in the footer")
+    fh.seek(size - 8 - length + at)
+    fh.write(sealed)
+
+
+def time_grid(md: pq.FileMetaData, source) -> list[tuple[int, int, int]] | None:
     """A lake file's time stamps as uniform runs ``(first_us, step_us, rows)`` in time order
     (runs that continue each other joined: a continuous hour file is one run), from its time grid
     record (:data:`TIME_GRID_KEY`) if it has one that agrees with the footer: one entry per row
     group, each row group's runs holding its row count, starting at its ``timestamp_utc`` minimum
-    and ending at its maximum, every run and the row groups in increasing time. None otherwise
-    (no record, an irregular row group, a record that disagrees): the time column must be
+    and ending at its maximum, every run and the row groups in increasing time, and every row
+    group's time column chunk in ``source`` (the file's path, or the open file) holding the bytes
+    :data:`TIME_DIGEST_KEY` names. None otherwise (no record, an irregular row group, a record
+    that disagrees, rows rewritten under a carried-over record): the time column must be
     decoded."""
-    raw = (md.metadata or {}).get(TIME_GRID_KEY.encode())
-    if raw is None:
+    meta = md.metadata or {}
+    raw, digests = meta.get(TIME_GRID_KEY.encode()), meta.get(TIME_DIGEST_KEY.encode())
+    if raw is None or digests is None:
         return None
     try:
         groups = json.loads(raw)
@@ -258,6 +301,16 @@ def time_grid(md: pq.FileMetaData) -> list[tuple[int, int, int]] | None:
             rows += n
         if rows != md.row_group(g).num_rows or runs[0][0] != int(st.min_raw) or last != int(st.max_raw):
             return None
+    try:
+        if isinstance(source, (str, Path)):
+            with open(source, "rb") as fh:
+                found = _time_digests(fh, md)
+        else:
+            found = _time_digests(source, md)
+        if json.loads(digests) != found:
+            return None
+    except (OSError, ValueError):
+        return None
     return out
 
 
@@ -298,8 +351,9 @@ def grid_series(runs: list[tuple[int, int, int]], a: int, b: int, lengths: list[
 def _write_temp(tmp: Path, frames: Iterable[pl.DataFrame], gap_us: int, codec: str) -> None:
     """Write the frames, in order, as one Parquet file to ``tmp``, flushed and fsynced; pieces
     are joined up to :data:`ROW_GROUP_MAX_ROWS` rows before being cut into row groups, and the
-    file gets its time grid record (:data:`TIME_GRID_KEY`) if every row group is one."""
-    with open(tmp, "wb") as fh:
+    file gets its time grid record (:data:`TIME_GRID_KEY`) if every row group is one, sealed with
+    its time column's digests (:data:`TIME_DIGEST_KEY`)."""
+    with open(tmp, "w+b") as fh:
         with pq.ParquetWriter(
             fh,
             SENSOR_ARROW_SCHEMA,
@@ -319,7 +373,10 @@ def _write_temp(tmp: Path, frames: Iterable[pl.DataFrame], gap_us: int, codec: s
                     runs = grid_runs(t_us[a:b]) if grid is not None else None
                     grid = None if runs is None else grid + [runs]
             if grid:
-                writer.add_key_value_metadata({TIME_GRID_KEY: json.dumps(grid, separators=(",", ":"))})
+                pending = json.dumps([_PENDING_DIGEST] * len(grid))
+                writer.add_key_value_metadata({TIME_GRID_KEY: json.dumps(grid, separators=(",", ":")), TIME_DIGEST_KEY: pending})
+        if grid:
+            _seal_digests(fh, len(grid))
         fh.flush()
         os.fsync(fh.fileno())
 

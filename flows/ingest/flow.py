@@ -356,8 +356,9 @@ def _store_run(warehouse: Path, row: pl.DataFrame) -> None:
 FileRunner = Callable[..., FileReport]
 
 
-def preflight(config_path: str | Path, paths: list[str | Path]) -> tuple[PlantConfig, list[Path]]:
-    """The configuration (with a grid the lake can hold) and the export files, or the error.
+def preflight(config_path: str | Path, paths: list[str | Path], *, warn: bool = False) -> tuple[PlantConfig, list[Path]]:
+    """The configuration (with a grid the lake can hold) and the export files, or the error;
+    ``warn``: a word on stderr for each file of a folder that is not read (:func:`warn_skipped`).
 
     Cheap; the command line calls it before the Prefect flow starts, so a typo costs no server.
     """
@@ -368,7 +369,12 @@ def preflight(config_path: str | Path, paths: list[str | Path]) -> tuple[PlantCo
         raise ConfigError(f"{config_path}: {exc}") from None
     from flows.ingest.formats import discover_files
 
-    return config, discover_files(paths)
+    return config, discover_files(paths, warn_skipped if warn else None)
+
+
+def warn_skipped(path: Path, why: str) -> None:
+    """A file of an export folder that is not read, said on stderr."""
+    print(f"valvemon: warning: {path}: {why}", file=sys.stderr)
 
 
 def run_ingest(
@@ -406,7 +412,7 @@ def run_ingest(
         stored with status ``failed`` and the message.
     """
     warehouse = Path(warehouse)
-    config, files = preflight(config_path, paths)
+    config, files = preflight(config_path, paths, warn=True)
     runner = file_runner or ingest_file
     tags = TagTable.from_config(config)
     summary = RunSummary(run_id=f"{_now():%Y%m%dT%H%M%SZ}-{uuid.uuid4().hex[:8]}", files_seen=len(files))

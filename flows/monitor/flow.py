@@ -437,7 +437,7 @@ def _lake_files(warehouse: Path, valve_id: str, start: datetime | None, end: dat
         first, last = min((g[1] for g in groups), default=None), max((g[2] for g in groups), default=None)
         known = first is not None and first != UNKNOWN_SPAN_US[0]  # (a group without statistics spans all time)
         out.append(_LakeFile(path, day, sum(g[0] for g in groups), _EPOCH + timedelta(microseconds=first) if known else None,
-                             _EPOCH + timedelta(microseconds=last) if known else None, time_grid(md) if known else None))  # fmt: skip
+                             _EPOCH + timedelta(microseconds=last) if known else None, time_grid(md, path) if known else None))  # fmt: skip
     return out
 
 

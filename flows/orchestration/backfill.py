@@ -72,7 +72,7 @@ from flows.common.lake import list_partitions
 from flows.common.locks import file_lock, partition_lock
 from flows.common.prefect_run import flow, in_flow_run, task
 from flows.common.warehouse_db import connect, ensure_ingest_tables, insert_frame, migrate_hash_column, query_frame
-from flows.ingest.flow import FileReport, ingest_lock, merge_export, record_file, rekey_file
+from flows.ingest.flow import FileReport, ingest_lock, merge_export, record_file, rekey_file, warn_skipped
 from flows.ingest.formats import discover_files, open_export
 from flows.ingest.hashing import LEGACY_HASH_PREFIX, legacy_hash
 from flows.monitor.flow import (
@@ -611,7 +611,7 @@ def backfill_flow(
     if unit_days <= 0:
         raise ValvemonError("--unit-days must be positive")
     valves = plant_valves(config, valve_ids, config_path)
-    files = discover_files([exports]) if exports is not None else []
+    files = discover_files([exports], warn_skipped) if exports is not None else []
 
     summary = BackfillSummary(run_id=f"{kind}-{started:%Y%m%dT%H%M%SZ}-{uuid.uuid4().hex[:8]}", span_start=t0, span_end=t1, files_seen=len(files))
     meta = {"valves": ",".join(valves), "exports": str(exports) if exports else None, "task_runner": task_runner_name, "concurrency": concurrency}

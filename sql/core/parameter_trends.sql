@@ -7,9 +7,10 @@
 -- many a continuous recording gives. The sums come a day at a time (parameter_days: count, means,
 -- centred sums of squares and products of the alarm-free windows of the day), merged exactly:
 -- Sxx = sum(Sxx_day + n_day (mean_day - mean)^2), and so on; slope Sxy / Sxx, intercept
--- mean_value - slope mean_hours. Level: the median of the alarm-free windows of those days within
+-- mean_value - slope mean_hours. Level: the median of the alarm-free ok windows within
 -- change_history_hours before the edge's latest ok window, or of the latest change_history_windows
--- of them if those reach further back; what "the long-term trend exceeds a bound" is judged on.
+-- of them if those reach further back, whatever trend_span_hours is (a span shorter than those
+-- windows does not thin the level); what "the long-term trend exceeds a bound" is judged on.
 -- The level's windows are read raw: the open ones (open_values) and the closed ones
 -- from the valve's raw_from on (stg_summary_watermarks; its alarms in stg_alarm_windows).
 --
@@ -120,10 +121,7 @@ level_windows as (
     from recent
     join latest using (valve_id, edge)
     join bounds using (valve_id, parameter)
-    semi join span_days
-        on span_days.valve_id = recent.valve_id and span_days.edge = recent.edge
-        and span_days.parameter = recent.parameter
-        and span_days.day_utc = cast(timezone('UTC', recent.window_start) as date)
+    where recent.window_start <= latest.latest_start
 ),
 
 levels as (

@@ -77,6 +77,7 @@ recent_alarms as (
         fault_alarms.valve_id, fault_alarms.edge,
         count(*) as n_recent_alarms,
         arg_max(fault_alarms.reason, fault_alarms.window_start) as last_alarm_reason,
+        min(fault_alarms.window_start) as first_alarm_start,
         max(fault_alarms.window_start) as last_alarm_start
     from fault_alarms
     join windows using (valve_id, edge)
@@ -194,8 +195,9 @@ final as (
         edge,
         state,
         case state
-            when 'faulty' then printf('fault: %s (%d alarm window(s) since %s)', last_alarm_reason,
-                                      n_recent_alarms, strftime(last_alarm_start, '%Y-%m-%d %H:%M UTC'))
+            when 'faulty' then printf('fault: %s (%d alarm window(s) since %s%s)', last_alarm_reason, n_recent_alarms,
+                                      strftime(first_alarm_start, '%Y-%m-%d %H:%M UTC'),
+                                      case when n_recent_alarms > 1 then strftime(last_alarm_start, ', the last at %Y-%m-%d %H:%M UTC') else '' end)
             when 'worn' then 'worn: ' || wear_reason
             when 'unknown' then
                 case

@@ -138,7 +138,7 @@ def test_the_span_reader_reads_every_file_as_decoding_does(tmp_path, monkeypatch
 def test_a_gridded_file_is_read_back_identical_to_decoding(tmp_path):
     folder, whole = _lake(tmp_path, True)
     md = pq.ParquetFile(hour_path(folder, 1)).metadata
-    runs = time_grid(md)
+    runs = time_grid(md, hour_path(folder, 1))
     decoded = pl.read_parquet(hour_path(folder, 1))["timestamp_utc"]
     assert grid_series(runs, 0, md.num_rows).equals(decoded)
     assert json.loads(md.metadata[TIME_GRID_KEY.encode()])[0][0] == [T0_US + 3_600_000_000, 1_000, 30_001]

@@ -60,10 +60,14 @@ def test_typed_timestamps_naive_ones_are_local():
 
 
 def test_autumn_row_order_is_judged_per_tag():
-    """Tag A's rows pass the repeated hour twice; tag B's rows are only in the first pass."""
+    """Tags A and B each stay inside the repeated hour without going back: their order cannot tell
+    the pass (refused by default, issue 46), and with export.ambiguous_time = "earlier" both are
+    summer time, each tag judged on its own rows (B's 02:10 after A's 02:30 is no step back)."""
     s = pl.Series(["2025-10-26 02:30:00", "2025-10-26 02:10:00", "2025-10-26 02:40:00", "2025-10-26 02:20:00", "2025-10-26 02:50:00"])
     groups = pl.Series([0, 1, 0, 1, 0])
-    got = parse_timestamps(s, "iso8601", "Europe/Vienna", groups=groups).to_list()
+    with pytest.raises(IngestError, match="is in the hour Europe/Vienna repeats"):
+        parse_timestamps(s, "iso8601", "Europe/Vienna", groups=groups)
+    got = parse_timestamps(s, "iso8601", "Europe/Vienna", groups=groups, ambiguous="earlier").to_list()
     # A: 02:30 summer, 02:40 summer, 02:50 summer (never went back); B: 02:10, 02:20 summer
     assert got == [_utc(2025, 10, 26, 0, 30), _utc(2025, 10, 26, 0, 10), _utc(2025, 10, 26, 0, 40), _utc(2025, 10, 26, 0, 20), _utc(2025, 10, 26, 0, 50)]
     s2 = pl.Series(["2025-10-26 02:30:00", "2025-10-26 02:10:00", "2025-10-26 02:40:00"])

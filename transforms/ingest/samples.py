@@ -28,8 +28,9 @@ truncated      every sample of a text file's last line when it has no line end (
                was cut inside it)
 ============== ======================================================================
 
-The last three are *faults*: counted per tag (:attr:`Samples.faults`), and a file in which they
-exceed ``export.max_bad_share`` of a tag's samples is refused (``transforms.ingest.stream``).
+``bad_timestamp``, ``implausible_time``, ``out_of_range`` and ``field_count`` are *faults*: counted
+per tag (:attr:`Samples.faults`), and a file in which one of them exceeds ``export.max_bad_share``
+of a tag's samples is refused (``transforms.ingest.stream``).
 
 A tag no valve of the plant has (a row's tag in the long layout, a column in the wide one) is
 read past and counted (:attr:`Samples.other_tags`) under ``export.other_tags = "ignore"``, and
@@ -53,6 +54,7 @@ from schemas.fields import FAULT_REASONS, REQUIRED_SIGNALS, SENSOR_FIELDS, SIGNA
 from schemas.plant_config import ExportSpec, PlantConfig
 from transforms.ingest.clock import ClockSteps
 from transforms.ingest.errors import IngestError
+from transforms.ingest.text_rows import FIELD_COUNT as TEXT_FIELD_COUNT
 from transforms.ingest.text_rows import ROW_FAULT_COLUMN
 from transforms.ingest.timestamps import UTC_NS, parse_timestamps, unreadable_timestamp
 
@@ -63,7 +65,7 @@ FUTURE_TOLERANCE_NS = 86_400 * 10**9
 """A sample later than the ingest's time plus this is ``implausible_time`` (one day: more than any
 time-zone offset and any drift of a recorder's clock that is merely not synchronised). [ns]"""
 
-BAD_TIMESTAMP, IMPLAUSIBLE_TIME, OUT_OF_RANGE = (FAULT_REASONS.index(r) for r in ("bad_timestamp", "implausible_time", "out_of_range"))
+BAD_TIMESTAMP, IMPLAUSIBLE_TIME, OUT_OF_RANGE, FIELD_COUNT = (FAULT_REASONS.index(r) for r in ("bad_timestamp", "implausible_time", "out_of_range", "field_count"))
 _LIMITS = {f.name: f for f in SENSOR_FIELDS}
 
 
@@ -135,6 +137,20 @@ class Samples:
     blocks: tuple[int, ...] | None = None
     """Wide layout: ``accepted`` is one block of rows per tag, of these heights, in order (each
     block's columns are read without a copy); None: rows in file order (long)."""
+
+
+def refuse_repeated_columns(names: list[str], *, line: int | None = None) -> None:
+    """Refuse a header (``line``: its line in a text file) that names a column twice: which of the
+    two holds the tag cannot be told (a decoder would take the first). Unnamed columns (a
+    trailing separator) are no names."""
+    seen: dict[str, int] = {}
+    for j, name in enumerate(names):
+        key = name.strip()
+        if not key:
+            continue
+        if key in seen:
+            raise IngestError(f"column {key!r} is named twice, columns {seen[key] + 1} and {j + 1}; expected one column per tag", line=line)
+        seen[key] = j
 
 
 def _require_columns(df: pl.DataFrame, wanted: dict[str, str]) -> None:
@@ -326,6 +342,19 @@ class _Faults:
         for tid, i in zip(ids, first):
             self.first.setdefault((int(tid), BAD_TIMESTAMP), f"line {lines[i]}: tag {self.tags.tags[tid]}: {unreadable_timestamp(raw[int(i)], fmt)}")
 
+    def field_counts(self, tag_id: np.ndarray, lines: np.ndarray, marks: pl.Series, width: int) -> None:
+        """Samples of rows marked :data:`~transforms.ingest.text_rows.FIELD_COUNT` (``marks``: the
+        rows' marks; ``tag_id`` -1: no tag of the plant); a cut last line is not one."""
+        hit = (marks == TEXT_FIELD_COUNT).to_numpy() & (tag_id >= 0)
+        if not hit.any():
+            return
+        tag_id, lines = tag_id[hit], lines[hit]
+        np.add.at(self.counts[:, FIELD_COUNT], tag_id, 1)
+        ids, first = np.unique(tag_id, return_index=True)
+        for tid, i in zip(ids, first):
+            what = f"line {lines[i]}: tag {self.tags.tags[tid]}: the row does not have the header's {width} fields"
+            self.first.setdefault((int(tid), FIELD_COUNT), what)
+
     def checked(self, lines: pl.Series, tag_id: np.ndarray, ts: pl.Series, values: pl.Series, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
         """Values in SI, and the faults per sample (None: none) of accepted samples; ``tag_id``
         per sample, or one for all (a wide column); ``ids``: the tags of the frame. Times are
@@ -434,6 +463,8 @@ def long_samples(df: pl.DataFrame, export: ExportSpec, timezone: str, tags: TagT
     if export.quality_column:
         wanted["quality_column"] = export.quality_column
     _require_columns(df, wanted)
+    width = df.width - (ROW_FAULT_COLUMN in df.columns)
+    faults = _Faults(tags, time.time_ns() if now_ns is None else now_ns)
     df, lines = _drop_blank(df.select(_and_marks(df, wanted.values())), first_line)
     rows_in = df.height
     df, lines, broken, broken_lines = _take_broken(df, lines)
@@ -441,6 +472,8 @@ def long_samples(df: pl.DataFrame, export: ExportSpec, timezone: str, tags: TagT
     if broken is not None:
         q = broken[export.quality_column] if export.quality_column else None
         broken_q = _quarantine_frame(broken_lines, broken[export.tag_column], broken[export.timestamp_column], broken[export.value_column], q, broken[ROW_FAULT_COLUMN])
+        broken_ids = _tag_enum(broken[export.tag_column], tags).to_physical().cast(pl.Int64).fill_null(-1).to_numpy()
+        faults.field_counts(broken_ids, broken_lines.to_numpy(), broken[ROW_FAULT_COLUMN], width)
     tag_raw = df[export.tag_column]
     tag = _tag_enum(tag_raw, tags)
     missing_tag = None
@@ -459,9 +492,10 @@ def long_samples(df: pl.DataFrame, export: ExportSpec, timezone: str, tags: TagT
             missing_tag = None
     n = df.height
     tag_id = tag.to_physical()
-    faults = _Faults(tags, time.time_ns() if now_ns is None else now_ns)
     ts_raw = df[export.timestamp_column]
-    ts = parse_timestamps(ts_raw, export.timestamp_format, timezone, groups=tag_id, lines=lines, tags=tag, unreadable="null", origin_ns=origin_ns)
+    ts = parse_timestamps(
+        ts_raw, export.timestamp_format, timezone, groups=tag_id, lines=lines, tags=tag, unreadable="null", origin_ns=origin_ns, ambiguous=export.ambiguous_time
+    )
     bad_ts = None
     if ts.null_count():
         bad_ts = ts.is_null() if missing_tag is None else ts.is_null() & ~missing_tag
@@ -475,7 +509,8 @@ def long_samples(df: pl.DataFrame, export: ExportSpec, timezone: str, tags: TagT
     masks = (missing_tag, bad_ts, None, bad_quality, missing, non_numeric, non_finite)
     rejected = _any(masks)
     counts = _code_counts(tag_id.drop_nulls().to_numpy(), len(tags.tags))
-    tags_present = frozenset(tags.tags[i] for i in np.flatnonzero(counts))
+    counts_with_broken = counts + faults.counts[:, FIELD_COUNT]  # a fault's share counts the broken rows' samples in
+    tags_present = frozenset(tags.tags[i] for i in np.flatnonzero(counts_with_broken))
     raw = {"line": lines, "tag": tag_raw, "ts": ts_raw, "value": df[export.value_column], "quality": df[export.quality_column] if export.quality_column else None}
     set_aside = _set_aside(rejected, masks, raw)
     kept = None
@@ -491,7 +526,7 @@ def long_samples(df: pl.DataFrame, export: ExportSpec, timezone: str, tags: TagT
         lines, tag, ts, value_si = lines.filter(ok), tag.filter(ok), ts.filter(ok), value_si[fault == 0]
     n_broken = 0 if broken_q is None else broken_q.height
     return Samples(
-        _accepted(lines, tag, ts, value_si), _concat([broken_q, set_aside, faulted]), rows_in, n + n_broken, tags_present, counts, faults.counts, faults.first, other, _cut(broken)
+        _accepted(lines, tag, ts, value_si), _concat([broken_q, set_aside, faulted]), rows_in, n + n_broken, tags_present, counts_with_broken, faults.counts, faults.first, other, _cut(broken)
     )
 
 
@@ -531,18 +566,20 @@ def wide_samples(
                 raise IngestError(f"unknown tag {c!r} (column {df.columns.index(c) + 1}): no valve of the plant configuration has it")
             other[c] = df.height - df[c].null_count()
     tag_columns = [c for c in tag_columns if c in ids]
+    width = df.width - (ROW_FAULT_COLUMN in df.columns)
     df, lines = _drop_blank(df.select(_and_marks(df, [*wanted.values(), *tag_columns])), first_line)
     rows_in = df.height
     df, lines, broken, broken_lines = _take_broken(df, lines)
     n = df.height
     ts_raw = df[export.timestamp_column]
-    ts = parse_timestamps(ts_raw, export.timestamp_format, timezone, lines=lines, unreadable="null", origin_ns=origin_ns).cast(UTC_NS)  # once, not per tag
+    ts = parse_timestamps(ts_raw, export.timestamp_format, timezone, lines=lines, unreadable="null", origin_ns=origin_ns, ambiguous=export.ambiguous_time).cast(UTC_NS)  # once, not per tag
     bad_ts = ts.is_null() if ts.null_count() else None
     after_step = None if clock is None else clock.after_step(ts.to_physical(), lines)
     faults = _Faults(tags, time.time_ns() if now_ns is None else now_ns)
     bad_quality = _bad_quality(df[export.quality_column], export.good_quality) if export.quality_column else None
     accepted, quarantined = [], []
     samples_in = 0
+    tag_samples = np.zeros(len(tags.tags), dtype=np.int64)
     if broken is not None:  # every non-empty cell of a marked row, under the tag of its column
         q = broken[export.quality_column] if export.quality_column else None
         for c in tag_columns:
@@ -552,7 +589,8 @@ def wide_samples(
                 pick = lambda s: None if s is None else s.gather(at)  # noqa: E731
                 tag = pl.repeat(c, len(at), dtype=pl.String, eager=True)
                 quarantined.append(_quarantine_frame(pick(broken_lines), tag, pick(broken[export.timestamp_column]), pick(broken[c]), pick(q), pick(broken[ROW_FAULT_COLUMN])))
-    tag_samples = np.zeros(len(tags.tags), dtype=np.int64)
+                faults.field_counts(np.full(len(at), ids[c]), pick(broken_lines).to_numpy(), pick(broken[ROW_FAULT_COLUMN]), width)
+                tag_samples[ids[c]] += len(at)
     code_dtype = pl.Series(dtype=tags.enum).to_physical().to_numpy().dtype  # as a long frame's codes: one compiled kernel
     for c in tag_columns:
         values, missing, non_numeric, non_finite = _value_checks(df[c], export.decimal)
@@ -562,7 +600,7 @@ def wide_samples(
             continue
         samples_in += n_present
         tid = ids[c]
-        tag_samples[tid] = n_present
+        tag_samples[tid] += n_present
         bad_q = None if bad_quality is None else (bad_quality if present is None else bad_quality & present)
         bad_t = None if bad_ts is None else (bad_ts if present is None else bad_ts & present)
         if bad_t is not None and bad_t.any():

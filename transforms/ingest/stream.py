@@ -233,13 +233,14 @@ class ExportStream:
         for name, k in samples.other_tags.items():
             c.other_tags[name] = c.other_tags.get(name, 0) + k
         if final:
-            c.bad_timestamp, c.implausible_time, c.out_of_range = (int(x) for x in self._faults.sum(axis=0))
+            totals = dict(zip(FAULT_REASONS, (int(x) for x in self._faults.sum(axis=0))))
+            c.bad_timestamp, c.implausible_time, c.out_of_range = totals["bad_timestamp"], totals["implausible_time"], totals["out_of_range"]
             c.clock_step_message = None if self.clock is None else self.clock.message(c.clock_step)
+            self._refuse_if_mostly_faulty()
             if c.other_tags and not self._present:
                 names = ", ".join(list(c.other_tags)[:5]) + (", …" if len(c.other_tags) > 5 else "")
                 raise IngestError(f"no tag of the plant configuration in the file, only {len(c.other_tags)} other tags ({names})")
             c.valves = tuple(check_required_signals(frozenset(self._present), self.config))
-            self._refuse_if_mostly_faulty()
         acc = samples.accepted
         validate_raw_rows(acc)
         local = not export.relative_time  # relative times are counted from a start in UTC: never ambiguous
@@ -297,6 +298,9 @@ class ExportStream:
         elif reason == "bad_timestamp":
             what = "without a readable timestamp"
             cause = f"a wrong export.timestamp_format? it is {export.timestamp_format!r}"
+        elif reason == "field_count":
+            what = "in rows whose field count is not the header's"
+            cause = f"a separator missing or added in the rows, or a wrong export.separator? it is {export.separator!r}"
         else:
             what = "at implausible times"
             cause = "a recorder clock that is off, or a wrong plant.timezone or export.timestamp_format?"

@@ -9,6 +9,8 @@ else, so the ingest asks :func:`ragged_rows` which rows those are and quarantine
 
 from __future__ import annotations
 
+import csv
+
 import numba
 import numpy as np
 
@@ -19,6 +21,32 @@ cut file), null for every other row. ``transforms.ingest.samples`` quarantines t
 and removes the column."""
 
 FIELD_COUNT, TRUNCATED = "field_count", "truncated"
+
+
+def header_fields(line: bytes, separator: str) -> list[str]:
+    """The fields of one line of delimited text (quotes as the decoder reads them)."""
+    text = line.decode("utf-8", errors="replace").rstrip("\r\n")
+    return next(csv.reader([text], delimiter=separator, quotechar='"'), [])
+
+
+def first_row(block: bytes) -> bytes:
+    """The first line of ``block`` that holds something (b"" if none)."""
+    return next((line for line in block.split(b"\n", 64) if line.strip()), b"")
+
+
+def with_trailing_separator(header: bytes, row: bytes, separator: str) -> bytes:
+    """The header line as the rows are written: when the file's first data row ``row`` has one
+    field more than ``header``, that field empty (every row ends in a separator, the header
+    does not), the header with a separator added at its end, so the rows read as having the
+    header's width plus its trailing unnamed column (:func:`width_bounds`); else ``header``.
+    A trailing separator on only some rows is still the wrong width: the habit is the file's."""
+    if not row or not header.strip():
+        return header
+    names, cells = header_fields(header, separator), header_fields(row, separator)
+    if len(cells) != len(names) + 1 or cells[-1] != "" or names[-1] == "":
+        return header
+    body = header.rstrip(b"\r\n")
+    return body + separator.encode() + header[len(body) :]
 
 
 def width_bounds(columns: list[str]) -> tuple[int, int]:

@@ -91,14 +91,16 @@ def start_in_name(name: str, fmt: str) -> str | None:
     return None if m is None else m.group(0)
 
 
-def parse_start_time(text: str, fmt: str, timezone: str) -> int:
+def parse_start_time(text: str, fmt: str, timezone: str, *, ambiguous: str = "refuse") -> int:
     """A file's start time (``export.start_time_format``; local time in ``timezone`` unless the
-    pattern has an offset) → UTC ns.
+    pattern has an offset) → UTC ns; one in the repeated autumn hour as ``ambiguous`` says
+    (``export.ambiguous_time``, :func:`localize`).
 
     Raises
     ------
     IngestError
-        Text that does not match the pattern, or a local time that does not exist.
+        Text that does not match the pattern, a local time that does not exist, or one that is
+        ambiguous under ``"refuse"``.
     """
     raw = pl.Series([text.strip()])
     try:
@@ -110,7 +112,7 @@ def parse_start_time(text: str, fmt: str, timezone: str) -> int:
     if parsed.dtype.time_zone:
         return int(parsed.dt.convert_time_zone("UTC").to_physical()[0])
     try:
-        return int(localize(parsed, timezone).to_physical()[0])
+        return int(localize(parsed, timezone, ambiguous=ambiguous).to_physical()[0])
     except IngestError as exc:
         raise IngestError(exc.detail) from None  # the caller names the line
 
@@ -148,8 +150,16 @@ def localize(
     groups: pl.Series | None = None,
     lines: pl.Series | None = None,
     tags: pl.Series | None = None,
+    ambiguous: str = "refuse",
 ) -> pl.Series:
     """Naive local wall-clock times → UTC, the repeated autumn hour resolved by row order.
+
+    Within a sequence (a group), a time in the repeated hour is the first pass (summer time)
+    before the times go back and the second pass after; a sequence that never goes back is the
+    first pass when it has times before that hour, the second when it has times only after it.
+    A sequence of times all inside the hour (a single start time is one) cannot be told by its
+    order: ``ambiguous`` (``export.ambiguous_time``) says ``"earlier"``, ``"later"`` or
+    ``"refuse"``.
 
     Parameters
     ----------
@@ -164,11 +174,14 @@ def localize(
         Line number of each element, for error messages (default: position + 1).
     tags : Series of str, optional
         Tag of each element, named in error messages.
+    ambiguous : str
+        ``"refuse"``, ``"earlier"`` or ``"later"``: a time in the repeated hour the order cannot tell.
 
     Raises
     ------
     IngestError
-        For a time inside the spring gap (it does not exist in ``timezone``).
+        For a time inside the spring gap (it does not exist in ``timezone``), and under
+        ``"refuse"`` for a time in the repeated hour the order cannot tell, naming both instants.
     """
     naive = naive.cast(pl.Datetime("ns"))
     if timezone == "UTC":
@@ -178,13 +191,8 @@ def localize(
     if not unresolved.any():
         return zoned.dt.convert_time_zone("UTC")
     pos = unresolved.arg_true()
-    sub = pl.DataFrame(
-        {
-            "pos": pos,
-            "grp": pl.Series(np.zeros(len(pos), dtype=np.int64)) if groups is None else groups.gather(pos),
-            "naive": naive.gather(pos),
-        }
-    )
+    grp = pl.Series(np.zeros(len(naive), dtype=np.int64)) if groups is None else groups
+    sub = pl.DataFrame({"pos": pos, "grp": grp.gather(pos), "naive": naive.gather(pos)})
     earliest = sub["naive"].dt.replace_time_zone(timezone, ambiguous="earliest", non_existent="null")
     if earliest.null_count():
         i = int(sub["pos"][int(earliest.is_null().arg_true()[0])])
@@ -193,18 +201,40 @@ def localize(
             line=_line(lines, i),
             tag=None if tags is None else tags[i],
         )
+    clear = pl.DataFrame({"grp": grp, "naive": naive}).filter(zoned.is_not_null()).group_by("grp").agg(
+        first=pl.col("naive").min(), last=pl.col("naive").max()
+    )  # fmt: skip
     key = [pl.col("grp"), pl.col("naive").dt.year()]
-    folded = sub.with_columns(
-        went_back=(pl.col("naive") < pl.col("naive").cum_max().shift(1)).fill_null(False).over(key)
-    ).with_columns(fold=pl.col("went_back").cast(pl.Int8).cum_max().over(key) > 0)
-    resolved = folded.select(
-        pl.col("naive").dt.replace_time_zone(
-            timezone,
-            ambiguous=pl.when(pl.col("fold")).then(pl.lit("latest")).otherwise(pl.lit("earliest")),
-            non_existent="raise",
+    folded = (
+        sub.with_columns(went_back=(pl.col("naive") < pl.col("naive").cum_max().shift(1)).fill_null(False).over(key))
+        .with_columns(fold=pl.col("went_back").cast(pl.Int8).cum_max().over(key) > 0, folds=pl.col("went_back").any().over(key))
+        .join(clear, on="grp", how="left", maintain_order="left")
+        .with_columns(
+            before=(pl.col("first") < pl.col("naive").min().over(key)).fill_null(False),
+            after=(pl.col("last") > pl.col("naive").max().over(key)).fill_null(False),
         )
+        .with_columns(told=pl.col("folds") | pl.col("before") | pl.col("after"))
+    )
+    if ambiguous == "refuse" and not folded["told"].all():
+        j = int((~folded["told"]).arg_true()[0])
+        i = int(folded["pos"][j])
+        one = folded["naive"].gather([j])
+        both = [_iso_utc(one.dt.replace_time_zone(timezone, ambiguous=a)) for a in ("earliest", "latest")]
+        raise IngestError(
+            f"local time {naive[i]} is in the hour {timezone} repeats when the clocks go back: it is {both[0]} (summer time) or {both[1]}, "
+            "and nothing in the file tells which; set export.ambiguous_time = \"earlier\" or \"later\" if the plant knows",
+            line=_line(lines, i),
+            tag=None if tags is None else tags[i],
+        )
+    later = pl.when(pl.col("folds")).then(pl.col("fold")).when(pl.col("before")).then(False).when(pl.col("after")).then(True).otherwise(ambiguous == "later")
+    resolved = folded.select(
+        pl.col("naive").dt.replace_time_zone(timezone, ambiguous=pl.when(later).then(pl.lit("latest")).otherwise(pl.lit("earliest")), non_existent="raise")
     ).to_series()
     return zoned.scatter(pos, resolved).dt.convert_time_zone("UTC")
+
+
+def _iso_utc(t: pl.Series) -> str:
+    return t.dt.convert_time_zone("UTC").dt.strftime("%Y-%m-%dT%H:%M:%S%.fZ")[0].replace(".000000000Z", "Z")
 
 
 def parse_timestamps(
@@ -217,6 +247,7 @@ def parse_timestamps(
     tags: pl.Series | None = None,
     unreadable: str = "raise",
     origin_ns: int | None = None,
+    ambiguous: str = "refuse",
 ) -> pl.Series:
     """Timestamps of an export (text, epoch numbers or typed) → Datetime(ns, UTC).
 
@@ -238,6 +269,8 @@ def parse_timestamps(
         ``"raise"`` or ``"null"`` (above).
     origin_ns : int, optional
         The file's start time (UTC ns) that relative timestamps count from.
+    ambiguous : str
+        ``export.ambiguous_time`` (:func:`localize`).
 
     Raises
     ------
@@ -250,9 +283,9 @@ def parse_timestamps(
     if isinstance(dtype, pl.Datetime):
         if dtype.time_zone is not None:
             return raw.dt.convert_time_zone("UTC").cast(UTC_NS)
-        return localize(raw, timezone, groups=groups, lines=lines, tags=tags)
+        return localize(raw, timezone, groups=groups, lines=lines, tags=tags, ambiguous=ambiguous)
     if dtype == pl.Date:
-        return localize(raw.cast(pl.Datetime("ns")), timezone, groups=groups, lines=lines, tags=tags)
+        return localize(raw.cast(pl.Datetime("ns")), timezone, groups=groups, lines=lines, tags=tags, ambiguous=ambiguous)
     if dtype.is_numeric():
         if fmt != "epoch_ms":
             raise IngestError(f"timestamps are numbers, but export.timestamp_format is {fmt!r} (expected 'epoch_ms' for numbers)")
@@ -278,11 +311,11 @@ def parse_timestamps(
         if candidates:
             fast = _arrow_iso(text, zoned=candidates[0][1])
             if fast is not None:
-                return fast if candidates[0][1] else localize(fast, timezone, groups=groups, lines=lines, tags=tags)
+                return fast if candidates[0][1] else localize(fast, timezone, groups=groups, lines=lines, tags=tags, ambiguous=ambiguous)
     else:
         zoned = any(d in fmt for d in _ZONED_DIRECTIVES)
         candidates = [(fmt, zoned)]
-    return _parse_text(text, candidates, fmt, timezone, groups=groups, lines=lines, tags=tags, strict=unreadable == "raise")
+    return _parse_text(text, candidates, fmt, timezone, groups=groups, lines=lines, tags=tags, strict=unreadable == "raise", ambiguous=ambiguous)
 
 
 def _arrow_iso(text: pl.Series, *, zoned: bool) -> pl.Series | None:
@@ -340,6 +373,7 @@ def _parse_text(
     lines: pl.Series | None,
     tags: pl.Series | None,
     strict: bool = True,
+    ambiguous: str = "refuse",
 ) -> pl.Series:
     """Try the candidate formats in turn on the rows still unread; local ones are localised.
     Rows no format reads raise (``strict``) or stay null."""
@@ -373,7 +407,7 @@ def _parse_text(
         ok = pl.Series([True] * n).scatter(todo, False)
         raise _first_failure(text, ok, lines, fmt, tags)
     if naive_out is not None:
-        local = localize(naive_out, timezone, groups=groups, lines=lines, tags=tags)
+        local = localize(naive_out, timezone, groups=groups, lines=lines, tags=tags, ambiguous=ambiguous)
         return local if zoned_out is None else pl.select(pl.coalesce(zoned_out, local)).to_series()
     if zoned_out is None:
         return pl.repeat(None, n, dtype=UTC_NS, eager=True).alias(text.name)

@@ -29,7 +29,7 @@ import gzip
 import zlib
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterator, NamedTuple
+from typing import Any, Callable, Iterator, NamedTuple
 
 import polars as pl
 import pyarrow as pa
@@ -92,9 +92,10 @@ class ExportSource:
     """The format's own description of the file (header rows, COMTRADE channels)."""
 
 
-def discover_files(paths: list[str | Path]) -> list[Path]:
+def discover_files(paths: list[str | Path], skipped: Callable[[Path, str], None] | None = None) -> list[Path]:
     """The export files named by the arguments: files as given, folders searched recursively for
-    :data:`EXPORT_SUFFIXES` (sorted by path).
+    :data:`EXPORT_SUFFIXES` (sorted by path). ``skipped(file, why)`` is told of a folder's file
+    that looks like part of an export but is not read: a COMTRADE ``.dat`` without its ``.cfg``.
 
     Raises
     ------
@@ -106,6 +107,9 @@ def discover_files(paths: list[str | Path]) -> list[Path]:
     for p in map(Path, paths):
         if p.is_dir():
             found = sorted(f for f in p.rglob("*") if f.is_file() and f.name.lower().endswith(EXPORT_SUFFIXES) and not f.name.startswith("."))
+            for dat in sorted(f for f in p.rglob("*") if f.suffix.lower() == ".dat" and not f.name.startswith(".")) if skipped else ():
+                if not any(dat.with_suffix(s).is_file() for s in (".cfg", ".CFG", ".Cfg")):
+                    skipped(dat, f"a COMTRADE data file without its .cfg beside it ({dat.with_suffix('.cfg').name}): not read")
         elif p.exists():
             found = [p]
         else:
@@ -188,7 +192,7 @@ def time_origin(path: Path, start: tuple[str, int] | None, export: ExportSpec, t
                 f"written in export.start_time_format {fmt!r} (export.timestamp_format {export.timestamp_format!r} counts from the start)"
             )
     try:
-        return parse_start_time(written, fmt, timezone)
+        return parse_start_time(written, fmt, timezone, ambiguous=export.ambiguous_time)
     except IngestError as exc:
         raise ValvemonError(f"{where}: {exc}") from None
 
@@ -223,6 +227,8 @@ def iload(
             yield Batch(df, first_line, final)
     except ValvemonError:
         raise
+    except IngestError as exc:  # what the reader refuses in the file's content (a header naming a column twice)
+        raise ValvemonError(f"{src.path}: {exc}") from None
     except (EOFError, gzip.BadGzipFile, zlib.error) as exc:
         raise ValvemonError(f"{src.path}: truncated or corrupt gzip file ({exc})") from None
     except (pl.exceptions.PolarsError, pa.ArrowException, OSError, ValueError) as exc:

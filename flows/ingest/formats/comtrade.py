@@ -179,7 +179,10 @@ def parse_cfg(path: Path) -> Cfg:
         what = "an analog channel's numbers"
         number, a, b = _number(lines, f, 0, what, int), _number(lines, f, 5, what), _number(lines, f, 6, what)
         factor = 1.0
-        if len(f) >= 13 and f[12].upper() == "S":
+        if len(f) < 13 or f[12].upper() not in ("P", "S"):  # critical in C37.111-1999 and -2013: a blank one is not "primary"
+            raise lines.fail("an analog channel's PS field P or S (are a·raw + b primary or secondary values?) in field 13 of "
+                             "An,ch_id,ph,ccbm,uu,a,b,skew,min,max,primary,secondary,PS", f)  # fmt: skip
+        if f[12].upper() == "S":
             primary, secondary = _number(lines, f, 10, what), _number(lines, f, 11, what)
             if not (primary > 0 and secondary > 0):
                 raise lines.fail("primary and secondary factors > 0 for a channel scaled to the secondary side (PS = S)", f)
@@ -187,7 +190,9 @@ def parse_cfg(path: Path) -> Cfg:
         analogs.append(Analog(number, f[1], f[4], a, b, factor, lines.i))
     digitals = [lines.next("a digital channel Dn,ch_id,ph,ccbm,y")[1:2] or [""] for _ in range(n_digital)]
     lines.next("lf (the line frequency)")
-    nrates = _number(lines, lines.next("nrates"), 0, "nrates", int)
+    nrates = _number(lines, counted := lines.next("nrates"), 0, "nrates", int)
+    if nrates < 0:
+        raise lines.fail("nrates >= 0 (the number of sample rates; 0: time stamps only)", counted)
     rates = []
     for _ in range(max(nrates, 1)):
         f = lines.next("samp,endsamp")
@@ -205,7 +210,12 @@ def parse_cfg(path: Path) -> Cfg:
         raise lines.fail("the .dat's file type ASCII, BINARY, BINARY32 or FLOAT32", ft)
     timemult = 1.0
     if lines.i < len(lines.lines) and any(x.strip() for x in lines.lines[lines.i :]):
-        timemult = _number(lines, lines.next("timemult"), 0, "timemult") or 1.0
+        given = lines.next("timemult")
+        timemult = _number(lines, given, 0, "timemult")
+        if given[0] == "":
+            timemult = 1.0  # left out: time stamps in µs (ns) as written
+        elif not timemult > 0:
+            raise lines.fail("timemult > 0 (the time stamps' multiplier)", given)
     offset = None
     if rev == "2013" and any(x.strip() for x in lines.lines[lines.i :]):
         codes = lines.next("time_code,local_code")
@@ -290,7 +300,7 @@ def comtrade_layout(path: Path, export: ExportSpec, timezone: str) -> ComtradeLa
         origin = int(naive.to_physical()[0]) - cfg.utc_offset_s * 10**9
     else:
         try:
-            origin = int(localize(naive, timezone).to_physical()[0])
+            origin = int(localize(naive, timezone, ambiguous=export.ambiguous_time).to_physical()[0])
         except IngestError as exc:
             raise ValvemonError(f"{path}: line {cfg.start_line}: {exc.detail}") from None
     return ComtradeLayout(cfg, dat, columns, units, origin)

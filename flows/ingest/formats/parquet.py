@@ -23,6 +23,7 @@ from flows.ingest.formats.blocks import lookahead
 from flows.ingest.formats.text import _value_columns
 from schemas.plant_config import ExportSpec
 from transforms.ingest import TagTable
+from transforms.ingest.samples import refuse_repeated_columns
 
 SUFFIXES = (".parquet", ".pq")
 FILE_FORMATS = ("parquet",)
@@ -80,6 +81,7 @@ def iload(src, export: ExportSpec, tags: TagTable | None, batch_samples: int, bl
     """The file's rows in batches of about ``batch_samples`` samples: ``(frame, row of its first, last)``."""
     path = src.path
     schema = pq.read_schema(path)
+    refuse_repeated_columns(schema.names)
     wanted = [export.tag_column if export.layout == "long" else None, export.quality_column]
     coded = [c for c in wanted if c and c in schema.names and _is_text(schema.field(c).type)]
     per_row = max(len(_value_columns(schema.names, export)), 1)

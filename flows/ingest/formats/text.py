@@ -27,7 +27,18 @@ from flows.ingest.formats.header_rows import read_header_rows
 from flows.ingest.hashing import _mapped
 from schemas.plant_config import ExportSpec
 from transforms.ingest import TagTable
-from transforms.ingest.text_rows import FIELD_COUNT, ROW_FAULT_COLUMN, TRUNCATED, ragged_rows, unterminated, width_bounds
+from transforms.ingest.samples import refuse_repeated_columns
+from transforms.ingest.text_rows import (
+    FIELD_COUNT,
+    ROW_FAULT_COLUMN,
+    TRUNCATED,
+    first_row,
+    header_fields,
+    ragged_rows,
+    unterminated,
+    width_bounds,
+    with_trailing_separator,
+)
 
 SUFFIXES = (".csv", ".csv.gz", ".txt", ".tsv", ".tsv.gz", ".txt.gz")
 FILE_FORMATS = ("csv", "csv.gz")
@@ -161,7 +172,8 @@ def mark_row_faults(df: pl.DataFrame, data: bytes | Path, separator: str, *, may
 
 def iload(src, export: ExportSpec, tags: TagTable | None, batch_samples: int, block_bytes: int) -> Iterator[tuple[pl.DataFrame, int, bool]]:
     """The file's data lines in blocks of about ``block_bytes``, each decoded with the tag line in
-    front: ``(frame, the file's line of its first row, last)``."""
+    front: ``(frame, the file's line of its first row, last)``. A separator at the end of every
+    row that the tag line lacks is added to the tag line (``with_trailing_separator``)."""
     with _open(src) as fh:
         header = fh.readline()
         first = 2
@@ -175,8 +187,13 @@ def iload(src, export: ExportSpec, tags: TagTable | None, batch_samples: int, bl
                 raise ValvemonError(f"{src.path}: empty file inside the gzip (expected a {export.layout} export with a header line)")
             fh = _Prefixed(header + head, fh)
             header = b""
+        if header.strip():
+            tag_line = 1 if src.layout is None else export.header_rows.index("tag") + 1
+            refuse_repeated_columns(header_fields(header, export.separator), line=tag_line)
         any_block = False
         for block, final in lookahead(line_blocks(fh, block_bytes)):
+            if not any_block:
+                header = with_trailing_separator(header, first_row(block), export.separator)
             any_block = True
             df = read_csv_export(header + block, export, tags)
             if tags is not None and export.tag_column in df.columns and not isinstance(df[export.tag_column].dtype, pl.Enum):
