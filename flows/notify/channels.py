@@ -87,3 +87,15 @@ def deliver(spec: NotifySpec, channel: str, subject: str, body: str, payload: di
         except Exception as exc:  # noqa: BLE001 - any failure of a send is recorded, never raised
             error = f"{type(exc).__name__}: {str(exc).strip().splitlines()[0] if str(exc).strip() else ''}".rstrip(": ")
     return Outcome(False, spec.retries, error)
+
+
+def test_message(config) -> list[tuple[str, str, Outcome]]:
+    """``valvemon notify --test``: a test message on every configured channel of ``config``
+    (a :class:`schemas.plant_config.PlantConfig` with ``[notify]``): (channel, target, outcome)."""
+    from datetime import datetime, timezone
+
+    now = datetime.now(timezone.utc)
+    subject = f"valvemon {config.name}: test message"
+    body = f"valvemon, plant {config.name}: a test message sent {now:%Y-%m-%d %H:%M} UTC by valvemon notify --test. [notify] reaches you."
+    payload = {"text": body, "plant": config.name, "run_at": now.isoformat(), "report": "", "changes": [], "test": True}
+    return [(ch, target, deliver(config.notify, ch, subject, body, payload)) for ch, target in channels(config.notify)]

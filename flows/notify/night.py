@@ -103,14 +103,15 @@ def record_run(config: PlantConfig, warehouse: str | Path, conditions: pl.DataFr
     return NightChanges(run_id, changes, previous, queued.height)
 
 
-def deliver_pending(config: PlantConfig, warehouse: str | Path, now: datetime) -> Delivery:
-    """Send every ``unsent`` message (module doc), record the outcomes, publish the snapshot."""
+def deliver_pending(config: PlantConfig, warehouse: str | Path, now: datetime, *, send: bool = True) -> Delivery:
+    """Send every ``unsent`` message (module doc; none when not ``send``), record the outcomes,
+    publish the snapshot."""
     done = Delivery()
     with connect(warehouse) as con:
         ensure_report_tables(con)
         pending = query_frame(con, "SELECT * FROM notifications WHERE status = 'unsent' ORDER BY created_at, channel")
     updates = []
-    if config.notify is not None:
+    if config.notify is not None and send:
         for r in pending.iter_rows(named=True):
             out = deliver(config.notify, r["channel"], r["subject"], r["body"], json.loads(r["payload"]))
             if out.attempts == 0:  # the channel is no longer configured: left as it is
@@ -132,3 +133,24 @@ def deliver_pending(config: PlantConfig, warehouse: str | Path, now: datetime) -
                 )
         publish_snapshot(con, warehouse)
     return done
+
+
+def after_backfill(config_path: str | Path, warehouse: str | Path, *, send: bool) -> tuple[NightChanges, Delivery]:
+    """The end of ``valvemon backfill``: record the condition it left (from the snapshot its
+    publish wrote), so the next report compares with it; with ``send`` (``--notify``) send its
+    changes and every unsent message, else queue them ``suppressed``."""
+    from datetime import timezone
+
+    from flows.common.config import load_plant_config
+    from flows.report.views import connect_snapshot, materialise_views
+
+    config = load_plant_config(config_path)
+    now = datetime.now(timezone.utc).replace(microsecond=0)
+    con = connect_snapshot(warehouse)
+    try:
+        materialise_views(con, ("valve_condition",))
+        conditions = query_frame(con, "SELECT * FROM valve_condition ORDER BY valve_id, edge_order")
+    finally:
+        con.close()
+    night = record_run(config, warehouse, conditions, now=now, kind="backfill", send=send)
+    return night, deliver_pending(config, warehouse, now, send=send)

@@ -1,0 +1,67 @@
+"""Real receivers on this machine's loopback for the notification tests: an HTTP server that
+records the JSON it is POSTed, an SMTP server (aiosmtpd) that records the mail, and the address
+of a receiver that is down (a port nothing listens on)."""
+
+from __future__ import annotations
+
+import json
+import socket
+import threading
+from contextlib import contextmanager
+from email import message_from_bytes
+from email.message import Message
+from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from typing import Iterator
+
+
+@contextmanager
+def http_receiver() -> Iterator[tuple[str, list[dict]]]:
+    """(URL, the JSON bodies POSTed to it so far)."""
+    posts: list[dict] = []
+
+    class Handler(BaseHTTPRequestHandler):
+        def do_POST(self):  # noqa: N802 - http.server's name
+            body = self.rfile.read(int(self.headers["Content-Length"]))
+            posts.append(json.loads(body) | {"_content_type": self.headers["Content-Type"]})
+            self.send_response(200)
+            self.end_headers()
+            self.wfile.write(b"ok")
+
+        def log_message(self, *args):  # quiet
+            pass
+
+    server = ThreadingHTTPServer(("127.0.0.1", 0), Handler)
+    thread = threading.Thread(target=server.serve_forever, daemon=True)
+    thread.start()
+    try:
+        yield f"http://127.0.0.1:{server.server_address[1]}/hook", posts
+    finally:
+        server.shutdown()
+        server.server_close()
+
+
+def free_port() -> int:
+    """A loopback port nothing listens on (a receiver that is down)."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@contextmanager
+def smtp_receiver() -> Iterator[tuple[int, list[Message]]]:
+    """(port, the mails received so far, parsed)."""
+    from aiosmtpd.controller import Controller
+
+    mails: list[Message] = []
+
+    class Handler:
+        async def handle_DATA(self, server, session, envelope):  # noqa: N802 - aiosmtpd's name
+            mails.append(message_from_bytes(envelope.content))
+            return "250 Message accepted"
+
+    controller = Controller(Handler(), hostname="127.0.0.1", port=free_port())
+    controller.start()
+    try:
+        yield controller.port, mails
+    finally:
+        controller.stop()
