@@ -15,8 +15,8 @@ from typing import Iterator
 
 
 @contextmanager
-def http_receiver() -> Iterator[tuple[str, list[dict]]]:
-    """(URL, the JSON bodies POSTed to it so far)."""
+def http_receiver(port: int = 0) -> Iterator[tuple[str, list[dict]]]:
+    """(URL, the JSON bodies POSTed to it so far); on ``port`` (0: any free one)."""
     posts: list[dict] = []
 
     class Handler(BaseHTTPRequestHandler):
@@ -30,7 +30,7 @@ def http_receiver() -> Iterator[tuple[str, list[dict]]]:
         def log_message(self, *args):  # quiet
             pass
 
-    server = ThreadingHTTPServer(("127.0.0.1", 0), Handler)
+    server = ThreadingHTTPServer(("127.0.0.1", port), Handler)
     thread = threading.Thread(target=server.serve_forever, daemon=True)
     thread.start()
     try:
@@ -48,8 +48,8 @@ def free_port() -> int:
 
 
 @contextmanager
-def smtp_receiver() -> Iterator[tuple[int, list[Message]]]:
-    """(port, the mails received so far, parsed)."""
+def smtp_receiver(port: int = 0) -> Iterator[tuple[int, list[Message]]]:
+    """(port, the mails received so far, parsed); on ``port`` (0: any free one)."""
     from aiosmtpd.controller import Controller
 
     mails: list[Message] = []
@@ -59,7 +59,7 @@ def smtp_receiver() -> Iterator[tuple[int, list[Message]]]:
             mails.append(message_from_bytes(envelope.content))
             return "250 Message accepted"
 
-    controller = Controller(Handler(), hostname="127.0.0.1", port=free_port())
+    controller = Controller(Handler(), hostname="127.0.0.1", port=port or free_port())
     controller.start()
     try:
         yield controller.port, mails

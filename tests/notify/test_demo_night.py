@@ -61,6 +61,40 @@ def test_the_night_v012_breaks_sends_one_message_naming_it(v012, tmp_path):
     assert reason.startswith("fault: ") and posts[0]["changes"][0]["window_start"].startswith(BREAK)
     assert "V012 edge 1r" in posts[0]["text"] and reason in posts[0]["text"] and str(second.html.resolve()) in posts[0]["text"]
     assert mails[0]["To"] == "reliability@plant.test" and "V012 1r" in mails[0]["Subject"]
-    assert "V012 edge 1r" in mails[0].get_payload() and reason in mails[0].get_payload().replace("\n", " ") or reason[:40] in mails[0].get_payload()
+    body = mails[0].get_payload(decode=True).decode().replace("\r\n", "\n")
+    assert "V012 edge 1r" in body and reason in body and posts[0]["text"] == body.rstrip("\n")  # the same text on both channels
     html = second.html.read_text()
     assert html.index("id='changes'") < html.index("Fleet, most urgent first") and "V012" in html[html.index("id='changes'"):html.index("Fleet")]
+
+
+def test_receivers_down_the_night_completes_and_the_next_night_sends(v012, tmp_path, monkeypatch):
+    import flows.notify.channels as channels
+    from flows.common.warehouse_db import connect, query_frame
+    from tests.notify.receivers import free_port
+
+    monkeypatch.setattr(channels, "RETRY_WAITS_S", (0.0,))
+    root, config = v012
+    http_port, smtp_port = free_port(), free_port()  # nothing listens there yet
+    notify = NotifySpec(webhook_url=f"http://127.0.0.1:{http_port}/hook", retries=2,
+                        mail=MailSpec(host="127.0.0.1", port=smtp_port, starttls=False, sender="v@plant.test", to=("r@plant.test",)))  # fmt: skip
+    path = tmp_path / "plant.toml"
+    path.write_bytes(tomli_w.dumps(plant_config_to_dict(dataclasses.replace(config, notify=notify))).encode())
+    wh = tmp_path / "wh"
+    run_ingest(path, [root / "commissioning" / "exports", root / "span" / "exports"], wh)
+    run_monitor(path, wh, end=BREAK)
+    run_report(path, wh, detail=0)
+    run_monitor(path, wh, start=BREAK)
+    down = run_report(path, wh, detail=0)  # the night completes
+    assert down.html.is_file() and down.changes["valve_id"].to_list() == ["V012"]
+    assert (down.delivery.sent, down.delivery.unsent) == (0, 2) and "ConnectError" in down.delivery.line()
+    with connect(wh, read_only=True) as con:
+        kept = query_frame(con, "SELECT channel, status, attempts, error FROM notifications ORDER BY channel")
+    assert kept["status"].to_list() == ["unsent", "unsent"] and kept["attempts"].to_list() == [2, 2]
+    assert all(kept["error"].str.len_chars() > 0)
+    with http_receiver(http_port) as (_, posts), smtp_receiver(smtp_port) as (_, mails):
+        after = run_report(path, wh, detail=0)  # the next night: nothing new, last night's message goes out
+    assert after.changes.height == 0 and (after.delivery.sent, after.delivery.unsent) == (2, 0)
+    assert len(posts) == 1 and len(mails) == 1 and posts[0]["changes"][0]["edge"] == "1r" and "V012" in mails[0]["Subject"]
+    with connect(wh, read_only=True) as con:
+        sent = query_frame(con, "SELECT status, attempts, sent_at FROM notifications")
+    assert sent["status"].to_list() == ["sent", "sent"] and sent["attempts"].to_list() == [3, 3] and sent["sent_at"].is_not_null().all()
