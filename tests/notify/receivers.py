@@ -15,15 +15,15 @@ from typing import Iterator
 
 
 @contextmanager
-def http_receiver(port: int = 0) -> Iterator[tuple[str, list[dict]]]:
-    """(URL, the JSON bodies POSTed to it so far); on ``port`` (0: any free one)."""
+def http_receiver(port: int = 0, status: int = 200) -> Iterator[tuple[str, list[dict]]]:
+    """(URL, the JSON bodies POSTed to it so far); on ``port`` (0: any free one), answering ``status``."""
     posts: list[dict] = []
 
     class Handler(BaseHTTPRequestHandler):
         def do_POST(self):  # noqa: N802 - http.server's name
             body = self.rfile.read(int(self.headers["Content-Length"]))
             posts.append(json.loads(body) | {"_content_type": self.headers["Content-Type"]})
-            self.send_response(200)
+            self.send_response(status)
             self.end_headers()
             self.wfile.write(b"ok")
 
@@ -48,18 +48,25 @@ def free_port() -> int:
 
 
 @contextmanager
-def smtp_receiver(port: int = 0) -> Iterator[tuple[int, list[Message]]]:
-    """(port, the mails received so far, parsed); on ``port`` (0: any free one)."""
+def smtp_receiver(port: int = 0, logins: list[tuple[str, str]] | None = None) -> Iterator[tuple[int, list[Message]]]:
+    """(port, the mails received so far, parsed); on ``port`` (0: any free one). With ``logins``
+    a list, the server offers AUTH without TLS and records each (user, password) there."""
     from aiosmtpd.controller import Controller
+    from aiosmtpd.smtp import AuthResult
 
     mails: list[Message] = []
+
+    def authenticator(server, session, envelope, mechanism, auth_data):
+        logins.append((auth_data.login.decode(), auth_data.password.decode()))
+        return AuthResult(success=True)
 
     class Handler:
         async def handle_DATA(self, server, session, envelope):  # noqa: N802 - aiosmtpd's name
             mails.append(message_from_bytes(envelope.content))
             return "250 Message accepted"
 
-    controller = Controller(Handler(), hostname="127.0.0.1", port=port or free_port())
+    auth = {} if logins is None else {"authenticator": authenticator, "auth_require_tls": False}
+    controller = Controller(Handler(), hostname="127.0.0.1", port=port or free_port(), **auth)
     controller.start()
     try:
         yield controller.port, mails
