@@ -60,27 +60,30 @@ pairs as (
     left join before using (valve_id, edge)
 ),
 
+judged as (
+    -- an edge changes state in at most one way; a healthy edge may also cross the horizon
+    select
+        *,
+        case
+            when state_after = 'faulty' and state_before is distinct from 'faulty' then 'faulty'
+            when state_after = 'faulty' and last_alarm_start > coalesce(last_alarm_before, '-infinity'::timestamptz) then 'new_alarm'
+            when state_after = 'worn' and state_before is distinct from 'worn' then 'worn'
+            when state_after = 'healthy' and state_before in ('faulty', 'worn') then 'recovered'
+        end as state_change,
+        case
+            when state_after = 'healthy' and remaining_hours_after < remaining_below_h
+                and not coalesce(state_before = 'healthy' and remaining_hours_before < remaining_below_h, false)
+            then 'remaining_below'
+        end as life_change
+    from pairs
+),
+
+unnested as (
+    select *, unnest([state_change, life_change]) as change from judged
+),
+
 changes as (
-    select *, 'faulty' as change, first_alarm_start as window_start
-    from pairs
-    where state_after = 'faulty' and state_before is distinct from 'faulty'
-    union all
-    select *, 'new_alarm' as change, last_alarm_start as window_start
-    from pairs
-    where state_after = 'faulty' and state_before = 'faulty' and last_alarm_start > coalesce(last_alarm_before, '-infinity'::timestamptz)
-    union all
-    select *, 'worn' as change, last_ok_window_start as window_start
-    from pairs
-    where state_after = 'worn' and state_before is distinct from 'worn'
-    union all
-    select *, 'remaining_below' as change, last_ok_window_start as window_start
-    from pairs
-    where state_after = 'healthy' and remaining_hours_after < remaining_below_h
-      and not coalesce(state_before = 'healthy' and remaining_hours_before < remaining_below_h, false)
-    union all
-    select *, 'recovered' as change, last_ok_window_start as window_start
-    from pairs
-    where state_after = 'healthy' and state_before in ('faulty', 'worn')
+    select * from unnested where change is not null
 ),
 
 final as (
@@ -91,7 +94,11 @@ final as (
         state_before,
         state_after,
         reason,
-        window_start,
+        case change
+            when 'faulty' then first_alarm_start
+            when 'new_alarm' then last_alarm_start
+            else last_ok_window_start
+        end as window_start,
         remaining_hours_before,
         remaining_hours_after,
         remaining_below_h,
