@@ -228,9 +228,13 @@ def notify(
         return
     from datetime import datetime, timezone
 
+    from flows.common.warehouse_db import db_path
     from flows.notify.night import deliver_pending
 
-    delivery = deliver_pending(plant, warehouse_dir(warehouse), datetime.now(timezone.utc).replace(microsecond=0))
+    wh = warehouse_dir(warehouse)
+    if not db_path(wh).is_file():
+        raise ValvemonError(f"{db_path(wh)}: no warehouse database, so no message waits to be sent")
+    delivery = deliver_pending(plant, wh, datetime.now(timezone.utc).replace(microsecond=0))
     typer.echo(delivery.line())
     if delivery.unsent:
         raise ValvemonError(f"{delivery.unsent} message(s) still unsent")

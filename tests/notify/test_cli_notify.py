@@ -47,3 +47,29 @@ def test_notify_test_loads_neither_prefect_nor_duckdb(tmp_path):
         code, modules, out = _loaded(["notify", "--config", str(_config(tmp_path, {"webhook_url": url})), "--test"], tmp_path)
     assert code == 0 and out.strip().endswith(": sent") and len(posts) == 1
     assert modules.isdisjoint(HEAVY) and "duckdb" not in modules, sorted(modules & {*HEAVY, "duckdb"})
+
+
+def test_notify_sends_what_is_unsent_now(tmp_path):
+    from datetime import datetime, timezone
+
+    import polars as pl
+
+    from flows.common.warehouse_db import connect, insert_frame
+    from flows.report.views import create_views, ensure_report_tables
+    from schemas.fields import NOTIFICATION_FIELDS, polars_schema
+
+    runner = CliRunner()
+    res = runner.invoke(app, ["notify", "--config", str(_config(tmp_path, {"webhook_url": "http://127.0.0.1:9/x"})), "--warehouse", str(tmp_path / "none")])
+    assert res.exit_code != 0 and "no warehouse database" in str(res.exception) and not (tmp_path / "none").exists()
+    wh = tmp_path / "wh"
+    row = {f.name: None for f in NOTIFICATION_FIELDS} | {
+        "notification_id": "n1", "run_id": "r1", "created_at": datetime(2026, 9, 2, tzinfo=timezone.utc), "channel": "webhook",
+        "target": "old", "status": "unsent", "n_changes": 1, "subject": "s", "body": "b", "payload": '{"text": "held over"}',
+        "attempts": 3, "error": "ConnectError"}  # fmt: skip
+    with connect(wh) as con:
+        ensure_report_tables(con)
+        create_views(con)
+        insert_frame(con, "notifications", pl.DataFrame([row], schema=polars_schema(NOTIFICATION_FIELDS)))
+    with http_receiver() as (url, posts):
+        res = runner.invoke(app, ["notify", "--config", str(_config(tmp_path, {"webhook_url": url})), "--warehouse", str(wh)])
+    assert res.exit_code == 0 and "notify: 1 message(s) sent" in res.output and posts[0]["text"] == "held over"
