@@ -73,7 +73,11 @@ def history_rows(conditions: pl.DataFrame, *, run_id: str, run_at: datetime, kin
 
 def _queue(config: PlantConfig, changes: pl.DataFrame, run_id: str, now: datetime, report: str, status: str) -> pl.DataFrame:
     spec = config.notify
-    message = compose(config.name, spec, changes.to_dicts(), run_at=now, report=report) if spec is not None else None
+    try:
+        message = compose(config.name, spec, changes.to_dicts(), run_at=now, report=report) if spec is not None else None
+    except Exception:  # noqa: BLE001 - a message that cannot be composed must not fail the night's data work
+        log.exception("valvemon notify: the message of run %s could not be composed; nothing is queued", run_id)
+        message = None
     if message is None:
         return pl.DataFrame(schema=polars_schema(NOTIFICATION_FIELDS))
     rows = [{
