@@ -189,8 +189,55 @@ def report(
     result = run_flow(report_flows.report_flow, config_path=str(config), warehouse=str(warehouse_dir(warehouse)), detail=detail, valve_ids=valves)
     counts = result.ranking["state"].value_counts(sort=True) if result.ranking is not None else None
     summary = ", ".join(f"{n} {s}" for s, n in counts.iter_rows()) if counts is not None and counts.height else "no valves"
-    typer.echo(f"{summary}; {len(result.pngs)} pictures, export in {result.exports.get('valve_condition', Path()).parent}")
+    changed = f"; {result.changes.height} change(s) since the previous report" if result.changes is not None else ""
+    typer.echo(f"{summary}{changed}; {len(result.pngs)} pictures, export in {result.exports.get('valve_condition', Path()).parent}")
+    _delivery_line(result.delivery)
     typer.echo(str(result.html.resolve()))
+
+
+def _delivery_line(delivery) -> None:
+    """The messages sent (stdout), or a warning naming those kept for the next run (stderr)."""
+    if delivery is not None and delivery.unsent:
+        print(f"valvemon: warning: {delivery.line()}", file=sys.stderr)
+    elif delivery is not None and delivery.sent:
+        typer.echo(delivery.line())
+
+
+@app.command()
+def notify(
+    config: Config,
+    test: Annotated[bool, typer.Option("--test", help="Send a test message on every channel of [notify] and say how each went; the warehouse is not touched.")] = False,
+    warehouse: Warehouse = None,
+) -> None:
+    """Send the messages earlier runs could not (status unsent), or with --test a test message."""
+    from flows.common.config import load_plant_config
+
+    plant = load_plant_config(config)
+    if plant.notify is None:
+        raise ValvemonError(f"{config}: no [notify] section: nothing to send to (docs/notify.md)")
+    if test:
+        from flows.notify.channels import test_message
+
+        failed = 0
+        for channel, target, outcome in test_message(plant):
+            line = f"{channel} to {target}: " + ("sent" if outcome.ok else f"NOT sent after {outcome.attempts} attempt(s): {outcome.error}")
+            typer.echo(line)
+            failed += not outcome.ok
+        if failed:
+            raise ValvemonError(f"{failed} of the [notify] channels did not take the test message")
+        return
+    from datetime import datetime, timezone
+
+    from flows.common.warehouse_db import db_path
+    from flows.notify.night import deliver_pending
+
+    wh = warehouse_dir(warehouse)
+    if not db_path(wh).is_file():
+        raise ValvemonError(f"{db_path(wh)}: no warehouse database, so no message waits to be sent")
+    delivery = deliver_pending(plant, wh, datetime.now(timezone.utc).replace(microsecond=0))
+    typer.echo(delivery.line())
+    if delivery.unsent:
+        raise ValvemonError(f"{delivery.unsent} message(s) still unsent")
 
 
 @app.command()
@@ -226,6 +273,7 @@ def backfill(
     unit_days: Annotated[float, typer.Option("--unit-days", help="Days of one valve per monitor unit.")] = 7.0,
     retries: Annotated[int, typer.Option("--retries", help="Retries of a failed unit (as Prefect task retries when a Prefect API is configured).")] = 2,
     force: Annotated[bool, typer.Option("--force", help="Redo every monitor unit and re-read every file (content already in the manifest is still skipped).")] = False,
+    notify: Annotated[bool, typer.Option("--notify", help="Send what changed since the last report ([notify]), and what is still unsent; without it the changes are recorded, not sent.")] = False,
     dask_address: DaskAddress = None,
     dask_workers: Annotated[Optional[int], typer.Option("--dask-workers", help="Run the tasks on a temporary local Dask cluster of N worker processes.")] = None,
     quiet: Annotated[bool, typer.Option("--quiet", help="No progress bars.")] = False,
@@ -265,6 +313,11 @@ def backfill(
             typer.echo(exc.summary.line())
             raise
     typer.echo(summary.line())
+    from flows.notify.night import after_backfill
+
+    night, delivery = after_backfill(config, wh, send=notify)
+    typer.echo(f"{night.changes.height} change(s) since the last recorded run" + ("" if notify else " (recorded, not sent: --notify sends them)"))
+    _delivery_line(delivery)
 
 
 @app.command()

@@ -489,6 +489,8 @@ VALVE_CONDITION_FIELDS: tuple[Field, ...] = (
     Field("edge_law", pl.Utf8, "", "Edge law of the current baseline's shape (eq3, sharp; a note in reason when not the configured one).", nullable=True),
     _REMAINING_BASIS,
     _REMAINING_HORIZON,
+    Field("first_alarm_start", UTC_US, "", "Earliest of the recent alarm windows (n_recent_alarms): where the fault began.", nullable=True),
+    Field("last_alarm_start", UTC_US, "", "Latest of the recent alarm windows.", nullable=True),
 )
 """View ``valve_condition`` (interfaces.md), as exported to ``export/valve_condition.parquet``."""
 
@@ -765,3 +767,50 @@ SUMMARY_WATERMARK_FIELDS: tuple[Field, ...] = (
     Field("updated_at", UTC_US, "", "When the summaries last moved."),
 )
 """How far each valve's daily summaries reach (table ``summary_watermarks``)."""
+
+# --- the night's changes and their messages (docs/notify.md) --------------------------------
+
+_RUN_ID = Field("run_id", pl.Utf8, "", "Identifier of the run that recorded the condition.")
+
+CONDITION_HISTORY_FIELDS: tuple[Field, ...] = (
+    _RUN_ID,
+    Field("run_at", UTC_US, "", "When the run recorded it (UTC)."),
+    Field("run_kind", pl.Utf8, "", "report (valvemon report, the nightly run) or backfill.", isin=("report", "backfill")),
+    _VALVE_ID,
+    _EDGE,
+    Field("edge_order", pl.Int32, "", "1..4 for s1, 1r, s2, 2r (for sorting)."),
+    Field("state", pl.Utf8, "", "valve_condition.state at the run.", isin=STATES),
+    Field("reason", pl.Utf8, "", "valve_condition.reason at the run."),
+    Field("remaining_hours", pl.Float64, "h", "valve_condition.remaining_hours at the run.", nullable=True),
+    Field("remaining_below_h", pl.Float64, "h", "The [notify] remaining_below_h the run was made with (null: none).", nullable=True),
+    Field("first_alarm_start", UTC_US, "", "valve_condition.first_alarm_start at the run.", nullable=True),
+    Field("last_alarm_start", UTC_US, "", "valve_condition.last_alarm_start at the run.", nullable=True),
+    Field("last_ok_window_start", UTC_US, "", "valve_condition.last_ok_window_start at the run.", nullable=True),
+    Field("report_path", pl.Utf8, "", "The report the run wrote (empty: none, a backfill)."),
+)
+"""Every edge's condition as each report (or backfill) found it (table ``condition_history``;
+view ``condition_changes`` compares the latest two runs)."""
+
+CHANGES: tuple[str, ...] = ("faulty", "new_alarm", "worn", "remaining_below", "recovered")
+"""Kinds of change (view ``condition_changes``)."""
+
+NOTIFICATION_STATUSES: tuple[str, ...] = ("sent", "unsent", "suppressed")
+"""sent; unsent (every attempt failed: the next run tries again); suppressed (a backfill without --notify)."""
+
+NOTIFICATION_FIELDS: tuple[Field, ...] = (
+    Field("notification_id", pl.Utf8, "", "Identifier of the message on one channel; the table's key."),
+    _RUN_ID,
+    Field("created_at", UTC_US, "", "When the message was composed (UTC)."),
+    Field("channel", pl.Utf8, "", "webhook or mail.", isin=("webhook", "mail")),
+    Field("target", pl.Utf8, "", "The webhook's host or the mail's recipients (no secret)."),
+    Field("status", pl.Utf8, "", "sent, unsent (tried again by the next run) or suppressed.", isin=NOTIFICATION_STATUSES),
+    Field("n_changes", pl.Int64, "", "Changes the message names (0: the no-change line).", ge=0),
+    Field("subject", pl.Utf8, "", "One line: the plant and what changed."),
+    Field("body", pl.Utf8, "", "The message's text."),
+    Field("payload", pl.Utf8, "", "The webhook's JSON body (the same for mail, for the record)."),
+    Field("attempts", pl.Int64, "", "Attempts so far, over all runs.", ge=0),
+    Field("last_attempt_at", UTC_US, "", "When it was last tried.", nullable=True),
+    Field("sent_at", UTC_US, "", "When it went out.", nullable=True),
+    Field("error", pl.Utf8, "", "Why the last attempt failed (empty when sent)."),
+)
+"""One row per message and channel (table ``notifications``)."""

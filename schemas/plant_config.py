@@ -52,6 +52,10 @@ Keys the project adds to the specification (all optional; every key is documente
   (``transforms.windows``). It must divide a day, so windows start at the same times every day. [s]
 - ``[monitor] window_rows`` (default :data:`DEFAULT_WINDOW_ROWS`): about the most rows of a window
   the monitor evaluates (every k-th row of a longer one); 0 = every row.
+- ``[notify]`` (optional; absent = nothing is sent): where ``valvemon report`` sends the night's
+  changes (a webhook's JSON POST and/or mail, ``[notify.mail]``) and which (:class:`NotifySpec`,
+  ``docs/notify.md``). A mail password is never in the file: ``password_env`` names the
+  environment variable that holds it.
 """
 
 from __future__ import annotations
@@ -403,6 +407,46 @@ class LakeSpec:
 
 
 @dataclass(frozen=True)
+class MailSpec:
+    """An SMTP relay and the message's addresses (``[notify.mail]``)."""
+
+    host: str
+    sender: str
+    """The ``From`` address (key ``from``)."""
+    to: tuple[str, ...]
+    port: int = 587
+    starttls: bool = True
+    """Upgrade the connection with STARTTLS before anything is sent (the relay must offer it)."""
+    user: str | None = None
+    """Login name (None: the ``from`` address, when a password is configured)."""
+    password_env: str | None = None
+    """Name of the environment variable holding the password (None: no login)."""
+
+
+@dataclass(frozen=True)
+class NotifySpec:
+    """Where and what ``valvemon report`` sends at the end of a run (``docs/notify.md``)."""
+
+    webhook_url: str | None = None
+    """A JSON POST to this URL (``text`` plus the changes; Teams, Slack, Mattermost accept it)."""
+    mail: MailSpec | None = None
+    faulty: bool = True
+    """Send edges that became faulty, and new alarms on edges already faulty."""
+    worn: bool = True
+    """Send edges that became worn."""
+    recovered: bool = True
+    """Send edges back to healthy from faulty or worn."""
+    remaining_below_h: float | None = None
+    """Send healthy edges whose forecast remaining life dropped below this (None: not sent). [h]"""
+    no_change: bool = False
+    """On a night without a change to send, send one line saying so."""
+    retries: int = 3
+    """Attempts per message and channel in one run before it is kept for the next."""
+    timeout_s: float = 10.0
+    """Time allowed for one attempt (connect, send). [s]"""
+
+
+@dataclass(frozen=True)
 class PlantConfig:
     """A whole plant: export layout, valve types and monitored valves."""
 
@@ -415,6 +459,8 @@ class PlantConfig:
     retention: RetentionSpec | None = None
     """None: no retention configured, the lake is never thinned or dropped."""
     lake: LakeSpec = field(default_factory=LakeSpec)
+    notify: NotifySpec | None = None
+    """None: no ``[notify]`` section, nothing is sent."""
 
     def valve(self, valve_id: str) -> ValveSpec:
         """The valve with this id (``KeyError`` naming it if absent)."""
@@ -486,11 +532,13 @@ def _instant(value: Any, key: str, tz: ZoneInfo) -> datetime:
 
 # --- the tables ------------------------------------------------------------------------------
 
-_TOP_KEYS = {"plant", "export", "monitor", "valve_types", "valves", "retention", "lake"}
+_TOP_KEYS = {"plant", "export", "monitor", "valve_types", "valves", "retention", "lake", "notify"}
 _PLANT_KEYS = {"name", "timezone"}
 _MONITOR_KEYS = {"window_s", "window_rows"}
 _RETENTION_KEYS = {"keep_days", "mode", "thin_keep_s_per_hour"}
 _LAKE_KEYS = {"codec"}
+_NOTIFY_KEYS = {"webhook_url", "mail", "faulty", "worn", "recovered", "remaining_below_h", "no_change", "retries", "timeout_s"}
+_MAIL_KEYS = {"host", "port", "from", "to", "starttls", "user", "password_env"}
 _EXPORT_KEYS = {
     "layout", "timestamp_column", "timestamp_format", "tag_column", "value_column",
     "quality_column", "good_quality", "separator", "decimal", "sample_rate_hz", "max_gap_s",
@@ -585,6 +633,80 @@ def _parse_lake(raw: Any) -> LakeSpec:
     t = _table(raw, "lake")
     _no_unknown(t, _LAKE_KEYS, "lake")
     return LakeSpec(_str(t.get("codec", LakeSpec.codec), "lake.codec", LAKE_CODECS))
+
+
+def _bool(value: Any, key: str) -> bool:
+    if not isinstance(value, bool):
+        raise ConfigError(f"{key}: expected true or false, got {value!r}")
+    return value
+
+
+def _address(value: Any, key: str) -> str:
+    value = _str(value, key)
+    if not re.fullmatch(r"[^@\s]+@[^@\s]+", value):
+        raise ConfigError(f"{key}: {value!r} is not a mail address")
+    return value
+
+
+def _parse_mail(raw: Any) -> MailSpec:
+    t = _table(raw, "notify.mail")
+    if "password" in t:
+        raise ConfigError("notify.mail.password: a password is never kept in the file; name the environment variable that holds it in password_env")
+    _no_unknown(t, _MAIL_KEYS, "notify.mail")
+    to = _required(t, "to", "notify.mail")
+    to = [to] if isinstance(to, str) else to
+    if not isinstance(to, list) or not to:
+        raise ConfigError(f"notify.mail.to: expected an address or a list of addresses, got {to!r}")
+    starttls = _bool(t.get("starttls", MailSpec.starttls), "notify.mail.starttls")
+    port = t.get("port", MailSpec.port if starttls else 25)
+    if isinstance(port, bool) or not isinstance(port, int) or not 0 < port < 65536:
+        raise ConfigError(f"notify.mail.port: expected a port number 1-65535, got {port!r}")
+    env = _str(t["password_env"], "notify.mail.password_env") if "password_env" in t else None
+    if env is not None and not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", env):
+        raise ConfigError(f"notify.mail.password_env: {env!r} is not an environment variable name")
+    return MailSpec(
+        host=_str(_required(t, "host", "notify.mail"), "notify.mail.host"),
+        sender=_address(_required(t, "from", "notify.mail"), "notify.mail.from"),
+        to=tuple(_address(a, f"notify.mail.to[{i}]") for i, a in enumerate(to)),
+        port=port, starttls=starttls,
+        user=_str(t["user"], "notify.mail.user") if "user" in t else None,
+        password_env=env,
+    )  # fmt: skip
+
+
+def _parse_notify(raw: Any) -> NotifySpec:
+    t = _table(raw, "notify")
+    _no_unknown(t, _NOTIFY_KEYS, "notify")
+    url = _str(t["webhook_url"], "notify.webhook_url") if "webhook_url" in t else None
+    if url is not None and not re.match(r"https?://[^/\s]+", url):
+        raise ConfigError(f"notify.webhook_url: {url!r} is not an http:// or https:// URL")
+    mail = _parse_mail(t["mail"]) if "mail" in t else None
+    if url is None and mail is None:
+        raise ConfigError("notify: name a webhook_url or a [notify.mail] table (or leave [notify] out: nothing is sent)")
+    kw: dict[str, Any] = {k: _bool(t[k], f"notify.{k}") for k in ("faulty", "worn", "recovered", "no_change") if k in t}
+    if "remaining_below_h" in t:
+        kw["remaining_below_h"] = _number(t["remaining_below_h"], "notify.remaining_below_h", 0, open_lo=True)
+    if "retries" in t:
+        n = t["retries"]
+        if isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= 10:
+            raise ConfigError(f"notify.retries: expected a whole number of attempts 1-10, got {n!r}")
+        kw["retries"] = n
+    if "timeout_s" in t:
+        kw["timeout_s"] = _number(t["timeout_s"], "notify.timeout_s", 0, 600, open_lo=True)
+    return NotifySpec(webhook_url=url, mail=mail, **kw)
+
+
+def _notify_dict(n: NotifySpec) -> dict:
+    out: dict[str, Any] = {} if n.webhook_url is None else {"webhook_url": n.webhook_url}
+    defaults = NotifySpec()
+    for k in ("faulty", "worn", "recovered", "remaining_below_h", "no_change", "retries", "timeout_s"):
+        if getattr(n, k) != getattr(defaults, k):
+            out[k] = getattr(n, k)
+    m = n.mail
+    if m is not None:
+        out["mail"] = {"host": m.host, "port": m.port, "from": m.sender, "to": list(m.to), "starttls": m.starttls}
+        out["mail"] |= {k: getattr(m, k) for k in ("user", "password_env") if getattr(m, k) is not None}
+    return out
 
 
 def _parse_monitor(raw: Any) -> MonitorSpec:
@@ -841,7 +963,8 @@ def parse_plant_config(data: dict) -> PlantConfig:
             raise ConfigError(f"export.timestamp_column: {clash.pop()!r} is also a tag name")
     retention = _parse_retention(data["retention"]) if "retention" in data else None
     lake = _parse_lake(data["lake"]) if "lake" in data else LakeSpec()
-    return PlantConfig(name, tz_name, export, types, valves, monitor, retention, lake)
+    notify = _parse_notify(data["notify"]) if "notify" in data else None
+    return PlantConfig(name, tz_name, export, types, valves, monitor, retention, lake, notify)
 
 
 # --- writing back ----------------------------------------------------------------------------
@@ -943,4 +1066,6 @@ def plant_config_to_dict(config: PlantConfig) -> dict:
         out["retention"] = {"keep_days": r.keep_days, "mode": r.mode} | ({"thin_keep_s_per_hour": r.thin_keep_s_per_hour} if r.mode == "thin" else {})
     if config.lake != LakeSpec():
         out["lake"] = {"codec": config.lake.codec}
+    if config.notify is not None:
+        out["notify"] = _notify_dict(config.notify)
     return out

@@ -16,7 +16,11 @@
    pictures (:mod:`flows.report.figures`, drawn in a pool of processes: :func:`render_figures`) and
    ``WAREHOUSE/reports/report.html`` (:mod:`flows.report.html`), which also shows the latest
    ``valvemon discrepancy`` run of every valve analysed (:func:`discrepancy_results`; its overlay pictures are the workflow's own)
-   and the ingest's data quality (:mod:`flows.report.quality`).
+   and the ingest's data quality (:mod:`flows.report.quality`);
+5. records every edge's condition in ``condition_history`` and opens the report with what changed
+   since the previous report (view ``condition_changes``), then sends the night's message and any
+   an earlier run could not send (``[notify]``; :mod:`flows.notify.night`: a failed send is kept
+   for the next run, never a failed report) and publishes the snapshot again with them.
 
 Every write to ``valvemon.duckdb`` happens in a short-lived connection; the pictures and the
 export are made from the snapshot, without holding the live database.
@@ -40,6 +44,7 @@ from flows.common.batches import WriteBatch
 from flows.common.config import load_plant_config, plant_valves
 from flows.common.prefect_run import flow
 from flows.common.warehouse_db import connect, insert_frame, query_frame, transaction
+from flows.notify.night import Delivery, deliver_pending, record_run
 from flows.report.export import export_bi
 from flows.report.figures import characteristics_figure, fleet_figure, render_figures, trends_figure
 from flows.report.html import render_report
@@ -75,6 +80,10 @@ class ReportResult:
     views: list[str] = field(default_factory=list)
     standstill_rows: int = 0
     ranking: pl.DataFrame | None = None
+    changes: pl.DataFrame | None = None
+    """View ``condition_changes``: what changed since the previous report."""
+    delivery: Delivery | None = None
+    """The messages sent at the end of the run (``[notify]``)."""
 
 
 def update_standstill(config: PlantConfig, warehouse: Path, now: datetime) -> int:
@@ -229,11 +238,14 @@ def run_report(config_path: str | Path, warehouse: str | Path, *, detail: int = 
                         ("α̂, x̂ and e over operating hours with bounds and end of life", tr)]
                   for vid, ch, tr in zip(chosen, pngs[1::2], pngs[2::2])}  # fmt: skip
     html_path = out_dir / REPORT_NAME
+    night = record_run(config, warehouse, conditions, now=now, kind="report", report=str(html_path.resolve()))
     _write_html(html_path, render_report(
         plant=config.name, generated_at=now, ranking=ranking, conditions=conditions,
         fleet_png=pngs[0], valve_pngs=valve_pngs, discrepancy=discrepancy, snapshot=snapshot, quality=quality,
+        changes=night.changes, previous_run_at=night.previous_run_at,
     ))  # fmt: skip
-    return ReportResult(html_path, snapshot, pngs, exports, views, n_standstill, ranking)
+    delivery = deliver_pending(config, warehouse, now)
+    return ReportResult(html_path, snapshot, pngs, exports, views, n_standstill, ranking, night.changes, delivery)
 
 
 @flow(name="valvemon-report", persist_result=False, validate_parameters=False)

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import polars as pl
 
+from flows.notify.message import CHANGE_WORDS
 from flows.report.figures import STATE_COLOURS
 from flows.report.quality import DataQuality, quality_section
 from flows.report.remaining import remaining_text
@@ -99,6 +100,28 @@ def _discrepancy_section(discrepancy: dict[str, list[dict]]) -> list[str]:
     return parts
 
 
+def _changes_section(changes: pl.DataFrame | None, previous_run_at: datetime | None) -> list[str]:
+    """What changed since the previous report (view ``condition_changes``); one line when nothing did."""
+    if changes is None:
+        return []
+    since = f"the previous report ({previous_run_at:%Y-%m-%d %H:%M} UTC)" if previous_run_at else "nothing: the first recorded run"
+    if changes.height == 0:
+        return [f"<p id='changes'><b>No change</b> since {html.escape(since)}.</p>"]
+    parts = [f"<h2 id='changes'>Changed since {html.escape(since)}</h2>",
+             "<table><tr><th>valve</th><th>edge</th><th>change</th><th>state before → after</th>"
+             "<th>window (UTC)</th><th>reason</th></tr>"]  # fmt: skip
+    for r in changes.iter_rows(named=True):
+        when = r["window_start"].strftime("%Y-%m-%d %H:%M") if r["window_start"] else "—"
+        before = _state(r["state_before"]) if r["state_before"] else "—"
+        parts.append(
+            f"<tr><td><a href='#valve-{html.escape(r['valve_id'])}'>{html.escape(r['valve_id'])}</a></td><td>{html.escape(r['edge'])}</td>"
+            f"<td>{html.escape(CHANGE_WORDS[r['change']].format(h=r['remaining_below_h'] or 0))}</td><td>{before} → {_state(r['state_after'])}</td>"
+            f"<td>{when}</td><td>{html.escape(r['reason'] or '')}</td></tr>"
+        )
+    parts.append("</table>")
+    return parts
+
+
 def render_report(
     *,
     plant: str,
@@ -110,6 +133,8 @@ def render_report(
     discrepancy: dict[str, list[dict]],
     snapshot: Path,
     quality: DataQuality | None = None,
+    changes: pl.DataFrame | None = None,
+    previous_run_at: datetime | None = None,
 ) -> str:
     """The report's HTML text.
 
@@ -128,6 +153,9 @@ def render_report(
         The database snapshot the report was made from (named for the reader's queries).
     quality : DataQuality, optional
         The ingest's ledger summed (:mod:`flows.report.quality`): a section "Data quality".
+    changes : DataFrame, optional
+        View ``condition_changes`` for this run: the report opens with them (one line when
+        empty); ``previous_run_at`` the run they are compared with (None: the first).
     """
     counts = {s: int((ranking["state"] == s).sum()) for s in STATE_COLOURS}
     parts = [
@@ -138,6 +166,7 @@ def render_report(
         f"<h1>Valve condition report: plant {html.escape(plant)}</h1>",
         f'<div class="meta">generated {generated_at:%Y-%m-%d %H:%M} UTC from {html.escape(str(snapshot))} · '
         f"{ranking.height} valves · method: Steinboeck et al. (2013), step 5b</div>",
+        *_changes_section(changes, previous_run_at),
         '<div class="cards">'
         + "".join(f'<div class="card" style="background:{STATE_COLOURS[s]}"><b>{counts[s]}</b>{s}</div>' for s in counts)
         + "</div>",

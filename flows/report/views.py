@@ -42,7 +42,9 @@ from flows.common.warehouse_db import DB_NAME, add_missing_columns, db_path, ens
 from schemas.fields import (
     ALARM_WINDOW_FIELDS,
     CONDITION_BOUNDS_FIELDS,
+    CONDITION_HISTORY_FIELDS,
     EDGE_DAY_FIELDS,
+    NOTIFICATION_FIELDS,
     PARAMETER_DAY_FIELDS,
     STANDSTILL_FIELDS,
     STANDSTILL_PROGRESS_FIELDS,
@@ -66,6 +68,8 @@ REPORT_TABLES = {
     "parameter_day_summaries": PARAMETER_DAY_FIELDS,
     "alarm_windows": ALARM_WINDOW_FIELDS,
     "summary_watermarks": SUMMARY_WATERMARK_FIELDS,
+    "condition_history": CONDITION_HISTORY_FIELDS,
+    "notifications": NOTIFICATION_FIELDS,
 }
 """Tables the report and the publish write (besides the monitor's), created empty if missing so the views bind."""
 

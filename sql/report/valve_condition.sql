@@ -29,6 +29,8 @@
 -- the commissioning value (1 for a nominal baseline: Eq. 3 assumed).
 -- edge_law: the edge law the baseline's shape follows; where the commissioning window shows
 -- another than the configured area_law, edge_law_note says so and is appended to the reason.
+-- first_alarm_start, last_alarm_start: the earliest and the latest of those recent alarm windows
+-- (null when there are none): where a fault began (condition_changes names it).
 -- The Eq. 9 standstill check (standstill_indicator) is a valve-wide quick indicator: its
 -- result is appended to the reason and given in eq9_ok, it does not change an edge's state.
 with
@@ -249,7 +251,9 @@ final as (
         leak_scale_baseline,
         edge_law,
         remaining_basis,
-        case when state = 'healthy' then remaining_horizon_hours end as remaining_horizon_hours
+        case when state = 'healthy' then remaining_horizon_hours end as remaining_horizon_hours,
+        first_alarm_start,
+        last_alarm_start
     from life
 )
 
