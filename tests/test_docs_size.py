@@ -80,6 +80,7 @@ def test_benchmarks_is_one_table_per_area_with_every_column_filled():
         assert re.fullmatch(r"20\d\d-\d\d-\d\d", row["date"]), f"{row_id}: date {row['date']!r}"
         assert _numbers(row["today"]), f"{row_id}: no figure today"
         assert row["command"] != "—", f"{row_id}: no command"
+        assert "core" in row["machine"] and "load" in row["machine"], f"{row_id}: say the machine's cores and load"
 
 
 def test_every_quoted_figure_carries_its_benchmarks_row():
