@@ -1,6 +1,7 @@
 """docs/configuration.md stays true: every key the parser accepts is named there (a key added
 without its documentation fails here; a section with a page of its own, `[notify]` in
-docs/notify.md, is named on that page, key for key), and every complete example on the page
+docs/notify.md, is named on that page, key for key), and every complete example of
+docs/configuration_examples.md
 parses; the first is the specification's example, `tests/fixtures/plant_example.toml`, key for key."""
 
 from __future__ import annotations
@@ -16,7 +17,8 @@ from schemas.fields import SIGNALS
 
 ROOT = Path(__file__).resolve().parents[2]
 DOC = (ROOT / "docs" / "configuration.md").read_text()
-EXAMPLES = [block for block in re.findall(r"```toml\n(.*?)```", DOC, re.S) if block.startswith("[plant]")]
+EXAMPLES_PAGE = (ROOT / "docs" / "configuration_examples.md").read_text()
+EXAMPLES = [block for block in re.findall(r"```toml\n(.*?)```", EXAMPLES_PAGE, re.S) if block.startswith("[plant]")]
 OWN_PAGES = {"notify": (ROOT / "docs" / "notify.md").read_text()}
 """Sections documented on a page of their own: section → that page's text."""
 
