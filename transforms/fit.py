@@ -780,13 +780,16 @@ def fit_groups(
     x_start_m: np.ndarray | None = None,
     sort: bool = True,
     quick: bool = False,
+    strides: np.ndarray | None = None,
 ) -> pl.DataFrame:
     """Eq. 8 for populations laid out contiguously: ``groups`` (``valve_id, window_id,
     window_start, window_end, edge``) row g owns the points ``offsets[g]:offsets[g + 1]`` of
     ``u``/``area``. Returns :data:`FIT_COLUMNS`, sorted by valve, window and edge (in the order
     of ``groups`` when not ``sort``). ``x_start_m``: warm starts (:func:`fit_arrays`).
     ``quick``: α̂ and x̂ to 0.1 µm, no residual pass (e and the intervals NaN): a first estimate
-    that a refit will polish."""
+    that a refit will polish. ``strides``: per population, the k of points that are every k-th
+    row's (``MonitorParams.window_rows``): ``min_points`` counts samples, so such a population
+    needs ⌈min_points / k⌉ points (:data:`transforms.monitor.THIN_MARGIN`)."""
     valve_ids = groups["valve_id"].to_list()
     edge_ids = groups["edge"].to_list()
     g_n = groups.height
@@ -801,7 +804,7 @@ def fit_groups(
         offsets,
         chars,
         x_bound_m=np.array([per_valve[v].x_hat_bound_m for v in valve_ids]).reshape(g_n),
-        min_points=np.array([per_valve[v].min_points for v in valve_ids], dtype=np.int64).reshape(g_n),
+        min_points=-(-np.array([per_valve[v].min_points for v in valve_ids], dtype=np.int64).reshape(g_n) // (1 if strides is None else strides)),
         min_coverage_m=np.array([per_valve[v].min_coverage_m for v in valve_ids]).reshape(g_n),
         ci_level=ci_level,
         x_start_m=x_start_m,

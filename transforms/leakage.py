@@ -38,7 +38,7 @@ __all__ = ["LEAK_REF_M", "WORN_FACTOR", "closed_leakage", "effective_scale", "in
 def leak_scale_step(u, area, leak, offsets, ok, alpha, xhat, kstart, kend, kn, kv, ks, block):
     """Per population g (points offsets[g]:offsets[g+1] of ``u``, ``area`` = plain − λ_g ℓ and
     ``leak`` = ℓ; Â on kn[kstart[g]:kend[g]] with slopes ``ks``; (α̂, x̂) = (alpha[g], xhat[g]) where
-    ``ok[g]``), on the means of ``block`` consecutive points' equations (the load's ringing
+    ``ok[g]``), on the means of ``block[g]`` consecutive points' equations (the load's ringing
     filtered out, as at commissioning): (step, info, sigma2, rho) — the Gauss–Newton step
     Δλ = ⟨ℓ⊥, r⟩ / ‖ℓ⊥‖², the information ‖ℓ⊥‖² [m⁴], the residual variance
     σ² = (‖r‖² − ⟨ℓ⊥, r⟩²/‖ℓ⊥‖²)/(M − 3) [m⁴] (M block means) and the lag-1 autocorrelation ρ of
@@ -51,7 +51,8 @@ def leak_scale_step(u, area, leak, offsets, ok, alpha, xhat, kstart, kend, kn, k
     for g in range(g_n):
         s = offsets[g]
         e = offsets[g + 1]
-        if not ok[g] or (e - s) // block < 4:
+        bl = block[g]
+        if not ok[g] or (e - s) // bl < 4:
             continue
         k0 = kstart[g]
         k1 = kend[g]
@@ -72,7 +73,7 @@ def leak_scale_step(u, area, leak, offsets, ok, alpha, xhat, kstart, kend, kn, k
             mr += area[i] - al * b
             ml += leak[i]
             cnt += 1
-            if cnt < block and i < e - 1:
+            if cnt < bl and i < e - 1:
                 continue
             b, d, r, lk = mb / cnt, md / cnt, mr / cnt, ml / cnt
             mb = md = mr = ml = 0.0

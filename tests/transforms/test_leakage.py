@@ -87,7 +87,7 @@ def test_window_step_is_the_missing_leakage():
     ks = np.append(np.diff(kv) / np.diff(kn), 0.0)
     args = (np.array([0, u.shape[0]]), np.array([True]), np.array([1.0]), np.array([0.0]), np.array([0]), np.array([kn.shape[0]]), kn, kv, ks)
     for block in (1, 50):
-        step, info, sigma2, rho = leak_scale_step(u, area, leak, *args, block)
+        step, info, sigma2, rho = leak_scale_step(u, area, leak, *args, np.array([block]))
         assert step[0] == pytest.approx(0.7, abs=1e-6) and info[0] > 0 and np.isfinite(sigma2[0])
 
 
