@@ -105,15 +105,22 @@ FIT_COLUMNS = (
     "leak_scale",
     "leak_scale_ci_low",
     "leak_scale_ci_high",
+    "leak_scale_held",
+    "row_stride",
 )
 """``leak_scale*``: the row's edge's closed-edge leakage scale λ (× Eq. 3's leakage at the edge's
 state; identified from the other edge of its port, :mod:`transforms.leakage`) and its interval;
-NaN without the closed-edge correction.
+NaN without the closed-edge correction. ``leak_scale_held``: the window cannot resolve its own
+leakage (its interval is wider than :data:`transforms.leakage.LEAK_RESOLUTION`), so
+``leak_scale`` is the commissioning's, held (null without an estimate).
+
+``row_stride``: the window's points are every k-th row's (``MonitorParams.window_rows``; 1: every
+row); ``n_points`` × ``row_stride`` is the population's size in samples.
 
 ``u_spread_m``: the points' spread in u as the fit's covariance sees it; ``x_hat_determined``:
 ``u_spread_m`` ≥ :data:`X_HAT_MIN_SPREAD_M` (False without an estimate)."""
 
-LEAK_COLUMNS = FIT_COLUMNS[-3:]
+LEAK_COLUMNS = ("leak_scale", "leak_scale_ci_low", "leak_scale_ci_high")
 
 # kernel result codes
 _OK, _DEGENERATE, _AT_BOUND, _NOT_CONVERGED, _SKIPPED, _PREDICTED = 0, 1, 2, 3, 4, 5
@@ -813,6 +820,8 @@ def fit_groups(
     )
     out = groups.with_columns(pl.Series(name, col) for name, col in res.items())
     out = out.with_columns(pl.lit(float("nan")).alias(c) for c in LEAK_COLUMNS if c not in out.columns)
+    out = out.with_columns(pl.lit(None, dtype=pl.Boolean).alias("leak_scale_held"),
+                           pl.Series("row_stride", np.ones(g_n, dtype=np.int64) if strides is None else strides, dtype=pl.Int64))
     return sorted_fits(out.select(FIT_COLUMNS)) if sort else out.select(FIT_COLUMNS)
 
 

@@ -41,7 +41,7 @@ from transforms.baseline import (
 from transforms.characteristic import Characteristic, scaled_shifted
 from transforms.derivatives import add_savgol, read_only, savgol_arrays, savgol_at, take_rows
 from transforms.fit import fit_arrays, fit_groups, sorted_fits, walk_segment
-from transforms.leakage import closed_leakage, effective_scale, inflation, leak_columns, leak_scale_step
+from transforms.leakage import LEAK_RESOLUTION, closed_leakage, effective_scale, inflation, leak_columns, leak_scale_step
 from transforms.params import EDGES, MonitorParams
 from transforms.points import (
     DEFAULT_SIGNALS,
@@ -557,8 +557,11 @@ def _leak_columns(fits, u, area, leak, offsets, lam_b, opposite, bk, pmap, valve
     """Each row's edge's leakage in the window: its commissioning λ_eff plus the scale of the
     Eq. 3-shaped regressor ``leak`` that the port's other population's final fit asks for (one
     Gauss–Newton step on block means of the strided points ``u``, ``area`` in ``offsets``: the
-    same 50 ms per block, whatever the population's stride), clipped to ≥ 0, and its interval (Student's t, the serial-correlation
-    factor); NaN where that fit is not ``ok``."""
+    same 50 ms per block, whatever the population's stride), clipped to ≥ 0, and its interval
+    (Student's t, the serial-correlation factor); NaN where that fit is not ``ok``. Where the
+    interval is wider than :data:`transforms.leakage.LEAK_RESOLUTION` (or there is none) the
+    window cannot tell its leakage: ``leak_scale`` is the commissioning's, ``leak_scale_held``
+    true (the interval stays the window's own)."""
     ok = (fits["status"] == "ok").to_numpy()
     alpha = fits["alpha_hat"].to_numpy()
     xhat = fits["x_hat_m"].to_numpy()
@@ -573,11 +576,16 @@ def _leak_columns(fits, u, area, leak, offsets, lam_b, opposite, bk, pmap, valve
     with np.errstate(invalid="ignore"):
         half = stdtrit(np.maximum(m - 3, 1), 0.5 + levels / 2) * se
     half = np.where(m > 3, half, np.nan)
-    lam_row, half_row = lam[opposite], half[opposite]
+    low, high = np.maximum(lam - half, 0.0), lam + half
+    estimated = np.isfinite(step)
+    held = estimated & ~(high - low < LEAK_RESOLUTION)
+    lam = np.where(held, lam_b, lam)
+    o = opposite
     return [
-        pl.Series("leak_scale", lam_row),
-        pl.Series("leak_scale_ci_low", np.maximum(lam_row - half_row, 0.0)),
-        pl.Series("leak_scale_ci_high", lam_row + half_row),
+        pl.Series("leak_scale", lam[o]),
+        pl.Series("leak_scale_ci_low", low[o]),
+        pl.Series("leak_scale_ci_high", high[o]),
+        pl.Series("leak_scale_held", held[o]).scatter(np.flatnonzero(~estimated[o]), None),
     ]
 
 
