@@ -18,7 +18,7 @@ moves, ``tests/refplant`` ``sparse``); ``--sensors noisy_end`` or ``plant_grade`
 positions as plants do.
 
     .venv/bin/python bench/refplant_window_rows.py [--seeds 1,2] [--laws eq3,sharp,linear] [--duration-s 300]
-        [--operation busy|sparse] [--sensors default|noisy_end|plant_grade]
+        [--operation busy|sparse] [--sensors default|noisy_end|plant_grade] [--out FITS.parquet]
 """
 
 from __future__ import annotations
@@ -97,10 +97,13 @@ def main() -> None:
     ap.add_argument("--window-rows", default="none,6000", help="comma-separated window_rows (none: every row; 0 in the table)")
     ap.add_argument("--operation", choices=("busy", "sparse"), default="busy")
     ap.add_argument("--sensors", choices=tuple(SENSORS), default="default")
+    ap.add_argument("--out", help="write every window-edge to this Parquet file")
     a = ap.parse_args()
     rows = [None if r.strip().lower() == "none" else int(r) for r in a.window_rows.split(",")]
     fits = pl.concat([valve_fits(law, int(s), a.duration_s, rows, a.operation, a.sensors) for law in a.laws.split(",")
                       for s in a.seeds.split(",")], how="diagonal_relaxed")  # fmt: skip
+    if a.out:
+        fits.write_parquet(a.out)
     with pl.Config(tbl_rows=50, tbl_cols=20, tbl_width_chars=250, float_precision=4):
         print(summary(fits))
 
