@@ -15,7 +15,7 @@ import polars as pl
 import pytest
 
 from tests import refplant as rp
-from transforms.monitor import THIN_MARGIN
+from transforms.monitor import THIN_MARGIN, commissioning_baseline
 
 from .shift_study import fits_against_truth
 from .sim_lake import START
@@ -32,8 +32,6 @@ def plant():
     snapshots."""
     base = rp.noisy_end(rp.manufactured(rp.NAMEPLATE, seed=1))
     comm = rp.to_lake_frame(rp.simulate_windows(base, 3, 1), "V1", START)
-    from transforms.monitor import commissioning_baseline
-
     return base, commissioning_baseline(comm, PARAMS, NOMINAL, laws=LAWS)
 
 
