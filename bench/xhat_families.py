@@ -11,15 +11,16 @@ gradient. ``--noiseless``: sensors without noise or quantisation (bias alone).
 ``--plant model`` (default): ``model/``'s closed loop, families of ``model.params.GEOMETRY_FAMILIES``
 (default Eq. 3, sharp, worn lands ×3, linear gradient). ``--plant refplant``: the second reference
 plant (``tests/refplant``, written apart from ``model/``: its own dynamics, loads and transmitters;
-families eq3, sharp, linear; 10 s windows); ``--ideal-transmitters``: its pressures without
+families eq3, sharp, linear, laminar; 10 s windows); ``--ideal-transmitters``: its pressures without
 their 1 ms lag and one sample of skew.
 
 Printed per family and edge: the worst and the median x̂ error as a fraction of the true shift
 (shifts > 0), the worst |x̂ error| in % of x_max (every shift, 0 included) — over the windows whose
 x̂ the fit calls determined (``x_hat_determined``), with the worst of the others after the slash
 ("-": none) —, the worst |α̂ error| (%),
-the identified ``leak_scale`` of the edge in the windows (median; the largest lower bound of its
-95 % interval) and at commissioning, and the edge law step 4a recognised.
+the identified ``leak_scale`` of the edge in the windows that resolved it (median; the largest
+lower bound of its 95 % interval; how many windows held the commissioning's, ``leak_scale_held``)
+and at commissioning, and the edge law step 4a recognised.
 
     .venv/bin/python bench/xhat_families.py [--plant model|refplant] [--seeds 1-2]
         [--families eq3,sharp,worn3,linear] [--shifts-mm 0,0.03,0.06,0.1] [--alphas 0.9,1.0,1.15,1.2]
@@ -54,11 +55,19 @@ def _seeds(spec: str) -> list[int]:
     return list(range(int(lo), int(hi or lo) + 1))
 
 
+def _resolved(fits: pl.DataFrame) -> pl.DataFrame:
+    return fits.filter(~pl.col("leak_scale_held"))
+
+
+def _nan(v) -> float:
+    return float("nan") if v is None else v
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--plant", choices=("model", "refplant"), default="model")
     ap.add_argument("--seeds", default="1-2")
-    ap.add_argument("--families", help="default: eq3,sharp,worn3,linear (model), eq3,sharp,linear (refplant)")
+    ap.add_argument("--families", help="default: eq3,sharp,worn3,linear (model), eq3,sharp,linear,laminar (refplant)")
     ap.add_argument("--shifts-mm", default="0,0.03,0.06,0.1")
     ap.add_argument("--alphas", default="0.9,1.0,1.15,1.2")
     ap.add_argument("--duration-s", type=float, default=10.0, help="window length (model plant)")
@@ -67,7 +76,7 @@ def main() -> None:
     ap.add_argument("--ideal-transmitters", action="store_true", help="refplant: pressures without lag and skew")
     ap.add_argument("--out", help="write every window-edge to this Parquet file")
     args = ap.parse_args()
-    families = _list(args.families or ("eq3,sharp,worn3,linear" if args.plant == "model" else "eq3,sharp,linear"), str)
+    families = _list(args.families or ("eq3,sharp,worn3,linear" if args.plant == "model" else "eq3,sharp,linear,laminar"), str)
     shifts = [s * 1e-3 for s in _list(args.shifts_mm)]
     alphas = _list(args.alphas)
     t0 = time.process_time()
@@ -86,7 +95,7 @@ def main() -> None:
         allf.write_parquet(args.out)
     x_max = TABLE1.geometry.x_max_m
     print(f"{'family':7} {'edge':4} {'ok':>7} {'worst x̂ err/shift (not det.)':>28} {'median':>7} {'worst x̂ % x_max':>16} "
-          f"{'worst α̂ %':>10} {'leak_scale windows (ci_low max) / commissioning':>48} {'edge law':>8}")
+          f"{'worst α̂ %':>10} {'leak_scale resolved (ci_low max) held / commissioning':>54} {'edge law':>8}")
     for fam in families:
         for e in EDGES:
             d = allf.filter((pl.col("family") == fam) & (pl.col("edge") == e))
@@ -99,7 +108,8 @@ def main() -> None:
             c = d.filter(pl.col("window_id") == 0)
             print(f"{fam:7} {e:4} {ok.height:3d}/{d.height - c.height:<3d} {worst:+9.1%} / {'-' if und_rel is None else f'{und_rel:.1%}':>6} {np.median(rel):+7.1%} "
                   f"{ok['x_err_m'].abs().max() / x_max:16.3%} {every['alpha_err'].abs().max():10.3%} "
-                  f"{every['leak_scale'].median():31.2f} ({every['leak_scale_ci_low'].max():.2f}) / "
+                  f"{_nan(_resolved(every)['leak_scale'].median()):31.2f} ({_nan(_resolved(every)['leak_scale_ci_low'].max()):.2f}) "
+                  f"{every['leak_scale_held'].sum():3d} / "
                   f"{c['leak_scale_baseline'].median():.2f} {c['edge_law'][0]:>8}")
     print(f"CPU {time.process_time() - t0:.0f} s")
 

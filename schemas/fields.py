@@ -352,6 +352,11 @@ EDGE_FIT_FIELDS: tuple[Field, ...] = (
     Field("x_hat_determined", pl.Boolean, "",
           "False where u_spread_mm < 0.1 mm: too short a range of u to tell a shift from a scale; "
           "x_hat_mm is then not used by the trends and the change detector.", nullable=True),
+    Field("leak_scale_held", pl.Boolean, "",
+          "True where the window cannot resolve its own leakage (its interval of leak_scale is 1 or wider: it cannot tell "
+          "none from Eq. 3's): leak_scale is then the commissioning's, held; the views show it as undetermined.", nullable=True),
+    Field("row_stride", pl.Int32, "", "The window was evaluated on every row_stride-th row ([monitor] window_rows; 1: every row); "
+          "n_points × row_stride is its population in samples.", nullable=True, ge=1),
 )
 """One row per valve, edge and monitoring window (table ``edge_fits``, interfaces.md)."""
 

@@ -51,7 +51,9 @@ Keys the project adds to the specification (all optional; every key is documente
   a recording at least half as long is cut at every multiple of it since the UTC epoch
   (``transforms.windows``). It must divide a day, so windows start at the same times every day. [s]
 - ``[monitor] window_rows`` (default :data:`DEFAULT_WINDOW_ROWS`): about the most rows of a window
-  the monitor evaluates (every k-th row of a longer one); 0 = every row.
+  the monitor evaluates (every k-th row of a longer one); 0 = every row. A window whose thinned
+  points would leave an edge near a fit threshold (sparse motion) is evaluated at every row, so the
+  setting changes the speed, not which windows give an estimate.
 - ``[notify]`` (optional; absent = nothing is sent): where ``valvemon report`` sends the night's
   changes (a webhook's JSON POST and/or mail, ``[notify.mail]``) and which (:class:`NotifySpec`,
   ``docs/notify.md``). A mail password is never in the file: ``password_env`` names the
@@ -174,7 +176,8 @@ class MonitorSpec:
     epoch, a shorter one (a snapshot) is one window. [s]"""
     window_rows: int = DEFAULT_WINDOW_ROWS
     """About the most rows of a window steps 2–3 and Eq. 7 evaluate: every k-th row,
-    k = max(1, n // window_rows) for a window of n samples; 0 = every row."""
+    k = max(1, n // window_rows) for a window of n samples (every row where that leaves an edge
+    short of information: ``transforms.monitor.THIN_MARGIN``); 0 = every row."""
 
 
 @dataclass(frozen=True)

@@ -105,15 +105,22 @@ FIT_COLUMNS = (
     "leak_scale",
     "leak_scale_ci_low",
     "leak_scale_ci_high",
+    "leak_scale_held",
+    "row_stride",
 )
 """``leak_scale*``: the row's edge's closed-edge leakage scale λ (× Eq. 3's leakage at the edge's
 state; identified from the other edge of its port, :mod:`transforms.leakage`) and its interval;
-NaN without the closed-edge correction.
+NaN without the closed-edge correction. ``leak_scale_held``: the window cannot resolve its own
+leakage (its interval is wider than :data:`transforms.leakage.LEAK_RESOLUTION`), so
+``leak_scale`` is the commissioning's, held (null without an estimate).
+
+``row_stride``: the window's points are every k-th row's (``MonitorParams.window_rows``; 1: every
+row); ``n_points`` × ``row_stride`` is the population's size in samples.
 
 ``u_spread_m``: the points' spread in u as the fit's covariance sees it; ``x_hat_determined``:
 ``u_spread_m`` ≥ :data:`X_HAT_MIN_SPREAD_M` (False without an estimate)."""
 
-LEAK_COLUMNS = FIT_COLUMNS[-3:]
+LEAK_COLUMNS = ("leak_scale", "leak_scale_ci_low", "leak_scale_ci_high")
 
 # kernel result codes
 _OK, _DEGENERATE, _AT_BOUND, _NOT_CONVERGED, _SKIPPED, _PREDICTED = 0, 1, 2, 3, 4, 5
@@ -780,13 +787,16 @@ def fit_groups(
     x_start_m: np.ndarray | None = None,
     sort: bool = True,
     quick: bool = False,
+    strides: np.ndarray | None = None,
 ) -> pl.DataFrame:
     """Eq. 8 for populations laid out contiguously: ``groups`` (``valve_id, window_id,
     window_start, window_end, edge``) row g owns the points ``offsets[g]:offsets[g + 1]`` of
     ``u``/``area``. Returns :data:`FIT_COLUMNS`, sorted by valve, window and edge (in the order
     of ``groups`` when not ``sort``). ``x_start_m``: warm starts (:func:`fit_arrays`).
     ``quick``: α̂ and x̂ to 0.1 µm, no residual pass (e and the intervals NaN): a first estimate
-    that a refit will polish."""
+    that a refit will polish. ``strides``: per population, the k of points that are every k-th
+    row's (``MonitorParams.window_rows``): ``min_points`` counts samples, so such a population
+    needs ⌈min_points / k⌉ points (:data:`transforms.monitor.THIN_MARGIN`)."""
     valve_ids = groups["valve_id"].to_list()
     edge_ids = groups["edge"].to_list()
     g_n = groups.height
@@ -801,7 +811,7 @@ def fit_groups(
         offsets,
         chars,
         x_bound_m=np.array([per_valve[v].x_hat_bound_m for v in valve_ids]).reshape(g_n),
-        min_points=np.array([per_valve[v].min_points for v in valve_ids], dtype=np.int64).reshape(g_n),
+        min_points=-(-np.array([per_valve[v].min_points for v in valve_ids], dtype=np.int64).reshape(g_n) // (1 if strides is None else strides)),
         min_coverage_m=np.array([per_valve[v].min_coverage_m for v in valve_ids]).reshape(g_n),
         ci_level=ci_level,
         x_start_m=x_start_m,
@@ -810,6 +820,8 @@ def fit_groups(
     )
     out = groups.with_columns(pl.Series(name, col) for name, col in res.items())
     out = out.with_columns(pl.lit(float("nan")).alias(c) for c in LEAK_COLUMNS if c not in out.columns)
+    out = out.with_columns(pl.lit(None, dtype=pl.Boolean).alias("leak_scale_held"),
+                           pl.Series("row_stride", np.ones(g_n, dtype=np.int64) if strides is None else strides, dtype=pl.Int64))
     return sorted_fits(out.select(FIT_COLUMNS)) if sort else out.select(FIT_COLUMNS)
 
 

@@ -19,7 +19,8 @@ In a window, :func:`leak_scale_step` is the Gauss–Newton step of an extra leak
 (α̂, x̂) optimum (the residual projected off the fit's Jacobian Â(u + x̂), α̂ Â'(u + x̂)), on means
 of consecutive equations, with its information ‖ℓ⊥‖²: its standard error is σ/‖ℓ⊥‖, widened like
 the fit's intervals for the serial correlation of the residuals (:func:`inflation`). The monitor
-reports it; it does not correct with it (a window confounds it with α̂ and x̂).
+reports it where it can resolve it (:data:`LEAK_RESOLUTION`), and holds the commissioning's
+elsewhere; it never corrects with it (a window confounds it with α̂ and x̂).
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ import numpy as np
 from transforms.characteristic import Characteristic
 from transforms.fit import walk_segment
 
-__all__ = ["LEAK_REF_M", "WORN_FACTOR", "closed_leakage", "effective_scale", "inflation", "leak_columns", "leak_scale_step",
+__all__ = ["LEAK_REF_M", "LEAK_RESOLUTION", "WORN_FACTOR", "closed_leakage", "effective_scale", "inflation", "leak_columns", "leak_scale_step",
            "worn_branch"]
 
 
@@ -38,7 +39,7 @@ __all__ = ["LEAK_REF_M", "WORN_FACTOR", "closed_leakage", "effective_scale", "in
 def leak_scale_step(u, area, leak, offsets, ok, alpha, xhat, kstart, kend, kn, kv, ks, block):
     """Per population g (points offsets[g]:offsets[g+1] of ``u``, ``area`` = plain − λ_g ℓ and
     ``leak`` = ℓ; Â on kn[kstart[g]:kend[g]] with slopes ``ks``; (α̂, x̂) = (alpha[g], xhat[g]) where
-    ``ok[g]``), on the means of ``block`` consecutive points' equations (the load's ringing
+    ``ok[g]``), on the means of ``block[g]`` consecutive points' equations (the load's ringing
     filtered out, as at commissioning): (step, info, sigma2, rho) — the Gauss–Newton step
     Δλ = ⟨ℓ⊥, r⟩ / ‖ℓ⊥‖², the information ‖ℓ⊥‖² [m⁴], the residual variance
     σ² = (‖r‖² − ⟨ℓ⊥, r⟩²/‖ℓ⊥‖²)/(M − 3) [m⁴] (M block means) and the lag-1 autocorrelation ρ of
@@ -51,7 +52,8 @@ def leak_scale_step(u, area, leak, offsets, ok, alpha, xhat, kstart, kend, kn, k
     for g in range(g_n):
         s = offsets[g]
         e = offsets[g + 1]
-        if not ok[g] or (e - s) // block < 4:
+        bl = block[g]
+        if not ok[g] or (e - s) // bl < 4:
             continue
         k0 = kstart[g]
         k1 = kend[g]
@@ -72,7 +74,7 @@ def leak_scale_step(u, area, leak, offsets, ok, alpha, xhat, kstart, kend, kn, k
             mr += area[i] - al * b
             ml += leak[i]
             cnt += 1
-            if cnt < block and i < e - 1:
+            if cnt < bl and i < e - 1:
                 continue
             b, d, r, lk = mb / cnt, md / cnt, mr / cnt, ml / cnt
             mb = md = mr = ml = 0.0
@@ -112,6 +114,14 @@ def inflation(rho: np.ndarray) -> np.ndarray:
     """sqrt((1 + ρ)/(1 − ρ)), ρ clipped to [0, 0.98]: the AR(1) long-run factor the fit's intervals use."""
     r = np.clip(np.nan_to_num(rho, nan=0.0), 0.0, 0.98)
     return np.sqrt((1.0 + r) / (1.0 - r))
+
+
+LEAK_RESOLUTION = 1.0
+"""A window resolves its own leakage only where its interval of ``leak_scale`` is narrower than
+this: the distance from no leakage (0, sharp or linear edges) to Eq. 3's (1). A wider interval
+cannot tell those two apart, so the window's number says nothing its commissioning did not: the
+monitor then holds the commissioning's leakage and marks the row (``leak_scale_held``). Windows
+of sparse motion or narrow coverage typically report intervals from 0 to 15-65."""
 
 
 LEAK_REF_M = 1e-3

@@ -41,7 +41,7 @@ from transforms.baseline import (
 from transforms.characteristic import Characteristic, scaled_shifted
 from transforms.derivatives import add_savgol, read_only, savgol_arrays, savgol_at, take_rows
 from transforms.fit import fit_arrays, fit_groups, sorted_fits, walk_segment
-from transforms.leakage import closed_leakage, effective_scale, inflation, leak_columns, leak_scale_step
+from transforms.leakage import LEAK_RESOLUTION, closed_leakage, effective_scale, inflation, leak_columns, leak_scale_step
 from transforms.params import EDGES, MonitorParams
 from transforms.points import (
     DEFAULT_SIGNALS,
@@ -174,6 +174,8 @@ class _ValvePoints:
     """valve_id, window_id, window_start, window_end, edge: the populations, edge-major, windows in
     time order; population g owns ``sizes[g]`` consecutive points."""
     sizes: np.ndarray
+    strides: np.ndarray
+    """Each population's stride k: its points are every k-th row's (:data:`THIN_MARGIN`)."""
 
 
 def _groups(windows: pl.DataFrame) -> pl.DataFrame:
@@ -185,25 +187,43 @@ def _groups(windows: pl.DataFrame) -> pl.DataFrame:
 def _valve_polars(lake_v, valve_id, p, leakage, with_ratio, want_points):
     framed = prepare_samples(_time_sorted(lake_v), p)
     windows = window_table(framed)
-    if p.window_rows is not None:  # every k-th row of a long window (MonitorParams.window_rows)
-        k = (pl.len().over("window_id") // p.window_rows).clip(lower_bound=1)
-        framed = framed.filter(pl.int_range(pl.len()).over("window_id") % k == 0)
-    points = opening_area_points(
-        framed, p, selected={e: pl.col(selected_column(e)) for e in EDGES},
-        leakage=None if leakage is None else leakage.get(valve_id), with_ratio=with_ratio,
-    )
+    groups = _groups(windows)
+    strides = pl.Series(np.ones(groups.height, dtype=np.int64))
+    evaluated = framed
+    if p.window_rows is not None:  # every k-th row of a long window (MonitorParams.window_rows, THIN_MARGIN)
+        stride = windows.select("window_id", (pl.col("n_samples") // p.window_rows).clip(lower_bound=1).alias("_k"))
+        for dense in (None, True):
+            if dense is not None:  # the windows short of information: every row
+                thin = _polars_points(evaluated, p, leakage, valve_id, False)
+                sel = _sizes(groups, thin).reshape(len(EDGES), -1).T
+                dense = thinning_short(stride["_k"].to_numpy(), sel, thin["u_m"].to_numpy(), p)
+                stride = stride.with_columns(pl.when(pl.Series(dense)).then(1).otherwise(pl.col("_k")).alias("_k"))
+            evaluated = framed.join(stride, on="window_id", how="left", maintain_order="left").filter(
+                pl.int_range(pl.len()).over("window_id") % pl.col("_k") == 0).drop("_k")  # fmt: skip
+        strides = groups.join(stride, on="window_id", how="left", maintain_order="left")["_k"]
+    points = _polars_points(evaluated, p, leakage, valve_id, with_ratio)
     ratio = None
     if with_ratio:
         ratio = points["leak_ratio"].to_numpy()
         points = points.drop("leak_ratio")
     # the populations in the order of `points` (edge-major, windows in time order), as the
     # compiled path lays them out
-    counts = points.group_by("edge", "window_id").len()
-    groups = _groups(windows)
-    sizes = groups.join(counts, on=["edge", "window_id"], how="left", maintain_order="left")["len"].fill_null(0)
     return _ValvePoints(
         points["u_m"].to_numpy(), points["area_m2"].to_numpy(), ratio, points.select(POINT_COLUMNS),
-        selection_stats(framed), windows, groups, sizes.to_numpy().astype(np.int64),
+        selection_stats(evaluated), windows, groups, _sizes(groups, points), strides.to_numpy().astype(np.int64),
+    )  # fmt: skip
+
+
+def _sizes(groups: pl.DataFrame, points: pl.DataFrame) -> np.ndarray:
+    """Points per population of ``groups`` (edge-major, windows in time order)."""
+    counts = points.group_by("edge", "window_id").len()
+    return groups.join(counts, on=["edge", "window_id"], how="left", maintain_order="left")["len"].fill_null(0).to_numpy().astype(np.int64)
+
+
+def _polars_points(framed, p, leakage, valve_id, with_ratio):
+    return opening_area_points(
+        framed, p, selected={e: pl.col(selected_column(e)) for e in EDGES},
+        leakage=None if leakage is None else leakage.get(valve_id), with_ratio=with_ratio,
     )  # fmt: skip
 
 
@@ -234,39 +254,29 @@ def _float64(col: pl.Series) -> np.ndarray:
     return chunks[0] if len(chunks) == 1 else np.concatenate(chunks)
 
 
-def _layout(lake_v: pl.DataFrame, p: MonitorParams) -> tuple[pl.DataFrame, float, np.ndarray, WindowLayout]:
+def _layout(lake_v: pl.DataFrame, p: MonitorParams, dense: np.ndarray | None = None) -> tuple[pl.DataFrame, float, np.ndarray, WindowLayout]:
     """The valve's rows (sorted by time if they were not), sample period, time stamps (µs) and
-    :func:`transforms.windows.window_layout` (which checks the order in its pass)."""
+    :func:`transforms.windows.window_layout` (which checks the order in its pass; ``dense``: the
+    windows evaluated at every row)."""
     dt = p.sample_period_s or infer_sample_period_s(lake_v)
     for _ in range(2):
         ts = read_only(lake_v["timestamp_utc"].cast(_UTC_US).to_physical().to_numpy())  # (a view, or a copy of several chunks)
         try:
             lay = window_layout(ts, sample_period_s=dt, gap_limit_s=p.gap_limit_periods * dt, step_tolerance=p.step_tolerance,
-                                half_window=p.half_window, window_s=p.window_s, window_rows=p.window_rows)  # fmt: skip
+                                half_window=p.half_window, window_s=p.window_s, window_rows=p.window_rows, dense=dense)  # fmt: skip
             return lake_v, dt, ts, lay
         except UnsortedTimes:
             lake_v = lake_v.sort("timestamp_utc", maintain_order=True)
     raise AssertionError("unreachable: sorted rows")
 
 
-def _valve_numba(lake_v, valve_id, p, leakage, with_ratio, want_points):
-    lake_v, dt, ts, lay = _layout(lake_v, p)
-    n_windows, first = lay.n_windows, lay.first
-    last = first + lay.count - 1
-    windows = pl.DataFrame(
-        {
-            "valve_id": pl.repeat(valve_id, n_windows, eager=True, dtype=pl.Utf8),
-            "window_id": pl.Series(np.arange(n_windows), dtype=pl.UInt32),
-            "window_start": pl.Series(ts[first]).cast(_UTC_US),
-            "window_end": pl.Series(ts[last]).cast(_UTC_US),
-            "n_samples": pl.Series(lay.count, dtype=pl.Int64),
-        }
-    )
-    # the signals as float arrays (float32 from the lake as it is; nulls become NaN), then
-    # Savitzky–Golay as plain weighted sums in one compiled pass per signal; the validity comes
-    # from window_layout and is applied in the selection kernel. A long window is evaluated on
-    # every k-th row (MonitorParams.window_rows): the Savitzky–Golay sums at those rows only,
-    # the other signals gathered there
+def _evaluate(lake_v, dt, lay, p, leakage, with_ratio):
+    """Steps 2–3 and Eq. 7 at the rows of ``lay``: the signals as float arrays (float32 from the
+    lake as it is; nulls become NaN), then Savitzky–Golay as plain weighted sums in one compiled
+    pass per signal (the validity comes from the layout and is applied in the selection kernel).
+    A thinned window (stride k > 1) is evaluated on every k-th row: the Savitzky–Golay sums at
+    those rows only, the other signals gathered there. Returns (rows or None, win, selection
+    counts, points arrays)."""
     rows = None if lay.every_row else lay.rows
     if rows is None:
         arrays = {c: _float64(lake_v[c]) for c in _SIGNALS_F64}
@@ -281,15 +291,36 @@ def _valve_numba(lake_v, valve_id, p, leakage, with_ratio, want_points):
         if smooth_name is not None:
             arrays[smooth_name] = sm
         arrays[deriv_name] = de
-    win, valid = lay.window, lay.valid
-    codes, flagged, removed, selected, n_evaluated = selection_codes(arrays, win, n_windows, p, valid=valid)
+    win = lay.window
+    codes, flagged, removed, selected, n_evaluated = selection_codes(arrays, win, lay.n_windows, p, valid=lay.valid)
+    pts = points_arrays(arrays, codes, SELECTED_CODE, selected.sum(axis=0), p, leakage=leakage, with_ratio=with_ratio)
+    return rows, (flagged, removed, selected, n_evaluated), pts
+
+
+def _valve_numba(lake_v, valve_id, p, leakage, with_ratio, want_points):
+    lake_v, dt, ts, lay = _layout(lake_v, p)
+    leak = None if leakage is None else leakage.get(valve_id)
+    rows, counts, pts = _evaluate(lake_v, dt, lay, p, leak, with_ratio)
+    if not lay.every_row:  # a thinned window short of information is evaluated again at every row
+        dense = thinning_short(lay.stride, counts[2], pts[4], p)
+        if dense.any():
+            lake_v, dt, ts, lay = _layout(lake_v, p, dense)
+            rows, counts, pts = _evaluate(lake_v, dt, lay, p, leak, with_ratio)
+    flagged, removed, selected, n_evaluated = counts
+    idx, area, offs, ratio, u = pts
+    n_windows, first, win = lay.n_windows, lay.first, lay.window
+    last = first + lay.count - 1
+    windows = pl.DataFrame(
+        {
+            "valve_id": pl.repeat(valve_id, n_windows, eager=True, dtype=pl.Utf8),
+            "window_id": pl.Series(np.arange(n_windows), dtype=pl.UInt32),
+            "window_start": pl.Series(ts[first]).cast(_UTC_US),
+            "window_end": pl.Series(ts[last]).cast(_UTC_US),
+            "n_samples": pl.Series(lay.count, dtype=pl.Int64),
+        }
+    )
     # the counts are those of the evaluated rows (n_samples too, so removed + selected = n_samples)
     stats = stats_frame(valve_id, windows if rows is None else windows.with_columns(n_samples=n_evaluated), flagged, removed, selected)
-
-    idx, area, offs, ratio, u = points_arrays(
-        arrays, codes, SELECTED_CODE, selected.sum(axis=0), p, leakage=None if leakage is None else leakage.get(valve_id),
-        with_ratio=with_ratio,
-    )
     points = None
     if want_points:
         pw = win[idx]  # windows of the points
@@ -309,7 +340,43 @@ def _valve_numba(lake_v, valve_id, p, leakage, with_ratio, want_points):
             }
         )
     # the fit populations in the order of the points: edge-major, windows in time order
-    return _ValvePoints(u, area, ratio if with_ratio else None, points, stats, windows, _groups(windows), selected.T.reshape(-1).astype(np.int64))
+    return _ValvePoints(u, area, ratio if with_ratio else None, points, stats, windows, _groups(windows),
+                        selected.T.reshape(-1).astype(np.int64), np.tile(lay.stride, len(EDGES)))  # fmt: skip
+
+
+THIN_MARGIN = 2.0
+"""A window is evaluated on every k-th row (``MonitorParams.window_rows``) only where that leaves
+each of its populations clear of every threshold of the fit by this factor: at least
+``THIN_MARGIN`` × ``min_points`` samples (k samples per evaluated point) and ``THIN_MARGIN`` ×
+``min_coverage_m`` of u. Elsewhere — a window of sparse motion, an edge barely used — every row
+is evaluated, so that a window's verdict is the one it has at every row. The thresholds count
+samples at the sample rate, i.e. information: the points of a window are correlated over the
+21-sample Savitzky–Golay stencil, so every k-th of them (k ≤ 21) carries about what all of them
+do; k · points is the population's size in samples. Thinning moves that count by up to k per
+run of selected rows, and the span of u by what the spool travels in k samples at its ends; a
+factor of 2 leaves both far inside the margin."""
+
+
+def thinning_short(stride: np.ndarray, selected: np.ndarray, u: np.ndarray, p: MonitorParams) -> np.ndarray:
+    """Per window, whether its thinned populations fall short of :data:`THIN_MARGIN` × a threshold
+    (and so it must be evaluated at every row): ``stride`` per window, ``selected`` (n_windows, 4)
+    points per window and edge, ``u`` the points' opening coordinates, edge-major, windows in time
+    order within an edge (as :func:`transforms.points.points_arrays` lays them out)."""
+    sizes = selected.T.reshape(-1)
+    span = _spans(u, sizes).reshape(len(EDGES), -1).T
+    k = stride[:, None]
+    short = (selected > 0) & ((k * selected < THIN_MARGIN * p.min_points) | (span < THIN_MARGIN * p.min_coverage_m))
+    return (stride > 1) & short.any(axis=1)
+
+
+def _spans(u: np.ndarray, sizes: np.ndarray) -> np.ndarray:
+    """max − min of u over each run of ``sizes`` consecutive points (NaN for an empty run)."""
+    out = np.full(sizes.shape[0], np.nan)
+    some = sizes > 0
+    if some.any():
+        starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])[some]
+        out[some] = np.maximum.reduceat(u, starts) - np.minimum.reduceat(u, starts)
+    return out
 
 
 @dataclass
@@ -322,6 +389,8 @@ class _Points:
     ratio: np.ndarray | None
     groups: pl.DataFrame
     offsets: np.ndarray
+    strides: np.ndarray
+    """Each population's stride (:data:`THIN_MARGIN`)."""
 
 
 def _monitor_points(lake, params, leakage, engine, with_ratio=False, want_points=True) -> _Points:
@@ -341,7 +410,7 @@ def _monitor_points(lake, params, leakage, engine, with_ratio=False, want_points
         empty = opening_area_points(framed, p, selected={e: pl.col(selected_column(e)) for e in EDGES}).select(POINT_COLUMNS)
         windows = window_table(framed)
         parts = [_ValvePoints(np.zeros(0), np.zeros(0), np.zeros(0) if with_ratio else None, empty, selection_stats(framed),
-                              windows, _groups(windows), np.zeros(0, dtype=np.int64))]  # fmt: skip
+                              windows, _groups(windows), np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64))]  # fmt: skip
     if want_points:
         points = pl.concat([q.points for q in parts], how="vertical")
     else:
@@ -365,6 +434,7 @@ def _monitor_points(lake, params, leakage, engine, with_ratio=False, want_points
         joined([q.ratio for q in parts]) if with_ratio else None,
         pl.concat([q.groups for q in parts], how="vertical"),
         np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64),
+        np.concatenate([q.strides for q in parts]).astype(np.int64),
     )
 
 
@@ -427,8 +497,9 @@ def monitor(
     pts = _monitor_points(lake, params, None, engine, with_ratio=leakage is not None, want_points=points)
     res, groups, offsets, u, plain = pts.result, pts.groups, pts.offsets, pts.u, pts.area
     pmap = {v: _params_for(params, v) for v in res.windows["valve_id"].unique().to_list()}
+    strides = pts.strides
     if leakage is None:
-        fits = fit_groups(groups, u, plain, offsets, baselines, pmap)
+        fits = fit_groups(groups, u, plain, offsets, baselines, pmap, strides=strides)
         return MonitorResult(points=res.points, selection=res.selection, fits=fits, windows=res.windows)
 
     ratio = pts.ratio
@@ -459,13 +530,13 @@ def monitor(
         sarea = np.empty_like(splain)
         for _ in range(passes):
             _leak_correct(su, splain, sratio, sub_off, scale, shift, *lk, sarea, _NO_LEAK)
-            status, alpha, xhat = _quick_fit(su, sarea, sub_off, baselines, pmap, valve_ids, edge_ids)
-            own_a, own_x = _edge_states(status, alpha, xhat, su, sarea, sub_off, baselines, valve_ids, edge_ids)
+            status, alpha, xhat = _quick_fit(su, sarea, sub_off, baselines, pmap, valve_ids, edge_ids, strides)
+            own_a, own_x = _edge_states(status, alpha, xhat, su, sarea, sub_off, baselines, valve_ids, edge_ids, strides)
             scale, shift = own_a[opposite], own_x[opposite]
             x0 = xhat
     area = np.empty_like(plain)
     _leak_correct(u, plain, ratio, offsets, scale, shift, *lk, area, _NO_LEAK)
-    fits = fit_groups(groups, u, area, offsets, baselines, pmap, x_start_m=x0, sort=False)
+    fits = fit_groups(groups, u, area, offsets, baselines, pmap, x_start_m=x0, sort=False, strides=strides)
     # the windows' own leakage, on every FIRST_FIT_STRIDE-th point (a report, at 1/8 of a pass):
     # the points as corrected, and the regressor, Eq. 3's branch at o's state in the window
     if not passes:
@@ -477,22 +548,26 @@ def monitor(
     if leak_reference is not None:
         ref = _LeakPacked([leak_reference.get(v, {}).get(OPPOSITE_EDGE[e]) for v, e in zip(valve_ids, edge_ids, strict=True)])
         _leak_correct(su, splain, sratio, sub_off, scale, shift, ref.kstart, ref.kend, ref.kn, ref.kv, ref.ks, np.empty_like(splain), sleak)
-    fits = fits.with_columns(_leak_columns(fits, su, sarea, sleak, sub_off, lam_b, opposite, bk, pmap, valve_ids))
+    fits = fits.with_columns(_leak_columns(fits, su, sarea, sleak, sub_off, lam_b, opposite, bk, pmap, valve_ids, strides))
     out_points = res.points.with_columns(pl.Series("area_m2", area)) if points else res.points
     return MonitorResult(points=out_points, selection=res.selection, fits=sorted_fits(fits), windows=res.windows)
 
 
-def _leak_columns(fits, u, area, leak, offsets, lam_b, opposite, bk, pmap, valve_ids) -> list[pl.Series]:
+def _leak_columns(fits, u, area, leak, offsets, lam_b, opposite, bk, pmap, valve_ids, strides) -> list[pl.Series]:
     """Each row's edge's leakage in the window: its commissioning λ_eff plus the scale of the
     Eq. 3-shaped regressor ``leak`` that the port's other population's final fit asks for (one
     Gauss–Newton step on block means of the strided points ``u``, ``area`` in ``offsets``: the
-    same 50 ms per block), clipped to ≥ 0, and its interval (Student's t, the serial-correlation
-    factor); NaN where that fit is not ``ok``."""
+    same 50 ms per block, whatever the population's stride), clipped to ≥ 0, and its interval
+    (Student's t, the serial-correlation factor); NaN where that fit is not ``ok``. Where the
+    interval is wider than :data:`transforms.leakage.LEAK_RESOLUTION` (or there is none) the
+    window cannot tell its leakage: ``leak_scale`` is the commissioning's, ``leak_scale_held``
+    true (the interval stays the window's own)."""
     ok = (fits["status"] == "ok").to_numpy()
     alpha = fits["alpha_hat"].to_numpy()
     xhat = fits["x_hat_m"].to_numpy()
-    block = max(pmap[v].leak_block_points for v in set(valve_ids)) if valve_ids else 1
-    block = np.int64(max(1, -(-block // FIRST_FIT_STRIDE)))  # the same span of time on the strided points
+    # the same span of time on the strided points: every (FIRST_FIT_STRIDE · stride)-th row
+    block = np.array([pmap[v].leak_block_points for v in valve_ids], dtype=np.int64)
+    block = np.maximum(1, -(-block // (FIRST_FIT_STRIDE * strides)))
     step, info, sigma2, rho = leak_scale_step(u, area, leak, offsets, ok, alpha, xhat, *bk, block)
     se = np.sqrt(sigma2 / info) * inflation(rho)
     lam = np.maximum(lam_b + step, 0.0)
@@ -501,11 +576,16 @@ def _leak_columns(fits, u, area, leak, offsets, lam_b, opposite, bk, pmap, valve
     with np.errstate(invalid="ignore"):
         half = stdtrit(np.maximum(m - 3, 1), 0.5 + levels / 2) * se
     half = np.where(m > 3, half, np.nan)
-    lam_row, half_row = lam[opposite], half[opposite]
+    low, high = np.maximum(lam - half, 0.0), lam + half
+    estimated = np.isfinite(step)
+    held = estimated & ~(high - low < LEAK_RESOLUTION)
+    lam = np.where(held, lam_b, lam)
+    o = opposite
     return [
-        pl.Series("leak_scale", lam_row),
-        pl.Series("leak_scale_ci_low", np.maximum(lam_row - half_row, 0.0)),
-        pl.Series("leak_scale_ci_high", lam_row + half_row),
+        pl.Series("leak_scale", lam[o]),
+        pl.Series("leak_scale_ci_low", low[o]),
+        pl.Series("leak_scale_ci_high", high[o]),
+        pl.Series("leak_scale_held", held[o]).scatter(np.flatnonzero(~estimated[o]), None),
     ]
 
 
@@ -607,21 +687,21 @@ def _strided(offsets: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
     return idx, sub_off
 
 
-def _quick_fit(u, area, offsets, baselines, pmap, valve_ids, edge_ids):
+def _quick_fit(u, area, offsets, baselines, pmap, valve_ids, edge_ids, strides):
     """(status, α̂, x̂) per population of a :func:`_strided` subsample, to 0.1 µm, without the
-    residual pass; the point thresholds scaled by the stride."""
-    k = FIRST_FIT_STRIDE
+    residual pass; the point thresholds scaled by the strides (the subsample's and the rows')."""
+    k = FIRST_FIT_STRIDE * strides
     res = fit_arrays(
         u, area, offsets, [baselines.get(v, {}).get(e) for v, e in zip(valve_ids, edge_ids, strict=True)],
         x_bound_m=np.array([pmap[v].x_hat_bound_m for v in valve_ids]),
-        min_points=np.array([max(3, pmap[v].min_points // k) for v in valve_ids], dtype=np.int64),
+        min_points=np.maximum(3, np.array([pmap[v].min_points for v in valve_ids], dtype=np.int64) // k),
         min_coverage_m=np.array([pmap[v].min_coverage_m for v in valve_ids]),
         xtol_m=1e-7, residuals=False,
     )  # fmt: skip
     return res["status"], res["alpha_hat"], res["x_hat_m"]
 
 
-def _edge_states(status, alpha, xhat, u, area, offsets, baselines, valve_ids, edge_ids):
+def _edge_states(status, alpha, xhat, u, area, offsets, baselines, valve_ids, edge_ids, strides):
     """Each population's own state relative to its baseline, (scale, shift): the fit where it is
     ``ok``, else a scale-only estimate (:data:`SCALE_ONLY_MIN_POINTS`), else (1, 0)."""
     a = np.array(alpha, dtype=np.float64)
@@ -630,7 +710,7 @@ def _edge_states(status, alpha, xhat, u, area, offsets, baselines, valve_ids, ed
     a[~ok] = 1.0
     x[~ok] = 0.0
     n = np.diff(offsets)
-    for g in np.flatnonzero(~ok & (n >= -(-SCALE_ONLY_MIN_POINTS // FIRST_FIT_STRIDE))):
+    for g in np.flatnonzero(~ok & (n >= -(-SCALE_ONLY_MIN_POINTS // (FIRST_FIT_STRIDE * strides)))):
         base = baselines.get(valve_ids[g], {}).get(edge_ids[g])
         if base is None:
             continue

@@ -263,12 +263,12 @@ def window_table(framed: pl.DataFrame | pl.LazyFrame) -> pl.DataFrame:
 
 
 @numba.njit(cache=True)
-def _layout_kernel(n, starts, irregular, h, window_rows):
-    """Windows ``starts`` (sorted rows) of n rows → each window's first row and length, the
-    evaluated rows (every k-th of a window from its first, k = max(1, length // window_rows);
-    window_rows 0: every row), their window and their Savitzky–Golay validity: no uniform-run
-    start (a window start or an ``irregular`` step's row) in (i − h, i] nor in (i, i + h], and
-    i + h < n."""
+def _layout_kernel(n, starts, irregular, h, window_rows, dense):
+    """Windows ``starts`` (sorted rows) of n rows → each window's first row, length and stride k,
+    the evaluated rows (every k-th of a window from its first, k = max(1, length // window_rows);
+    window_rows 0 or ``dense[w]``: every row), their window and their Savitzky–Golay validity: no
+    uniform-run start (a window start or an ``irregular`` step's row) in (i − h, i] nor in
+    (i, i + h], and i + h < n. ``dense`` is empty or one flag per window."""
     nw = starts.shape[0]
     count = np.empty(nw, dtype=np.int64)
     stride = np.empty(nw, dtype=np.int64)
@@ -276,6 +276,8 @@ def _layout_kernel(n, starts, irregular, h, window_rows):
     for w in range(nw):
         count[w] = (starts[w + 1] if w + 1 < nw else n) - starts[w]
         k = max(1, count[w] // window_rows) if window_rows > 0 else 1
+        if dense.shape[0] > 0 and dense[w]:
+            k = 1
         stride[w] = k
         total += (count[w] + k - 1) // k
     # the uniform-run starts: both sorted lists merged
@@ -307,7 +309,7 @@ def _layout_kernel(n, starts, irregular, h, window_rows):
             win[r] = w
             valid[r] = nxt - i > h and i - runs[j] >= h
             r += 1
-    return count, rows, win, valid
+    return count, stride, rows, win, valid
 
 
 class UnsortedTimes(ValueError):
@@ -322,6 +324,8 @@ class WindowLayout:
     """Each window's first row (int64, sorted)."""
     count: np.ndarray
     """Each window's number of rows (int64)."""
+    stride: np.ndarray
+    """Each window's stride k (int64): every k-th row of it is evaluated."""
     rows: np.ndarray
     """The evaluated rows, sorted (int64): every k-th row of each window from its first."""
     window: np.ndarray
@@ -348,13 +352,16 @@ def window_layout(
     half_window: int,
     window_s: float | None = None,
     window_rows: int | None = None,
+    dense: np.ndarray | None = None,
 ) -> WindowLayout:
     """:func:`assign_windows` and the Savitzky–Golay validity of
     :func:`transforms.derivatives.savgol_valid` for the time stamps (µs since the epoch, int64) of
     **one valve**, at the rows a window of n samples is evaluated on: every k-th row from its
     first, k = max(1, n // ``window_rows``) (:class:`transforms.params.MonitorParams`
-    ``window_rows``; None: every row). One compiled pass over the time stamps (which also checks
-    their order: :class:`UnsortedTimes` if they are not sorted), the rest over the evaluated rows.
+    ``window_rows``; None: every row), every row of the windows ``dense`` flags (one bool per
+    window; :func:`transforms.monitor.thinning_short`). One compiled pass over the time stamps
+    (which also checks their order: :class:`UnsortedTimes` if they are not sorted), the rest over
+    the evaluated rows.
     """
     if sample_period_s <= 0:
         raise ValueError("sample_period_s must be > 0")
@@ -366,5 +373,6 @@ def window_layout(
     t_us = np.ascontiguousarray(timestamp_us, dtype=np.int64)
     irregular, gaps = _gap_rows(t_us, period_us * (1.0 - step_tolerance), period_us * (1.0 + step_tolerance), float(gap_limit_s * 1e6))
     starts = _starts_kernel(t_us, gaps, window_length_us(window_s))
-    count, rows, win, valid = _layout_kernel(t_us.shape[0], starts, irregular, int(half_window), int(window_rows or 0))
-    return WindowLayout(starts, count, rows, win, valid)
+    flags = np.zeros(0, dtype=np.bool_) if dense is None else np.ascontiguousarray(dense, dtype=np.bool_)
+    count, stride, rows, win, valid = _layout_kernel(t_us.shape[0], starts, irregular, int(half_window), int(window_rows or 0), flags)
+    return WindowLayout(starts, count, stride, rows, win, valid)

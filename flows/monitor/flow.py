@@ -606,6 +606,8 @@ def _fits_table(fits: pl.DataFrame, valve: ValveSpec, baselines: dict[str, Basel
         "leak_scale_ci_high",
         (pl.col("u_spread_m") * 1e3).alias("u_spread_mm"),
         "x_hat_determined",
+        "leak_scale_held",
+        pl.col("row_stride").cast(pl.Int32),
     ).cast(dict(polars_schema(EDGE_FIT_FIELDS))).with_columns(pl.col(pl.Float64).fill_nan(None))  # no estimate: NULL
 
 

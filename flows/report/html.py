@@ -37,6 +37,14 @@ def _state(s: str | None) -> str:
     return f'<span class="state" style="background:{STATE_COLOURS.get(s, "#000")}">{html.escape(s)}</span>'
 
 
+def _leak(r: dict) -> str:
+    """The edge's leakage in its windows: undetermined where it has ok windows but none resolved
+    it (edge_fits.leak_scale_held: the commissioning's was held)."""
+    if r.get("leak_scale") is None and r.get("n_ok_windows"):
+        return "undetermined"
+    return _num(r.get("leak_scale"), "{:.2f}")
+
+
 def _num(v, fmt: str = "{:,.0f}") -> str:
     if v is None:
         return "—"
@@ -207,7 +215,7 @@ def render_report(
                 f"<tr><td>{html.escape(r['edge'])}</td><td>{_state(r['state'])}</td><td>{html.escape(r['reason'] or '')}</td>"
                 f"<td class='num'>{_num(r['alpha_hat'], '{:.3f}')}</td><td class='num'>{_num(r['x_hat_pct'], '{:+.2f}')}</td>"
                 f"<td class='num'>{_num(r['e_mm2'], '{:.3f}')}</td>"
-                f"<td class='num'>{_num(r.get('leak_scale'), '{:.2f}')}; {_num(r.get('leak_scale_baseline'), '{:.2f}')}</td>"
+                f"<td class='num'>{_leak(r)}; {_num(r.get('leak_scale_baseline'), '{:.2f}')}</td>"
                 f"<td class='num'>{html.escape(remaining_text(r))}</td>"
                 f"<td class='num'>{r['n_ok_windows']} / {r['n_windows']}</td></tr>"
             )

@@ -23,7 +23,8 @@
 --                   no figure (a linear extrapolation that far is no forecast), null;
 --   no_trend        healthy, no trend heads significantly toward a bound: null;
 --   too_little_data unknown: null.
--- leak_scale: the edge's closed-edge leakage over Eq. 3's, median over the ok windows of the
+-- leak_scale: the edge's closed-edge leakage over Eq. 3's, median over the ok windows that resolved it
+-- (null where none did: edge_fits.leak_scale_held, the report says undetermined) of the
 -- latest UTC day that has one (a growing leakage is a wear signal; the trend picture shows it a
 -- point a day), leak_scale_baseline
 -- the commissioning value (1 for a nominal baseline: Eq. 3 assumed).

@@ -17,6 +17,7 @@ import pytest
 
 from model import broken_edge, condition_at, healthy, wear
 from model.params import GEOMETRY_FAMILIES
+from transforms.leakage import LEAK_RESOLUTION
 from transforms.monitor import commissioning_baseline, monitor
 
 from .sim_lake import simulated_lake
@@ -41,9 +42,13 @@ def test_wear_study_every_family(family, seed):
     assert later.height == 20 and (later["status"] == "ok").all(), later.filter(pl.col("status") != "ok")
     bad = later.filter((pl.col("alpha_err").abs() > ALPHA_TOL) | (pl.col("x_err_m").abs() > X_TOL))
     assert bad.height == 0, bad.select("window_id", "edge", "alpha_err", "x_err_m", "u_min_m", "u_max_m")
-    # every window reports its edges' leakage with an interval
+    # every window reports its edges' leakage with an interval: its own where the interval resolves
+    # it (narrower than LEAK_RESOLUTION), else the commissioning's, held and marked
     assert later["leak_scale"].is_not_null().all() and (later["leak_scale"] >= 0).all()
-    assert (later["leak_scale_ci_low"] <= later["leak_scale"]).all() and (later["leak_scale"] <= later["leak_scale_ci_high"]).all()
+    width = later["leak_scale_ci_high"] - later["leak_scale_ci_low"]
+    assert (later["leak_scale_held"] == (width >= LEAK_RESOLUTION)).all()
+    own = later.filter(~pl.col("leak_scale_held"))
+    assert (own["leak_scale_ci_low"] <= own["leak_scale"]).all() and (own["leak_scale"] <= own["leak_scale_ci_high"]).all()
 
 
 def _commissioning(family: str, seed: int):

@@ -75,3 +75,24 @@ def test_shift_on_the_second_reference_plant():
     assert bad.height == 0, bad.select(cols)
     assert (base["leak_scale_baseline"] <= 1.96 * base["leak_scale_baseline_se"] + 0.01).all(), base
     assert (later["leak_scale_ci_low"] < 0.01).all(), later.filter(pl.col("leak_scale_ci_low") >= 0.01)
+
+
+@pytest.mark.slow
+def test_shift_on_a_laminar_corner():
+    """The reference plant's linear-gradient edges whose orifice law leaves Eq. 4's near the corner
+    (the discharge coefficient falls with the slot's flow number: laminar at small openings and
+    pressure drops), configured as Eq. 3, worn by 0.03–0.06 mm and α ×1–1.15: x̂ within 0.1 % of
+    x_max on every ok window, determined or not (bench/xhat_families.py --plant refplant --families
+    laminar: worst 0.089 % over 2 seeds × 16 windows); the leakage, which these edges do not have,
+    either within a window's interval of 0 or held at the commissioning's and marked."""
+    fits = refplant_study("laminar", 1, [(0.03e-3, 1.0), (0.03e-3, 1.15), (0.06e-3, 1.0), (0.06e-3, 1.15)])
+    base = fits.filter(pl.col("window_id") == 0)
+    later = fits.filter(pl.col("window_id") > 0)
+    assert set(base["edge_law"]) == {"sharp"}
+    ok = later.filter(pl.col("status") == "ok")
+    assert ok.height >= 14, later.filter(pl.col("status") != "ok")
+    assert (ok["x_err_m"].abs() <= ABS_TOL).all(), ok.select("window_id", "edge", "x_true_m", "x_err_m", "u_min_m", "u_max_m")
+    resolved = ok.filter(~pl.col("leak_scale_held"))
+    assert (resolved["leak_scale_ci_low"] < 0.01).all(), resolved
+    held = ok.filter(pl.col("leak_scale_held")).join(base.select("edge", "leak_scale_baseline"), on="edge")
+    assert held.height > 0 and (held["leak_scale"] == held["leak_scale_baseline"]).all()

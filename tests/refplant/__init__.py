@@ -18,7 +18,9 @@ What differs from ``model/`` on purpose:
   steps of 1-5 um per plant; :func:`noisy_end`: spool 0.2 %, cylinder 10 um in 5 um steps);
 * operation: busy (dwells 0.2-0.8 s) by default, or :func:`sparse` (dwells 2-10 s between moves);
 * edge families per edge: Eq. 3 (written again), a sharp edge without radial clearance, a linear
-  gradient with a hard corner (alpha A = C_q g max(u + x_u, 0), g = sin(phi) pi 2R per port);
+  gradient with a hard corner (alpha A = C_q g max(u + x_u, 0), g = sin(phi) pi 2R per port), and
+  that gradient with a laminar region at small openings (the discharge coefficient falls with the
+  slot's flow number: an orifice law other than Eq. 4's near the corner);
 * a valve as built (underlap and alpha scatter per edge, beta 2.5 % off its nameplate), wear per
   edge, and hidden effects (the discrepancy library's, in this package's own implementation, and
   two outside it: pressure-dependent seal friction, an extra lag on one transmitter).

@@ -23,8 +23,9 @@ EDGES: tuple[str, str, str, str] = ("s1", "1r", "s2", "2r")
 OPENING: tuple[float, float, float, float] = (1.0, -1.0, -1.0, 1.0)
 #: Port (1 head side, 2 rod side) of each edge.
 PORT: tuple[int, int, int, int] = (1, 1, 2, 2)
-#: Edge laws (:mod:`.edges`): Eq. 3; sharp conical edge without radial clearance; linear gradient.
-LAWS: tuple[str, str, str] = ("eq3", "sharp", "linear")
+#: Edge laws (:mod:`.edges`): Eq. 3; sharp conical edge without radial clearance; linear gradient;
+#: linear gradient whose discharge coefficient falls at small openings (laminar region).
+LAWS: tuple[str, str, str, str] = ("eq3", "sharp", "linear", "laminar")
 
 
 @dataclass(frozen=True)
@@ -38,7 +39,10 @@ class Edge:
         ``"sharp"`` (the exact conical-gap area of a sharp edge with no radial clearance:
         A = pi h (2R - h cos phi), h = max(u + x_u, 0) sin phi; no closed-edge leakage) or
         ``"linear"`` (alpha A = alpha g max(u + x_u, 0): a linear gradient g and a hard corner,
-        no radial clearance, no leakage). [-]
+        no radial clearance, no leakage) or ``"laminar"`` (the linear gradient whose orifice law
+        leaves Eq. 4's near the corner: the discharge coefficient is alpha tanh(2 lambda /
+        lambda_t), lambda = (D_h / nu) sqrt(2 |dp| / rho) the flow number of the slot, D_h = 2 s,
+        s = u + x_u; laminar, q ~ s^2 dp, at small openings and pressure drops). [-]
     underlap_m : float
         Underlap x_u in the edge's opening coordinate (> 0: open at x = 0). [m]
     alpha : float
@@ -48,6 +52,9 @@ class Edge:
         f = sin(phi) and d = 2R (:meth:`Valve.port_gradient`).
     x_l_fraction : float
         Eq. 3 only: x_l = -x_u + f delta, f in (0, 1] (onset of the leakage branch). [-]
+    transition_flow_number : float
+        Laminar law only: lambda_t, the flow number about which the discharge coefficient reaches
+        its turbulent value (1000: Merritt's sharp-edged orifice; 0.76 alpha at lambda_t / 2). [-]
     """
 
     law: str = "eq3"
@@ -55,6 +62,7 @@ class Edge:
     alpha: float = 0.675
     gradient_m: float = 0.0
     x_l_fraction: float = 0.5
+    transition_flow_number: float = 1000.0
 
     def __post_init__(self):
         if self.law not in LAWS:
@@ -65,6 +73,8 @@ class Edge:
             raise ValueError("gradient_m must be >= 0")
         if not 0.0 < self.x_l_fraction <= 1.0:
             raise ValueError("x_l_fraction must lie in (0, 1]")
+        if not self.transition_flow_number > 0:
+            raise ValueError("transition_flow_number must be > 0")
 
 
 @dataclass(frozen=True)
@@ -102,7 +112,7 @@ class Valve:
         return math.sin(self.taper(i)) * math.pi * 2.0 * self.bore_radius_m
 
     def gradient(self, i: int) -> float:
-        """The linear-law gradient of edge i (its own, else the port's). [m]"""
+        """The linear- or laminar-law gradient of edge i (its own, else the port's). [m]"""
         g = self.edges[i].gradient_m
         return g if g > 0 else self.port_gradient(i)
 
@@ -175,11 +185,13 @@ class Cylinder:
 class Fluid:
     """beta [Pa] (1.5 GPa nameplate), rho [kg/m^3] (870), dp_transition_pa: the orifice law
     sign(dp) sqrt|dp| is replaced by dp / (dp^2 + dp_t^2)^(1/4) (smooth through 0, within 2.5e-5
-    relative of the square root at 1 bar for dp_t = 10 mbar). [Pa]"""
+    relative of the square root at 1 bar for dp_t = 10 mbar). [Pa]
+    nu: kinematic viscosity [m^2/s] (32 mm^2/s, ISO VG 32 at 40 degC; the laminar edge law)."""
 
     bulk_modulus_pa: float = 1.5e9
     density_kg_m3: float = 870.0
     dp_transition_pa: float = 1.0e3
+    kinematic_viscosity_m2_s: float = 32.0e-6
 
 
 @dataclass(frozen=True)
@@ -303,7 +315,7 @@ NAMEPLATE = RefPlant()
 
 
 def family(plant: RefPlant, law: str) -> RefPlant:
-    """``plant`` with every edge on ``law`` (``"eq3"``, ``"sharp"``, ``"linear"``)."""
+    """``plant`` with every edge on ``law`` (``"eq3"``, ``"sharp"``, ``"linear"``, ``"laminar"``)."""
     return replace(plant, valve=plant.valve.with_edges(law=law))
 
 

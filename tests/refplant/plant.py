@@ -31,7 +31,7 @@ from numba import njit
 from scipy.integrate import solve_ivp
 from scipy.optimize import root
 
-from .edges import area_kernel, edge_rows
+from .edges import area_kernel, edge_rows, laminar_factor
 from .params import RefPlant
 from .scenarios import Effects, Load, Trajectory
 
@@ -113,16 +113,18 @@ def feedforward_kernel(v, P):
 
 
 @njit(cache=True)
-def supply_at_valve(ps, p1, p2, gs1, gs2, k, dpt, R):
-    """p_v with p_v = p_s - R q_s|q_s|, q_s = k (gs1 ssqrt(p_v - p1) + gs2 ssqrt(p_v - p2)):
-    bisection on the bracket, 60 halvings (f(p_v) rises with p_v). [Pa]"""
+def supply_at_valve(ps, p1, p2, gs1, gs2, k, dpt, R, x, rows):
+    """p_v with p_v = p_s - R q_s|q_s|, q_s = k (gs1 ssqrt(p_v - p1) c1 + gs2 ssqrt(p_v - p2) c2),
+    c the edges' :func:`laminar_factor` at spool position x: bisection on the bracket, 60 halvings
+    (f(p_v) rises with p_v). [Pa]"""
     if R <= 0.0:
         return ps
     lo = min(ps, p1, p2)
     hi = max(ps, p1, p2)
     for _ in range(60):
         pv = 0.5 * (lo + hi)
-        q = k * (gs1 * ssqrt(pv - p1, dpt) + gs2 * ssqrt(pv - p2, dpt))
+        q = k * (gs1 * ssqrt(pv - p1, dpt) * laminar_factor(x, pv - p1, rows[0])
+                 + gs2 * ssqrt(pv - p2, dpt) * laminar_factor(-x, pv - p2, rows[2]))
         if pv - ps + R * q * abs(q) > 0.0:
             hi = pv
         else:
@@ -140,9 +142,9 @@ def flows_kernel(x, p1, p2, ps, pr, rows, P):
     g1 = rows[1, 2] * area_kernel(-x, rows[1])
     g2 = rows[2, 2] * area_kernel(-x, rows[2])
     g3 = rows[3, 2] * area_kernel(x, rows[3])
-    pv = supply_at_valve(ps, p1, p2, g0, g2, k, dpt, P[_RS])
-    q1 = k * (g0 * ssqrt(pv - p1, dpt) + g1 * ssqrt(pr - p1, dpt))
-    q2 = k * (g2 * ssqrt(p2 - pv, dpt) + g3 * ssqrt(p2 - pr, dpt))
+    pv = supply_at_valve(ps, p1, p2, g0, g2, k, dpt, P[_RS], x, rows)
+    q1 = k * (g0 * ssqrt(pv - p1, dpt) * laminar_factor(x, pv - p1, rows[0]) + g1 * ssqrt(pr - p1, dpt) * laminar_factor(-x, pr - p1, rows[1]))
+    q2 = k * (g2 * ssqrt(p2 - pv, dpt) * laminar_factor(-x, p2 - pv, rows[2]) + g3 * ssqrt(p2 - pr, dpt) * laminar_factor(x, p2 - pr, rows[3]))
     return q1, q2, pv
 
 
@@ -217,7 +219,7 @@ class Inputs:
     @classmethod
     def build(cls, plant: RefPlant, effects: Effects, supply: tuple, trajectory: Trajectory,
               load: Load, spool_command: np.ndarray | None = None) -> "Inputs":
-        return cls(pack(plant, effects, supply, trajectory.X0_m), edge_rows(plant.valve), trajectory.arrays(),
+        return cls(pack(plant, effects, supply, trajectory.X0_m), edge_rows(plant.valve, plant.fluid), trajectory.arrays(),
                    (np.ascontiguousarray(load.t_s, float), np.ascontiguousarray(load.force_n, float)),
                    np.ascontiguousarray(np.empty(0) if spool_command is None else spool_command, float))
 

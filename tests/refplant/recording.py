@@ -54,10 +54,10 @@ class RefRecording:
         return self.t_s.size
 
     def edge_truth(self) -> list[dict]:
-        """The true edges, one dict per edge: edge, law, alpha, underlap_m, gradient_m (linear law)."""
+        """The true edges, one dict per edge: edge, law, alpha, underlap_m, gradient_m (linear and laminar laws)."""
         v = self.plant.valve
         return [{"edge": e, "law": ed.law, "alpha": ed.alpha, "underlap_m": ed.underlap_m,
-                 "gradient_m": v.gradient(i) if ed.law == "linear" else math.nan}
+                 "gradient_m": v.gradient(i) if ed.law in ("linear", "laminar") else math.nan}
                 for i, (e, ed) in enumerate(zip(EDGES, v.edges))]
 
 

@@ -298,6 +298,26 @@ def test_x_hat_a_window_did_not_determine_is_left_out(wh):
     assert wh.condition("N1", "s2")["state"] == "faulty"
 
 
+def test_leakage_a_window_could_not_resolve_is_undetermined(wh, tmp_path):
+    # windows whose leak_scale interval was too wide hold the commissioning's (edge_fits.leak_scale_held):
+    # the views show no number for them, the edge's leakage is the median of the windows that resolved
+    # it, or none (the report says undetermined)
+    wh.add_valve("L1")
+    held = np.zeros(HOURS.size, bool)
+    held[-3:] = True
+    leak = np.where(held, 10.0, 0.2)
+    wh.add_fits("L1", "s1", HOURS, 0.98, 0.23, 0.10, leak=leak, leak_held=held)
+    wh.add_fits("L1", "s2", HOURS, 0.98, 0.23, 0.10, leak=10.0, leak_held=True)
+    assert wh.q("SELECT count(leak_scale) AS n FROM stg_edge_fits WHERE edge = 's1'")["n"][0] == HOURS.size - 3
+    assert wh.condition("L1", "s1")["leak_scale"] == pytest.approx(0.2)
+    c = wh.condition("L1", "s2")
+    assert c["leak_scale"] is None and c["n_ok_windows"] == HOURS.size
+    page = render_report(plant="P", generated_at=COMMISSIONED, ranking=wh.q("SELECT * FROM fleet_ranking"),
+                         conditions=wh.q("SELECT * FROM valve_condition"), fleet_png=_png(tmp_path), valve_pngs={"L1": []},
+                         discrepancy={}, snapshot=tmp_path)
+    assert page.count("undetermined") == 1  # s2; s1 shows 0.20
+
+
 def test_configured_bounds_are_used(wh):
     # the same fits: healthy with the defaults, worn with a tighter α̂ wear bound
     wh.add_valve("K1")

@@ -40,7 +40,7 @@ class Warehouse:
         insert_frame(self.con, "condition_bounds", pl.DataFrame([row], schema=polars_schema(CONDITION_BOUNDS_FIELDS)))
 
     def add_fits(self, valve_id: str, edge: str, hours, alpha, x_pct, e, status="ok", baseline_version: int = 1,
-                 x_determined=None, leak=None, monitored_at: datetime = COMMISSIONED) -> None:
+                 x_determined=None, leak=None, leak_held=None, monitored_at: datetime = COMMISSIONED) -> None:
         hours = np.asarray(hours, float)
         n = hours.size
         col = lambda v: np.broadcast_to(np.asarray(v, float), (n,)).copy()  # noqa: E731
@@ -68,6 +68,8 @@ class Warehouse:
                 "leak_scale": None if leak is None else np.where(ok, col(leak), np.nan), "leak_scale_ci_low": None, "leak_scale_ci_high": None,
                 "u_spread_mm": None,
                 "x_hat_determined": None if x_determined is None else np.broadcast_to(np.asarray(x_determined, bool), (n,)).tolist(),
+                "leak_scale_held": None if leak_held is None else np.broadcast_to(np.asarray(leak_held, bool), (n,)).tolist(),
+                "row_stride": [1] * n,
             },
             schema_overrides={k: v for k, v in polars_schema(EDGE_FIT_FIELDS).items()},
         ).cast(dict(polars_schema(EDGE_FIT_FIELDS)))

@@ -87,12 +87,12 @@ def test_window_step_is_the_missing_leakage():
     ks = np.append(np.diff(kv) / np.diff(kn), 0.0)
     args = (np.array([0, u.shape[0]]), np.array([True]), np.array([1.0]), np.array([0.0]), np.array([0]), np.array([kn.shape[0]]), kn, kv, ks)
     for block in (1, 50):
-        step, info, sigma2, rho = leak_scale_step(u, area, leak, *args, block)
+        step, info, sigma2, rho = leak_scale_step(u, area, leak, *args, np.array([block]))
         assert step[0] == pytest.approx(0.7, abs=1e-6) and info[0] > 0 and np.isfinite(sigma2[0])
 
 
 def test_older_warehouse_gets_the_leakage_columns(tmp_path):
-    """A warehouse whose edge_fits and baselines predate the leak_* (and u_spread_mm, x_hat_determined,
+    """A warehouse whose edge_fits and baselines predate the leak_* (and u_spread_mm, x_hat_determined, row_stride,
     edge_law*) columns gets them
     (NULL in old rows), after its own columns; a current one costs no DDL."""
     from flows.common.warehouse_db import create_table_sql
@@ -100,7 +100,7 @@ def test_older_warehouse_gets_the_leakage_columns(tmp_path):
     from schemas.fields import BASELINE_FIELDS, EDGE_FIT_FIELDS
 
     con = duckdb.connect(str(tmp_path / "old.duckdb"))
-    old_fits = tuple(f for f in EDGE_FIT_FIELDS if not f.name.startswith("leak_") and f.name not in ("u_spread_mm", "x_hat_determined"))
+    old_fits = tuple(f for f in EDGE_FIT_FIELDS if not f.name.startswith("leak_") and f.name not in ("u_spread_mm", "x_hat_determined", "row_stride"))
     old_base = tuple(f for f in BASELINE_FIELDS if not f.name.startswith(("leak_", "edge_law")))
     con.execute(create_table_sql("edge_fits", old_fits))
     con.execute(create_table_sql("baselines", old_base))

@@ -119,3 +119,25 @@ def test_engines_agree_with_window_rows(lake):
     assert a.selection.equals(b.selection)
     assert a.points.drop("area_m2").equals(b.points.drop("area_m2"))
     np.testing.assert_allclose(a.points["area_m2"].to_numpy(), b.points["area_m2"].to_numpy(), rtol=1e-12)
+
+
+def test_a_window_short_of_information_is_evaluated_at_every_row(lake):
+    """With min_points so high that the thinned 6 s windows keep fewer than THIN_MARGIN × min_points
+    samples on an edge, they are evaluated at every row: their points are every row's, on both
+    engines; with it low enough they stay thinned (the rule, transforms.monitor.THIN_MARGIN)."""
+    full = monitor_points(lake, sv.params())
+    per = full.points.group_by("valve_id", "window_id", "edge").len()
+    most = int(per["len"].max())
+    for engine in ("numba", "polars"):
+        dense = monitor_points(lake, sv.params(window_rows=WINDOW_ROWS, min_points=most), engine=engine)
+        assert dense.points.drop("area_m2").equals(full.points.drop("area_m2"))
+        np.testing.assert_allclose(dense.points["area_m2"].to_numpy(), full.points["area_m2"].to_numpy(), rtol=1e-12)
+        thin = monitor_points(lake, sv.params(window_rows=WINDOW_ROWS, min_points=1), engine=engine)
+        assert thin.points.height < full.points.height // 4
+    # between the two: a window is thinned exactly when every edge with points keeps ≥ 2 × min_points samples
+    min_points = int(per["len"].min()) // 2 + 1
+    some = monitor_points(lake, sv.params(window_rows=WINDOW_ROWS, min_points=min_points))
+    got = some.points.group_by("valve_id", "window_id").len().join(full.points.group_by("valve_id", "window_id").len(), on=["valve_id", "window_id"])
+    dense_windows = set(zip(*got.filter(pl.col("len") == pl.col("len_right")).select("valve_id", "window_id").to_dict(as_series=False).values()))
+    short = per.filter(pl.col("len") < 2 * min_points)
+    assert dense_windows >= set(zip(short["valve_id"], short["window_id"]))
