@@ -1,6 +1,6 @@
 """Continuous-recording ingest benchmark: a valve-day of back-to-back 1 kHz samples → lake.
 
-Usage (figures and the exact commands in BENCHMARKS.md, "Ingest of continuous recordings"):
+Usage (figures and the exact commands in BENCHMARKS.md, "Ingest", ING-8):
 
     .venv/bin/python bench/continuous.py --hours 24 --layout wide --format parquet           # one file
     .venv/bin/python bench/continuous.py --hours 24 --layout wide --format parquet --hourly   # 24 hourly files

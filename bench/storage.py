@@ -1,6 +1,6 @@
 """Storage of continuous recordings: lake bytes per row, what retention leaves, and the plant-scale arithmetic.
 
-Usage (figures and the exact command in BENCHMARKS.md, "Storage and retention"):
+Usage (figures and the exact command in BENCHMARKS.md, "Retention and storage"):
 
     taskset -c 0 .venv/bin/python bench/storage.py                # 20 min of one valve
     taskset -c 0 .venv/bin/python bench/storage.py --minutes 60 --valves 500 --keep-days 90 --thin-s 10

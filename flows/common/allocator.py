@@ -5,7 +5,7 @@ after chunk (a valve-week, ~1.7 M rows), and each chunk allocates the same ~100 
 of temporary arrays again (Savitzky–Golay values, selection codes, points). glibc serves
 allocations above its mmap threshold (at most 32 MB, adapted upwards as blocks are freed) with
 fresh ``mmap`` pages and unmaps them on ``free``, so each chunk pays one page fault per 4 KiB it
-touches: ~22 % of steps 2–4b (BENCHMARKS.md, "Monitoring"). :func:`retain_freed_memory` raises
+touches: ~22 % of steps 2–4b (measured with BENCHMARKS.md's MON-3). :func:`retain_freed_memory` raises
 the mmap and trim thresholds (``mallopt``), so large blocks come from the heap and stay there
 after ``free``, ready for the next chunk.
 
@@ -37,7 +37,8 @@ TOP_PAD_BYTES = 64 << 20
 POLARS_ALLOCATOR_CONF = "dirty_decay_ms:-1,muzzy_decay_ms:-1"
 """polars' allocator (jemalloc, configured by ``_RJEM_MALLOC_CONF``) keeping freed pages: without
 it each chunk's decoded columns come on fresh pages (one page fault per 4 KiB; on a valve-day of
-continuous recording ~3.5 of the monitor's 16 CPU s went to the kernel, BENCHMARKS.md)."""
+continuous recording ~3.5 of the monitor's 16 CPU s went to the kernel, measured as
+BENCHMARKS.md's MON-1)."""
 
 
 def retain_polars_memory() -> bool:

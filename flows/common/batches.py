@@ -1,7 +1,7 @@
 """Finished rows held in memory and written to the warehouse database together.
 
-One DuckDB transaction costs ~20–40 ms whatever its size (``BENCHMARKS.md``, "Monitoring" and
-"Backfill"), so a write per chunk, file or unit would be the serial part of a long run. What a
+One DuckDB transaction costs ~20–40 ms whatever its size (``BENCHMARKS.md``, "Plant-day",
+DAY-9), so a write per chunk, file or unit would be the serial part of a long run. What a
 batch holds is lost in a crash before its write; its producers are all idempotent, so a rerun
 redoes that work and nothing else.
 """

@@ -2,7 +2,7 @@
 
 typer (0.29) converts every option's and argument's value with a pydantic ``TypeAdapter`` that
 it builds on first use: importing pydantic and building the adapters cost every command
-0.15–0.2 CPU-s (BENCHMARKS.md, "The monitor on a valve-day, fourth round"), ten times what
+0.15–0.2 CPU-s (BENCHMARKS.md, row LAT-7), ten times what
 parsing the command line costs otherwise. The values valvemon's commands get need none of it:
 :func:`convert_plainly` gives each parameter whose annotation is ``str``, ``Path``, ``bool``,
 ``int`` or ``float`` (or a list of one) a converter that returns what typer's would for the

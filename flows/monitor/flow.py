@@ -65,7 +65,7 @@ INDEXED_TABLES = frozenset({"baselines"})
 """Tables whose key DuckDB enforces with a unique index. ``edge_fits`` and ``selection_stats``
 keep theirs by construction instead: every write deletes the spans it replaces and inserts their
 rows in one transaction (:func:`store_spans`). A unique (ART) index on them made each such write
-about 4× as expensive (~45 against ~12 ms CPU for a valve-week), BENCHMARKS.md "Monitoring"."""
+about 4× as expensive (~45 against ~12 ms CPU for a valve-week)."""
 
 LEAK_Z95 = 1.959963984540054
 """Normal 97.5 % quantile: the baselines' 95 % interval of ``leak_scale`` (a pooled commissioning

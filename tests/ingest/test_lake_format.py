@@ -70,8 +70,8 @@ def test_lake_file_encodings_codec_and_statistics_from_the_footer_and_rerun_byte
 def test_older_lake_files_are_read_beside_new_ones(tmp_path):
     """A day folder after an upgrade: hour 0 written by an older valvemon (zstd, PLAIN time,
     dictionary-encoded floats, small row groups), hour 1 with byte-stream-split floats (measured
-    for the lake and not taken: ``docs/ingest.md``, "Storage"), hour 2 by this one. polars (``read_lake``), DuckDB and
-    retention's thinning read them all alike."""
+    for the lake and not taken: ``docs/ingest.md``, "The lake's format"), hour 2 by this one.
+    polars (``read_lake``), DuckDB and retention's thinning read them all alike."""
     wh = tmp_path / "wh"
     folder = partition_path(wh, "V1", date(2025, 1, 1)).parent
     folder.mkdir(parents=True)

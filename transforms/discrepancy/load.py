@@ -387,7 +387,7 @@ def ramp_load(f_hat: np.ndarray, valid: np.ndarray, usable: np.ndarray, segment:
     plant seed 2: the load 43 N off at speed over 1–2 s levels after steep ramps); the mechanical
     replay takes that column's part as friction (:func:`motion_mismatch`), so what it replays is
     the joint fit. (Such pieces were once tied to one value, which left missed gentle ramps inside
-    them to the velocity column: docs/discrepancy.md, "A level is one value".)
+    them to the velocity column; docs/discrepancy.md, "How it works".)
 
     A segment without usable samples keeps its ``levels`` value."""
     W = _corner_width(knot_samples, settings)
