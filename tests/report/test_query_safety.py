@@ -19,6 +19,7 @@ import pytest
 from flows.common.errors import ValvemonError
 from flows.report.query import check_read_only
 from flows.simulate.archive import DEFAULT_COMMISSIONED, SimulateRequest, run_simulate
+from tests.report.commands import run_each
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -40,29 +41,6 @@ def _run(args: list[str], env: dict[str, str], *, ok: bool) -> subprocess.Comple
     assert (proc.returncode == 0) == ok, proc.stderr
     return proc
 
-
-# the command line's entry point run once per argument list, in one process (each command started in a
-# process of its own cost ~0.4 CPU-s of start-up, 28 of them): (exit status, stdout, stderr) of each
-_COMMANDS = """
-import contextlib, io, json, sys
-from flows.cli import main
-done = []
-for args in json.loads(sys.argv[1]):
-    sys.argv, out, err, code = ["valvemon", *args], io.StringIO(), io.StringIO(), 0
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        try:
-            main()
-        except SystemExit as exc:
-            code = exc.code
-    done.append((code, out.getvalue(), err.getvalue()))
-print(json.dumps(done))
-"""
-
-
-def _run_each(commands: list[list[str]], env: dict[str, str]) -> list[tuple[int, str, str]]:
-    proc = subprocess.run([sys.executable, "-c", _COMMANDS, json.dumps(commands)], env=env, capture_output=True, text=True, timeout=300)
-    assert proc.returncode == 0, proc.stderr
-    return [tuple(r) for r in json.loads(proc.stdout)]
 
 
 def _files(root: Path) -> dict[str, str]:
@@ -99,7 +77,7 @@ def test_a_query_refuses_every_write_and_leaves_every_file_unchanged(warehouse, 
     part = _partition(wh)
     before = _files(wh)
     sqls = [template.format(part=part, wh=wh) for template in REFUSED]
-    done = _run_each([["query", sql, "--warehouse", str(wh), *(["--live"] if live else [])] for sql in sqls], env)
+    done = run_each([["query", sql, "--warehouse", str(wh), *(["--live"] if live else [])] for sql in sqls], env)
     for sql, (code, stdout, stderr) in zip(sqls, done, strict=True):
         assert code == 1, (sql, stderr)
         lines = stderr.strip().splitlines()
