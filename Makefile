@@ -49,7 +49,7 @@ chromium:
 # OPENBLAS_NUM_THREADS=1: two xdist workers on two cores, each with its own BLAS threads, spun
 # against each other (the discrepancy tests' least squares: 41 s of CPU for 39 s of wall, 16 for 19 without)
 test: setup chromium
-	OPENBLAS_NUM_THREADS=1 $(VENV)/bin/python -m pytest -n 2 --dist loadgroup --durations=30
+	OPENBLAS_NUM_THREADS=1 $(VENV)/bin/python -m pytest -n 2 --dist loadgroup --durations=15
 
 bench: setup
 	$(VENV)/bin/python bench/simulate.py

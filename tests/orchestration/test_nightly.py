@@ -71,7 +71,13 @@ def test_serve_needs_a_prefect_server(archive, tmp_path):
     assert "no such folder" in str(res.exception)
 
 
-def test_backfill_command_checks_its_options(archive, tmp_path):
+def test_backfill_command_checks_its_options(archive, tmp_path, monkeypatch):
+    import functools
+
+    import flows.orchestration.dask_runner as dask_runner
+
+    # nothing listens on port 9: the client retries until its timeout (10 s by default, 1 s here)
+    monkeypatch.setattr(dask_runner, "cluster_threads", functools.partial(dask_runner.cluster_threads, timeout_s=1.0))
     runner = CliRunner()
     base = ["backfill", "--config", str(archive / "plant.toml"), "--warehouse", str(tmp_path)]
     res = runner.invoke(app, [*base, "--from", "2025-01-01", "--to", "2025-01-02", "--dask-address", "tcp://x:1", "--dask-workers", "2"])

@@ -15,6 +15,7 @@ from pathlib import Path
 import pytest
 
 from flows.simulate.archive import DEFAULT_COMMISSIONED, SimulateRequest, run_simulate
+from tests.report.commands import run_each
 
 ROOT = Path(__file__).resolve().parents[2]
 DAY2 = "2025-01-02T00:00:00Z"
@@ -55,8 +56,11 @@ def _cli(args: list[str], env: dict[str, str]) -> str:
     return proc.stdout
 
 
-def _query(sql: str, wh: Path, env: dict[str, str]) -> list[str]:
-    return _cli(["query", sql, "--format", "csv", "--warehouse", str(wh)], env).splitlines()[1:]
+def _query(*sqls: str, wh: Path, env: dict[str, str]) -> list[list[str]]:
+    """The rows (CSV, without the header) of each query, the queries run one after the other in one process."""
+    done = run_each([["query", sql, "--format", "csv", "--warehouse", str(wh)] for sql in sqls], env)
+    assert all(code == 0 for code, _, _ in done), done
+    return [out.splitlines()[1:] for _, out, _ in done]
 
 
 @pytest.mark.slow
@@ -67,13 +71,15 @@ def test_query_sees_each_step_at_once_and_never_waits_for_a_running_monitor(tmp_
     env, wh, config = _env(tmp_path), tmp_path / "wh", str(archive / "plant.toml")
 
     _cli(["ingest", "--config", config, "--warehouse", str(wh), str(archive / "exports")], env)
-    assert _query("SELECT count(*) FROM ingest_manifest", wh, env) == ["2"]  # one file per day
-    assert _query("SELECT count(*) FROM quarantine", wh, env) == ["0"]
-    assert _query("SELECT count(*) FROM edge_fits", wh, env) == ["0"]  # the views' tables exist before any fit
+    manifest, quarantine, fits = _query("SELECT count(*) FROM ingest_manifest", "SELECT count(*) FROM quarantine", "SELECT count(*) FROM edge_fits", wh=wh, env=env)
+    assert manifest == ["2"]  # one file per day
+    assert quarantine == ["0"]
+    assert fits == ["0"]  # the views' tables exist before any fit
 
     _cli(["monitor", "--config", config, "--warehouse", str(wh), "--to", DAY2], env)  # day 1: 2 windows × 4 edges
-    assert _query("SELECT count(*) FROM edge_fits WHERE status = 'ok'", wh, env) == ["8"]
-    condition = _query("SELECT valve_id, edge, state, n_windows FROM valve_condition ORDER BY edge_order", wh, env)
+    fits, condition = _query("SELECT count(*) FROM edge_fits WHERE status = 'ok'", "SELECT valve_id, edge, state, n_windows FROM valve_condition ORDER BY edge_order",
+                             wh=wh, env=env)  # fmt: skip
+    assert fits == ["8"]
     assert condition == [f"V001,{e},unknown,2" for e in ("s1", "1r", "s2", "2r")]  # too few fits for a trend: unknown
 
     ready, go = tmp_path / "ready", tmp_path / "go"
@@ -84,12 +90,13 @@ def test_query_sees_each_step_at_once_and_never_waits_for_a_running_monitor(tmp_
             assert monitor.poll() is None, monitor.communicate()
             time.sleep(0.05)
         # the monitor holds the live database mid-transaction: the reader answers from the snapshot
-        assert _query("SELECT count(*) FROM edge_fits", wh, env) == ["8"]
-        assert len(_query("SELECT * FROM valve_condition", wh, env)) == 4
+        fits, condition = _query("SELECT count(*) FROM edge_fits", "SELECT * FROM valve_condition", wh=wh, env=env)
+        assert fits == ["8"] and len(condition) == 4
         assert monitor.poll() is None  # the answers came while the writer was still holding the database
     finally:
         go.touch()
         out, err = monitor.communicate(timeout=600)
     assert monitor.returncode == 0, err
-    assert _query("SELECT count(*) FROM edge_fits WHERE status = 'ok'", wh, env) == ["16"]  # day 2 published at once
-    assert _query("SELECT max(n_windows) FROM valve_condition", wh, env) == ["4"]
+    fits, most = _query("SELECT count(*) FROM edge_fits WHERE status = 'ok'", "SELECT max(n_windows) FROM valve_condition", wh=wh, env=env)
+    assert fits == ["16"]  # day 2 published at once
+    assert most == ["4"]

@@ -1,7 +1,8 @@
 """`valvemon query` never writes (issue 18, item 1): on a warehouse holding one ingested day,
 every statement that reaches the file system or the session's safety is refused with one line
 on stderr and exit 1, and every file of the warehouse is byte-identical afterwards; reading the
-lake's Parquet and the views still works. Through the real command line, in subprocesses."""
+lake's Parquet and the views still works. Through the real command line, in subprocesses (the
+refused statements one after the other in one)."""
 
 from __future__ import annotations
 
@@ -18,6 +19,7 @@ import pytest
 from flows.common.errors import ValvemonError
 from flows.report.query import check_read_only
 from flows.simulate.archive import DEFAULT_COMMISSIONED, SimulateRequest, run_simulate
+from tests.report.commands import run_each
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -38,6 +40,7 @@ def _run(args: list[str], env: dict[str, str], *, ok: bool) -> subprocess.Comple
     proc = subprocess.run([sys.executable, "-c", "from flows.cli import main; main()", *args], env=env, capture_output=True, text=True, timeout=300)
     assert (proc.returncode == 0) == ok, proc.stderr
     return proc
+
 
 
 def _files(root: Path) -> dict[str, str]:
@@ -73,13 +76,13 @@ def test_a_query_refuses_every_write_and_leaves_every_file_unchanged(warehouse, 
     wh, env = warehouse
     part = _partition(wh)
     before = _files(wh)
-    for template in REFUSED:
-        sql = template.format(part=part, wh=wh)
-        proc = _run(["query", sql, "--warehouse", str(wh), *(["--live"] if live else [])], env, ok=False)
-        assert proc.returncode == 1, (sql, proc.stderr)
-        lines = proc.stderr.strip().splitlines()
-        assert len(lines) == 1 and lines[0].startswith("valvemon: error: query "), (sql, proc.stderr)
-        assert proc.stdout == ""
+    sqls = [template.format(part=part, wh=wh) for template in REFUSED]
+    done = run_each([["query", sql, "--warehouse", str(wh), *(["--live"] if live else [])] for sql in sqls], env)
+    for sql, (code, stdout, stderr) in zip(sqls, done, strict=True):
+        assert code == 1, (sql, stderr)
+        lines = stderr.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith("valvemon: error: query "), (sql, stderr)
+        assert stdout == ""
     assert _files(wh) == before  # the partition still holds its rows, no file appeared or changed
 
 
