@@ -203,11 +203,59 @@ def replay(params: PlantParams, x_m, p_s_pa, p_r_pa, F_l_n, restart_at, restart_
             raise ValueError("the driving signals must be finite")
     if drive == DRIVE_MECHANICAL:
         P[[_BETA, _KI, _KE, _AIR, _RS]] = 0.0  # the pressures are given: no chamber dynamics
-    out = np.empty((4, n))
     p_limit = P_LIMIT_FACTOR * float(np.max(np.abs(ps)))
-    bad = _replay_kernel(x, ps, pr, fl, at, st, valve_edge_constants(params.geometry, cond),
-                         np.asarray(cond.alpha, float), P, params.sensors.sample_rate_hz,
-                         int(substeps), p_limit, int(drive), g, out)
+    args = (x, ps, pr, fl, at, st, valve_edge_constants(params.geometry, cond), np.asarray(cond.alpha, float), P,
+            params.sensors.sample_rate_hz, int(substeps), p_limit, int(drive), g)
+    out = _LAST.continued(args)
+    if out is None:
+        out = np.empty((4, n))
+        bad = _replay_kernel(*args, out)
+        _LAST.keep(args, out, bad)
+    else:
+        bad = -1
     if bad >= 0:
         raise FloatingPointError(f"replay diverged at sample {bad}")
     return ReplayResult(X_m=out[0], vX_m_s=out[1], p1_pa=out[2], p2_pa=out[3])
+
+
+class _LastReplay:
+    """The last replay the kernel integrated, to continue from: a replay that restarts at one
+    sample k with the state the last one passed through there exactly, on the same inputs from k
+    on (the same plant, valve, spool path, pressures, load from k, drive), is that replay from k
+    (the kernel's state at a sample is (X, v_X, p1, p2), nothing before k enters it), so its
+    states are copied instead of integrated: the same numbers. Placing a load step across a
+    standstill by replay (``transforms.discrepancy.rows``) replays each candidate from its own
+    sample on a common prefix; while the replayed cylinder sticks under both loads, the next
+    candidates' replays are the last one's."""
+
+    def __init__(self):
+        self.last = None
+
+    def keep(self, args, out, bad: int) -> None:
+        """Keep a copy of the kernel's inputs and states (one replay at a time; none if it diverged)."""
+        self.last = None if bad >= 0 else (tuple(a.copy() if isinstance(a, np.ndarray) else a for a in args), out.copy())
+
+    def continued(self, args) -> np.ndarray | None:
+        """The states (4, n) of a replay with ``args`` (the kernel's, without ``out``) copied from
+        the last one, or None where it is not that replay's continuation."""
+        if self.last is None:
+            return None
+        last, states = self.last
+        if args[4].size != 1 or args[0].size != last[0].size:
+            return None
+        k = int(args[4][0])
+        if int(last[4][-1]) > k or not np.array_equal(states[:, k], args[5][0]):
+            return None
+        if any(a != b for a, b in zip(args[9:13], last[9:13])):
+            return None
+        for i in (0, 1, 2, 6, 7, 8, 13):
+            if not np.array_equal(args[i], last[i]):
+                return None
+        if not np.array_equal(args[3][k:], last[3][k:]):
+            return None
+        out = np.full_like(states, np.nan)
+        out[:, k:] = states[:, k:]
+        return out
+
+
+_LAST = _LastReplay()
