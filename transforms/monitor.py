@@ -302,7 +302,7 @@ def _evaluate(lake_v, dt, lay, p, leakage, with_ratio):
             sm, de = savgol_arrays(arrays[column], window=p.savgol_window, order=p.savgol_order, sample_period_s=dt, smooth=smooth_name is not None)
             arrays.update(_named(smooth_name, sm, deriv_name, de))
     else:  # the columns' chunks as they are (not joined): read at the rows only
-        arrays = _averaged({c: _float_chunks(lake_v[c]) for c in _SIGNALS_F64}, rows, lay.stride[lay.window], p, dt)
+        arrays = _averaged({c: _float_chunks(lake_v[c]) for c in _SIGNALS_F64}, rows, lay.window, lay.stride, p, dt)
     win = lay.window
     codes, flagged, removed, selected, n_evaluated = selection_codes(arrays, win, lay.n_windows, p, valid=lay.valid)
     pts = points_arrays(arrays, codes, SELECTED_CODE, selected.sum(axis=0), p, leakage=leakage, with_ratio=with_ratio)
@@ -313,17 +313,18 @@ def _named(smooth_name, sm, deriv_name, de) -> dict[str, np.ndarray]:
     return {deriv_name: de} if smooth_name is None else {smooth_name: sm, deriv_name: de}
 
 
-def _averaged(chunks: dict[str, list[np.ndarray]], rows: np.ndarray, k: np.ndarray, p: MonitorParams, dt: float) -> dict[str, np.ndarray]:
-    """The signals of steps 2–3 at the evaluated ``rows`` of thinned windows, each row's the mean
-    of the k rows it stands for (``k`` per row: its window's stride): the Savitzky–Golay values
+def _averaged(chunks: dict[str, list[np.ndarray]], rows: np.ndarray, window: np.ndarray, stride: np.ndarray, p: MonitorParams,
+              dt: float) -> dict[str, np.ndarray]:  # fmt: skip
+    """The signals of steps 2–3 at the evaluated ``rows`` (of the windows ``window``), each row's the
+    mean of the k rows it stands for (k: its window's ``stride``): the Savitzky–Golay values
     on their stencil convolved with a k-row box, the raw signals read there averaged alike
     (:func:`transforms.derivatives.savgol_at`'s ``box``). Every row's values carry independent
     position noise (a cylinder transmitter's steps): their mean keeps the information of the k
     rows that a single row would drop. Rows of the same stride are summed together."""
     out: dict[str, np.ndarray] = {}
-    boxes = np.unique(k)
+    boxes = np.unique(stride)
     for box in boxes:
-        at = None if boxes.shape[0] == 1 else np.flatnonzero(k == box)  # None: all rows
+        at = None if boxes.shape[0] == 1 else np.flatnonzero((stride == box)[window])  # None: all rows
         r = rows if at is None else rows[at]
         parts = {c: box_mean_at(chunks[c], r, int(box)) for c in _GATHERED}
         for column, (smooth_name, deriv_name) in _SG_OUTPUTS.items():
