@@ -325,7 +325,7 @@ def box_weights(w: np.ndarray, box: int) -> np.ndarray:
 def savgol_at(x, rows: np.ndarray, *, window: int, order: int, sample_period_s: float, smooth: bool = True, box: int = 1):
     """:func:`savgol_arrays` evaluated at ``rows`` only (int64 indices into ``x``): (smoothed or
     None, first derivative), one entry per row, equal bit for bit to the full pass's entries at
-    those rows. What the monitor runs when it evaluates every k-th row of a window.
+    those rows.
 
     ``box`` = k > 1: each entry is instead the mean of the full pass's entries at rows i … i + k − 1
     (one stencil of window + k − 1 taps, :func:`box_weights`): the row stands for the k rows up to

@@ -392,9 +392,9 @@ each of its populations clear of every threshold of the fit by this factor: at l
 ``THIN_MARGIN`` × ``min_points`` samples (k samples per evaluated point) and ``THIN_MARGIN`` ×
 ``min_coverage_m`` of u. Elsewhere — a window of sparse motion, an edge barely used — every row
 is evaluated, so that a window's verdict is the one it has at every row. The thresholds count
-samples at the sample rate, i.e. information: the points of a window are correlated over the
-21-sample Savitzky–Golay stencil, so every k-th of them (k ≤ 21) carries about what all of them
-do; k · points is the population's size in samples. Thinning moves that count by up to k per
+samples at the sample rate, i.e. information: a thinned point is the mean of the k rows it
+stands for (:func:`_averaged`), so it carries what they do; k · points is the population's size
+in samples. Thinning moves that count by up to k per
 run of selected rows, and the span of u by what the spool travels in k samples at its ends; a
 factor of 2 leaves both far inside the margin."""
 

@@ -328,7 +328,8 @@ class WindowLayout:
     stride: np.ndarray
     """Each window's stride k (int64): every k-th row of it is evaluated."""
     rows: np.ndarray
-    """The evaluated rows, sorted (int64): every k-th row of each window from its first."""
+    """The evaluated rows, sorted (int64): every k-th row of each window from its first (each
+    standing for the k rows from it on)."""
     window: np.ndarray
     """The window (0 … n_windows − 1) of each evaluated row (int64)."""
     valid: np.ndarray
