@@ -91,8 +91,10 @@ def _stored_key(path: Path) -> str | None:
 
 @cache
 def _code_key() -> bytes:
-    """This module's source and matplotlib's version: a change to how pictures are drawn redraws them all."""
-    return Path(__file__).read_bytes() + matplotlib.__version__.encode()
+    """This module's source, the remaining-life wording it draws and matplotlib's version: a change
+    to how pictures are drawn redraws them all."""
+    here = Path(__file__).resolve()
+    return here.read_bytes() + (here.parent / "remaining.py").read_bytes() + matplotlib.__version__.encode()
 
 
 def figure_key(fn: Callable[..., Path], args: tuple) -> str:
