@@ -21,7 +21,9 @@ first 45 minutes of the same recording (``--warm-minutes``, 0: no warm-up; more 
 reads at once, so that its chunked reads compile the same kernel signatures), so that the numba
 kernels are in that tree's cache, as a nightly run finds them. ``--hours N`` takes the first N
 files and scales the sum to a day (linearly, start-up counted each time: an upper bound).
-``--steps ingest`` (a comma-separated list) runs only those steps; ``--duckdb`` adds, each round,
+``--steps ingest`` (a comma-separated list) runs only those steps. With the ingest, each round also
+runs the anchor, polars' bare streaming copy of the same files (:data:`POLARS_COPY`), pinned and
+measured alike, and prints the ingest ÷ copy ratio (the goal: ≤ 1.2). ``--duckdb`` adds, each round,
 DuckDB's bare ``COPY`` of the same files into a partitioned Parquet lake (one thread, no
 validation; :data:`DUCKDB_COPY`), pinned and measured alike, and prints the ingest ÷ DuckDB ratio:
 
@@ -69,6 +71,34 @@ con.execute(
 """DuckDB's bare copy of the exports into a partitioned Parquet lake (one thread, its defaults:
 snappy, the columns as they are): no validation, no grid, no units, no manifest."""
 
+POLARS_COPY = """
+import os, sys, tomllib
+os.environ["POLARS_MAX_THREADS"] = "1"
+import polars as pl
+from pathlib import Path
+SI = {"bar": 1e5, "mm": 1e-3, "Pa": 1.0, "m": 1.0}
+COLUMN = {"ps": "ps_pa", "pr": "pr_pa", "p1": "p1_pa", "p2": "p2_pa", "x_spool": "x_spool_m", "x_cyl": "x_cyl_m", "x_ref": "x_ref_m"}
+config, out, files = tomllib.loads(Path(sys.argv[1]).read_text()), Path(sys.argv[2]), sys.argv[3:]
+valve = config["valves"][0]
+t = pl.col(config["export"]["timestamp_column"])
+out.mkdir(parents=True, exist_ok=True)
+TEXT = {"decimal_comma": config["export"].get("decimal", ".") == ",", "separator": config["export"].get("separator", ",")}
+for i, f in enumerate(files):
+    if f.endswith(".parquet"):
+        scan, when = pl.scan_parquet(f), t
+    else:  # polars' own streaming read of the text: ISO-8601 times parsed, the values as Float64
+        scan = pl.scan_csv(f, schema_overrides={config["export"]["timestamp_column"]: pl.String}, **TEXT)
+        when = t.str.to_datetime(time_unit="us", time_zone="UTC")
+    scan.select(
+        pl.lit(valve["id"]).alias("valve_id"), when.dt.date().alias("date"), when.alias("timestamp_utc"),
+        *[(pl.col(tag["tag"]) * SI[tag["unit"]]).cast(pl.Float32).alias(COLUMN[s]) for s, tag in valve["tags"].items()],
+    ).sink_parquet(out / f"part-{i:02d}.parquet", compression="uncompressed")
+"""
+"""polars' bare streaming copy of each wide export (Parquet, or CSV with ISO-8601 times) into a lake
+file (one thread): scan, scale to SI, cast to float32, sink uncompressed (the lake's codec); no
+validation, no grid, no manifest. The
+anchor of the issue's "ingest within 1.2x of a bare streaming copy"."""
+
 
 def run_step(code: Path, cpu: int, argv: list[str], log: Path, script: str | None = None) -> dict:
     """One ``valvemon`` command (or the Python ``script`` with ``argv``) with ``PYTHONPATH=code``,
@@ -100,10 +130,14 @@ def plant_with_retention(config: Path, out: Path) -> Path:
 
 
 def export_rows(files: list[Path]) -> int:
-    """Rows of the wide exports (one per instant: the lake rows they make)."""
+    """Rows of the wide exports (one per instant: the lake rows they make; a CSV's lines after its header)."""
     import pyarrow.parquet as pq  # noqa: PLC0415
 
-    return sum(pq.ParquetFile(f).metadata.num_rows for f in files)
+    def lines(f: Path) -> int:
+        with f.open("rb") as fh:
+            return sum(block.count(b"\n") for block in iter(lambda: fh.read(1 << 24), b"")) - 1
+
+    return sum(pq.ParquetFile(f).metadata.num_rows if f.suffix == ".parquet" else lines(f) for f in files)
 
 
 def day_of(files: list[Path]) -> date:
@@ -116,6 +150,13 @@ def duckdb_copy(cpu: int, files: list[Path], out: Path, log: Path) -> dict:
     if out.exists():
         shutil.rmtree(out)
     return run_step(ROOT, cpu, [str(out), *map(str, files)], log, DUCKDB_COPY)
+
+
+def polars_copy(cpu: int, config: Path, files: list[Path], out: Path, log: Path) -> dict:
+    """:data:`POLARS_COPY` of ``files`` into ``out`` (emptied first), pinned to ``cpu``."""
+    if out.exists():
+        shutil.rmtree(out)
+    return run_step(ROOT, cpu, [str(config), str(out), *map(str, files)], log, POLARS_COPY)
 
 
 def path_once(code: Path, cpu: int, config: Path, files: list[Path], warehouse: Path, as_of: date, log: Path,
@@ -163,7 +204,7 @@ def main() -> None:
     steps = tuple(s for s in STEPS if s in args.steps.split(","))
 
     codes = [(c.split("=", 1)[0], Path(c.split("=", 1)[1]).resolve()) for c in (args.code or [f"this={ROOT}"])]
-    files = sorted((args.day / "exports").glob("*.parquet"))
+    files = sorted((args.day / "exports").glob("*.parquet")) or sorted((args.day / "exports").glob("*.csv"))
     if args.hours:
         files = files[: args.hours]
     if not files:
@@ -181,15 +222,20 @@ def main() -> None:
         warm.mkdir()
         import pyarrow.parquet as pq  # noqa: PLC0415 - only the warm-up's cut needs it
 
-        table = pq.read_table(files[0])
-        pq.write_table(table.slice(0, args.warm_minutes * 60_000), warm / files[0].name)
-        del table
+        if files[0].suffix == ".parquet":
+            table = pq.read_table(files[0])
+            pq.write_table(table.slice(0, args.warm_minutes * 60_000), warm / files[0].name)
+            del table
+        else:  # the header and the first minutes' lines
+            with files[0].open("rb") as src, (warm / files[0].name).open("wb") as dst:
+                dst.writelines(line for _, line in zip(range(args.warm_minutes * 60_000 + 1), src))
         for label, code in codes:
             path_once(code, args.cpu, config, [warm / files[0].name], args.work / f"wh_warm_{label}", as_of, log, steps=steps)
     ingested = args.work / "wh_ingested"
 
     results: dict[str, list[dict]] = {label: [] for label, _ in codes}
     duck: list[dict] = []
+    copy: list[dict] = []
     rows = export_rows(files)
     for r in range(args.rounds):
         for label, code in codes:
@@ -201,6 +247,9 @@ def main() -> None:
                 res["ingest"] = results[codes[0][0]][-1]["ingest"]
             results[label].append(res)
             print(json.dumps({"round": r + 1, "code": label, **res}), flush=True)
+        if "ingest" in steps:
+            copy.append(polars_copy(args.cpu, config, files, args.work / "polars_lake", log))
+            print(json.dumps({"round": r + 1, "polars copy": copy[-1]}), flush=True)
         if args.duckdb:
             duck.append(duckdb_copy(args.cpu, files, args.work / "duckdb_lake", log))
             print(json.dumps({"round": r + 1, "duckdb copy": duck[-1]}), flush=True)
@@ -217,6 +266,14 @@ def main() -> None:
             rr = min(results[label], key=lambda x: x[step]["cpu_s"])[step]
             cells += [f"{rr['cpu_s']:.1f}", f"{rr['wall_s']:.1f}", f"{rr['rss_mb'] / 1024:.2f} GB", f"{rows / rr['cpu_s'] / 1e6:.2f}"]
         print(f"| {step} | " + " | ".join(cells) + " |")
+    if copy:
+        p = min(copy, key=lambda x: x["cpu_s"])
+        print(f"| polars bare streaming copy | {p['cpu_s']:.1f} | {p['wall_s']:.1f} | {p['rss_mb'] / 1024:.2f} GB | {rows / p['cpu_s'] / 1e6:.2f} |")
+        print("\ningest ÷ polars bare streaming copy (CPU, least of each): "
+              + ", ".join(f"{label} {best[label]['ingest'] / p['cpu_s']:.2f}×" for label, _ in codes)
+              + "; per round: " + "; ".join(
+                  ", ".join(f"{label} {results[label][r]['ingest']['cpu_s'] / copy[r]['cpu_s']:.2f}×" for label, _ in codes)
+                  for r in range(len(copy))))
     if duck:
         d = min(duck, key=lambda x: x["cpu_s"])
         print(f"| DuckDB bare COPY | {d['cpu_s']:.1f} | {d['wall_s']:.1f} | {d['rss_mb'] / 1024:.2f} GB | {rows / d['cpu_s'] / 1e6:.2f} |")

@@ -51,7 +51,8 @@ Keys the project adds to the specification (all optional; every key is documente
   a recording at least half as long is cut at every multiple of it since the UTC epoch
   (``transforms.windows``). It must divide a day, so windows start at the same times every day. [s]
 - ``[monitor] window_rows`` (default :data:`DEFAULT_WINDOW_ROWS`): about the most rows of a window
-  the monitor evaluates (every k-th row of a longer one); 0 = every row. A window whose thinned
+  the monitor evaluates (every k-th row of a longer one, each the mean of the k rows it stands
+  for); 0 = every row. A window whose thinned
   points would leave an edge near a fit threshold (sparse motion) is evaluated at every row, so the
   setting changes the speed, not which windows give an estimate.
 - ``[notify]`` (optional; absent = nothing is sent): where ``valvemon report`` sends the night's
@@ -161,8 +162,8 @@ a 10 s snapshot (shorter than half of it) is never cut. [s]"""
 
 DEFAULT_WINDOW_ROWS = 6000
 """Default rows a monitoring window evaluates (docs/monitoring.md, "Fewer points, not faster
-points"): a window of n samples is evaluated on every k-th row, k = max(1, n // 6000): a 60 s
-window at 1 kHz on every 10th row (a tenth of the monitor's per-row work), a 10 s snapshot on
+points"): a window of n samples is evaluated on every k-th row, k = max(1, n // 6000), each the
+mean of the k rows it stands for: a 60 s window at 1 kHz on every 10th row (a tenth of the monitor's per-row work), a 10 s snapshot on
 every row. Measured on simulated 20-min recordings, its 60 s windows' scatter and errors stay far
 inside the condition bounds' ``*_sigma_floor``."""
 
@@ -175,8 +176,8 @@ class MonitorSpec:
     """Window length; a run of samples at least half as long is cut at its multiples since the
     epoch, a shorter one (a snapshot) is one window. [s]"""
     window_rows: int = DEFAULT_WINDOW_ROWS
-    """About the most rows of a window steps 2–3 and Eq. 7 evaluate: every k-th row,
-    k = max(1, n // window_rows) for a window of n samples (every row where that leaves an edge
+    """About the most rows of a window steps 2–3 and Eq. 7 evaluate: every k-th row, the mean of
+    the k rows from it, k = max(1, n // window_rows) for a window of n samples (every row where that leaves an edge
     short of information: ``transforms.monitor.THIN_MARGIN``); 0 = every row."""
 
 

@@ -33,11 +33,15 @@ __all__ = [
     "DEFAULT_OUTPUTS",
     "add_savgol",
     "savgol_arrays",
+    "box_mean_at",
+    "box_mean_expr",
+    "box_weights",
     "savgol_at",
     "savgol_exprs",
     "savgol_valid",
     "savgol_weights",
     "take_range",
+    "stencil_at",
     "take_rows",
 ]
 
@@ -73,12 +77,15 @@ def savgol_weights(window: int, order: int, deriv: int = 0) -> np.ndarray:
     return np.array(_weights(window, order, deriv))
 
 
-def savgol_valid(window: int) -> pl.Expr:
+def savgol_valid(window: int, box: int = 1) -> pl.Expr:
     """True where the centred stencil of ``window`` samples lies inside one uniform run:
-    no run start in rows (i − h, i] nor in (i, i + h], and i + h within the frame."""
+    no run start in rows (i − h, i] nor in (i, i + h], and i + h within the frame (``box`` = k:
+    the stencils of rows i … i + k − 1, :func:`savgol_at`'s: none in (i, i + k − 1 + h] either)."""
     h = window // 2
-    starts = pl.col("run_start").cast(pl.Int32).rolling_sum(h, min_samples=1)  # starts in (i − h, i]
-    return ((starts == 0) & (starts.shift(-h) == 0)).fill_null(False)
+    run_start = pl.col("run_start").cast(pl.Int32)
+    starts = run_start.rolling_sum(h, min_samples=1)  # starts in (i − h, i]
+    ahead = starts.shift(-h) if box == 1 else run_start.rolling_sum(h + box - 1, min_samples=1).shift(-(h + box - 1))
+    return ((starts == 0) & (ahead == 0)).fill_null(False)
 
 
 def savgol_exprs(
@@ -92,8 +99,10 @@ def savgol_exprs(
     valid: pl.Expr | None = None,
     mask: bool = True,
     nulls: bool = True,
+    box: int = 1,
 ) -> list[pl.Expr]:
-    """Expressions for the smoothed value and/or the first time derivative of ``column``.
+    """Expressions for the smoothed value and/or the first time derivative of ``column``
+    (``box`` = k > 1: at row i the mean of those of rows i … i + k − 1, as :func:`savgol_at`'s).
 
     ``valid`` (default :func:`savgol_valid`) masks rows whose stencil would leave the run.
     ``mask=False`` returns the plain weighted sums over the whole column (null only in the first
@@ -107,20 +116,32 @@ def savgol_exprs(
     if sample_period_s <= 0:
         raise ValueError("sample_period_s must be > 0")
     if valid is None and mask:
-        valid = savgol_valid(window)
+        valid = savgol_valid(window, box)
     col = pl.col(column)
     if nulls:  # polars' weighted rolling_sum rejects nulls; NaN propagates through the stencil
         col = col.fill_null(float("nan"))
+
+    def stencil(deriv: int) -> pl.Expr:
+        w = box_weights(np.array(_weights(window, order, deriv)), box)
+        if box == 1:
+            return col.rolling_sum(window, weights=list(w), center=True)
+        return col.rolling_sum(w.shape[0], weights=list(w)).shift(-(w.shape[0] - 1 - window // 2))
+
     out: list[pl.Expr] = []
     if smooth_name is not None:
-        w0 = list(_weights(window, order, 0))
-        e = col.rolling_sum(window, weights=w0, center=True)
+        e = stencil(0)
         out.append((pl.when(valid).then(e.fill_nan(None)) if mask else e).alias(smooth_name))
     if deriv_name is not None:
-        w1 = list(_weights(window, order, 1))
-        e = col.rolling_sum(window, weights=w1, center=True) * (1.0 / sample_period_s)
+        e = stencil(1) * (1.0 / sample_period_s)
         out.append((pl.when(valid).then(e.fill_nan(None)) if mask else e).alias(deriv_name))
     return out
+
+
+def box_mean_expr(column: str, box: int) -> pl.Expr:
+    """The mean of ``column`` over rows i … i + box − 1 at row i, as :func:`box_mean_at`'s (null
+    where that leaves the frame or meets a missing value)."""
+    e = pl.col(column).fill_null(float("nan")).rolling_sum(box, weights=[1.0 / box] * box).shift(-(box - 1))
+    return e.fill_nan(None)
 
 
 def add_savgol(
@@ -234,14 +255,15 @@ def savgol_arrays(x: np.ndarray, *, window: int, order: int, sample_period_s: fl
 
 
 @numba.njit(cache=True)
-def _savgol_at_kernel(x, rows, w0, w1, scale1, smooth, deriv, want_smooth):
-    """The stencil sums of :func:`_savgol_kernel` at the given rows only, four rows at a time with
+def _savgol_at_kernel(x, rows, w0, w1, lo, scale1, smooth, deriv, want_smooth):
+    """The stencil sums of :func:`_savgol_kernel` at the given rows only (a stencil of m taps
+    whose first is ``lo`` rows before its row: ``lo`` = h for a centred one), four rows at a time with
     their sums side by side in registers (independent sums: the additions of one row need not
     wait for each other's), each summed in the same order (oldest sample first, from 0.0), so
     the values are bit for bit those of the full pass."""
     n = x.shape[0]
     m = w1.shape[0]
-    h = m // 2
+    hi = n - (m - 1 - lo)  # a row i is inside where lo <= i < hi
     nr = rows.shape[0]
     if n < m:  # no stencil fits
         for r in range(nr):
@@ -251,16 +273,16 @@ def _savgol_at_kernel(x, rows, w0, w1, scale1, smooth, deriv, want_smooth):
         return
     for r in range(0, nr, 4):
         q = min(4, nr - r)
-        # a stencil that leaves the array (or a fourth row past the end) reads row h instead
+        # a stencil that leaves the array (or a fourth row past the end) reads row lo instead
         # (its value is replaced by NaN or not stored)
         i0 = rows[r]
-        i1 = rows[r + 1] if q > 1 else h
-        i2 = rows[r + 2] if q > 2 else h
-        i3 = rows[r + 3] if q > 3 else h
-        b0 = i0 - h if h <= i0 < n - h else 0
-        b1 = i1 - h if h <= i1 < n - h else 0
-        b2 = i2 - h if h <= i2 < n - h else 0
-        b3 = i3 - h if h <= i3 < n - h else 0
+        i1 = rows[r + 1] if q > 1 else lo
+        i2 = rows[r + 2] if q > 2 else lo
+        i3 = rows[r + 3] if q > 3 else lo
+        b0 = i0 - lo if lo <= i0 < hi else 0
+        b1 = i1 - lo if lo <= i1 < hi else 0
+        b2 = i2 - lo if lo <= i2 < hi else 0
+        b3 = i3 - lo if lo <= i3 < hi else 0
         s0 = s1 = s2 = s3 = 0.0
         d0 = d1 = d2 = d3 = 0.0
         if want_smooth:
@@ -288,16 +310,26 @@ def _savgol_at_kernel(x, rows, w0, w1, scale1, smooth, deriv, want_smooth):
                 d3 += a1 * np.float64(x[b3 + k])
         for j in range(q):
             i, s, d = (i0, s0, d0) if j == 0 else (i1, s1, d1) if j == 1 else (i2, s2, d2) if j == 2 else (i3, s3, d3)
-            inside = h <= i < n - h
+            inside = lo <= i < hi
             deriv[r + j] = d * scale1 if inside else np.nan
             if want_smooth:
                 smooth[r + j] = s if inside else np.nan
 
 
-def savgol_at(x, rows: np.ndarray, *, window: int, order: int, sample_period_s: float, smooth: bool = True):
+def box_weights(w: np.ndarray, box: int) -> np.ndarray:
+    """The stencil ``w`` (oldest sample first) convolved with a ``box``-row mean: its value at row i
+    is the mean of ``w``'s at rows i … i + box − 1 (box − 1 taps longer; ``w`` itself for box 1)."""
+    return w if box == 1 else np.convolve(w, np.full(box, 1.0 / box))
+
+
+def savgol_at(x, rows: np.ndarray, *, window: int, order: int, sample_period_s: float, smooth: bool = True, box: int = 1):
     """:func:`savgol_arrays` evaluated at ``rows`` only (int64 indices into ``x``): (smoothed or
     None, first derivative), one entry per row, equal bit for bit to the full pass's entries at
-    those rows. What the monitor runs when it evaluates every k-th row of a window.
+    those rows.
+
+    ``box`` = k > 1: each entry is instead the mean of the full pass's entries at rows i … i + k − 1
+    (one stencil of window + k − 1 taps, :func:`box_weights`): the row stands for the k rows up to
+    the next evaluated one (NaN where that stencil leaves ``x``).
 
     ``x``: an array, or the chunks of one (a sequence of arrays, in order; ``rows`` then sorted):
     each chunk is read where it is, and only the stencils that reach across a chunk's end are
@@ -305,39 +337,55 @@ def savgol_at(x, rows: np.ndarray, *, window: int, order: int, sample_period_s: 
     groups: this spares joining them)."""
     if sample_period_s <= 0:
         raise ValueError("sample_period_s must be > 0")
+    w0 = box_weights(np.array(_weights(window, order, 0)), box)
+    w1 = box_weights(np.array(_weights(window, order, 1)), box)
+    return stencil_at(x, rows, w0, w1, window // 2, 1.0 / sample_period_s, smooth)
+
+
+def box_mean_at(x, rows: np.ndarray, box: int) -> np.ndarray:
+    """The mean of ``x`` over rows i … i + box − 1 for each row i of ``rows`` (NaN where that
+    leaves ``x``); ``x`` an array or its chunks, as for :func:`savgol_at`."""
+    if box == 1:
+        return take_rows([x] if isinstance(x, np.ndarray) else list(x), np.ascontiguousarray(rows, dtype=np.int64))
+    return stencil_at(x, rows, np.empty(0), np.full(box, 1.0 / box), 0, 1.0, False)[1]
+
+
+def stencil_at(x, rows: np.ndarray, w0: np.ndarray, w1: np.ndarray, before: int, scale1: float, smooth: bool):
+    """The weighted sums of ``x`` (an array or its chunks) at ``rows`` over the stencils of
+    weights ``w0`` (if ``smooth``) and ``w1`` × ``scale1``, whose first tap is ``before`` rows
+    before the row: (sums by w0 or None, sums by w1), NaN where a stencil leaves ``x``."""
     rows = np.ascontiguousarray(rows, dtype=np.int64)
-    w0 = np.array(_weights(window, order, 0))
-    w1 = np.array(_weights(window, order, 1))
+    m = w1.shape[0]
+    after = m - 1 - before
     out0 = np.empty(rows.shape[0]) if smooth else np.empty(0)
     out1 = np.empty(rows.shape[0])
 
-    def run(xs, rs, lo, hi):  # the rows rows[lo:hi], at rs in the array xs
-        _savgol_at_kernel(read_only(_float_array(xs)), rs, w0, w1, 1.0 / sample_period_s, out0[lo:hi] if smooth else out0, out1[lo:hi], bool(smooth))
+    def run(xs, rs, r0, r1):  # the rows rows[r0:r1], at rs in the array xs
+        _savgol_at_kernel(read_only(_float_array(xs)), rs, w0, w1, before, scale1, out0[r0:r1] if smooth else out0, out1[r0:r1], bool(smooth))
 
     chunks = [x] if isinstance(x, np.ndarray) else list(x)
     if len(chunks) == 1:
         run(chunks[0], rows, 0, rows.shape[0])
         return (out0 if smooth else None), out1
-    h = window // 2
     offsets = np.concatenate([[0], np.cumsum([c.shape[0] for c in chunks])])
     n = int(offsets[-1])
     inside = np.zeros(rows.shape[0], dtype=np.bool_)
     for j, c in enumerate(chunks):
         # the rows whose stencil stays in chunk j (at the array's own ends the kernel's rule holds)
-        a = offsets[j] + (h if j > 0 else 0)
-        b = offsets[j + 1] - (h if j + 1 < len(chunks) else 0)
-        lo, hi = np.searchsorted(rows, [a, b])
-        if hi > lo:
-            run(c, rows[lo:hi] - offsets[j], lo, hi)
-            inside[lo:hi] = True
+        a = offsets[j] + (before if j > 0 else 0)
+        b = offsets[j + 1] - (after if j + 1 < len(chunks) else 0)
+        r0, r1 = np.searchsorted(rows, [a, b])
+        if r1 > r0:
+            run(c, rows[r0:r1] - offsets[j], r0, r1)
+            inside[r0:r1] = True
     rest = np.flatnonzero(~inside)
     # the others in clusters of rows less than a stencil apart, each over a copy of its samples
-    cuts = np.flatnonzero(np.diff(rows[rest]) > 2 * h + 1) + 1
+    cuts = np.flatnonzero(np.diff(rows[rest]) > m) + 1
     for part in np.split(rest, cuts):
         if part.size:
-            a, b = max(0, int(rows[part[0]]) - h), min(n, int(rows[part[-1]]) + h + 1)
-            lo, hi = int(part[0]), int(part[-1]) + 1  # rest is sorted and the cluster contiguous in rows
-            run(take_range(chunks, offsets, a, b), rows[lo:hi] - a, lo, hi)
+            a, b = max(0, int(rows[part[0]]) - before), min(n, int(rows[part[-1]]) + after + 1)
+            r0, r1 = int(part[0]), int(part[-1]) + 1  # rest is sorted and the cluster contiguous in rows
+            run(take_range(chunks, offsets, a, b), rows[r0:r1] - a, r0, r1)
     return (out0 if smooth else None), out1
 
 

@@ -114,8 +114,8 @@ NaN without the closed-edge correction. ``leak_scale_held``: the window cannot r
 leakage (its interval is wider than :data:`transforms.leakage.LEAK_RESOLUTION`), so
 ``leak_scale`` is the commissioning's, held (null without an estimate).
 
-``row_stride``: the window's points are every k-th row's (``MonitorParams.window_rows``; 1: every
-row); ``n_points`` × ``row_stride`` is the population's size in samples.
+``row_stride``: the window's points are at every k-th row, each the mean of the k rows from it
+(``MonitorParams.window_rows``; 1: every row); ``n_points`` × ``row_stride`` is the population's size in samples.
 
 ``u_spread_m``: the points' spread in u as the fit's covariance sees it; ``x_hat_determined``:
 ``u_spread_m`` ≥ :data:`X_HAT_MIN_SPREAD_M` (False without an estimate)."""

@@ -21,7 +21,6 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass
-from functools import partial
 
 import numba
 import numpy as np
@@ -39,7 +38,7 @@ from transforms.baseline import (
     recognise_edge_law,
 )
 from transforms.characteristic import Characteristic, scaled_shifted
-from transforms.derivatives import add_savgol, read_only, savgol_arrays, savgol_at, take_rows
+from transforms.derivatives import add_savgol, box_mean_at, box_mean_expr, read_only, savgol_arrays, savgol_at, savgol_exprs
 from transforms.fit import fit_arrays, fit_groups, sorted_fits, walk_segment
 from transforms.leakage import LEAK_RESOLUTION, closed_leakage, effective_scale, inflation, leak_columns, leak_scale_step
 from transforms.params import EDGES, MonitorParams
@@ -198,8 +197,7 @@ def _valve_polars(lake_v, valve_id, p, leakage, with_ratio, want_points):
                 sel = _sizes(groups, thin).reshape(len(EDGES), -1).T
                 dense = thinning_short(stride["_k"].to_numpy(), sel, thin["u_m"].to_numpy(), p)
                 stride = stride.with_columns(pl.when(pl.Series(dense)).then(1).otherwise(pl.col("_k")).alias("_k"))
-            evaluated = framed.join(stride, on="window_id", how="left", maintain_order="left").filter(
-                pl.int_range(pl.len()).over("window_id") % pl.col("_k") == 0).drop("_k")  # fmt: skip
+            evaluated = _thinned(framed, stride, p)
         strides = groups.join(stride, on="window_id", how="left", maintain_order="left")["_k"]
     points = _polars_points(evaluated, p, leakage, valve_id, with_ratio)
     ratio = None
@@ -212,6 +210,26 @@ def _valve_polars(lake_v, valve_id, p, leakage, with_ratio, want_points):
         points["u_m"].to_numpy(), points["area_m2"].to_numpy(), ratio, points.select(POINT_COLUMNS),
         selection_stats(evaluated), windows, groups, _sizes(groups, points), strides.to_numpy().astype(np.int64),
     )  # fmt: skip
+
+
+def _thinned(framed: pl.DataFrame, stride: pl.DataFrame, p: MonitorParams) -> pl.DataFrame:
+    """The rows of :func:`prepare_samples` that a window of stride k (``stride``: window_id, _k)
+    is evaluated on, every k-th from its first, each the mean of the k rows it stands for (as
+    :func:`_averaged`): its signals averaged, step 3 applied to them."""
+    dt = p.sample_period_s or infer_sample_period_s(framed)
+    lf = framed.lazy().join(stride.lazy(), on="window_id", how="left", maintain_order="left")
+    signals: dict[str, pl.Expr] = {}
+    for box in sorted(set(stride["_k"].to_list()) - {1}):
+        exprs = [box_mean_expr(c, box).alias(c) for c in _GATHERED]
+        for column, (smooth_name, deriv_name) in _SG_OUTPUTS.items():
+            exprs += savgol_exprs(column, window=p.savgol_window, order=p.savgol_order, sample_period_s=dt,
+                                  smooth_name=smooth_name, deriv_name=deriv_name, box=box)  # fmt: skip
+        for e in exprs:
+            name = e.meta.output_name()
+            signals[name] = pl.when(pl.col("_k") == box).then(e).otherwise(signals.get(name, pl.col(name))).alias(name)
+    if signals:
+        lf = add_selection_flags(lf.with_columns(list(signals.values())), p, signals=DEFAULT_SIGNALS)
+    return lf.filter(pl.int_range(pl.len()).over("window_id") % pl.col("_k") == 0).drop("_k").collect()
 
 
 def _sizes(groups: pl.DataFrame, points: pl.DataFrame) -> np.ndarray:
@@ -274,27 +292,51 @@ def _evaluate(lake_v, dt, lay, p, leakage, with_ratio):
     """Steps 2–3 and Eq. 7 at the rows of ``lay``: the signals as float arrays (float32 from the
     lake as it is; nulls become NaN), then Savitzky–Golay as plain weighted sums in one compiled
     pass per signal (the validity comes from the layout and is applied in the selection kernel).
-    A thinned window (stride k > 1) is evaluated on every k-th row: the Savitzky–Golay sums at
-    those rows only, the other signals gathered there. Returns (rows or None, win, selection
+    A thinned window (stride k > 1) is evaluated on every k-th row, each the mean of the k rows
+    it stands for (:func:`_averaged`). Returns (rows or None, win, selection
     counts, points arrays)."""
     rows = None if lay.every_row else lay.rows
     if rows is None:
         arrays = {c: _float64(lake_v[c]) for c in _SIGNALS_F64}
-        sg = savgol_arrays
+        for column, (smooth_name, deriv_name) in _SG_OUTPUTS.items():
+            sm, de = savgol_arrays(arrays[column], window=p.savgol_window, order=p.savgol_order, sample_period_s=dt, smooth=smooth_name is not None)
+            arrays.update(_named(smooth_name, sm, deriv_name, de))
     else:  # the columns' chunks as they are (not joined): read at the rows only
-        chunks = {c: _float_chunks(lake_v[c]) for c in _SIGNALS_F64}
-        arrays = {c: take_rows(chunks[c], rows) for c in _GATHERED}
-        sg = partial(savgol_at, rows=rows)
-    for column, (smooth_name, deriv_name) in _SG_OUTPUTS.items():
-        sm, de = sg(arrays[column] if rows is None else chunks[column], window=p.savgol_window, order=p.savgol_order, sample_period_s=dt,
-                    smooth=smooth_name is not None)  # fmt: skip
-        if smooth_name is not None:
-            arrays[smooth_name] = sm
-        arrays[deriv_name] = de
+        arrays = _averaged({c: _float_chunks(lake_v[c]) for c in _SIGNALS_F64}, rows, lay.window, lay.stride, p, dt)
     win = lay.window
     codes, flagged, removed, selected, n_evaluated = selection_codes(arrays, win, lay.n_windows, p, valid=lay.valid)
     pts = points_arrays(arrays, codes, SELECTED_CODE, selected.sum(axis=0), p, leakage=leakage, with_ratio=with_ratio)
     return rows, (flagged, removed, selected, n_evaluated), pts
+
+
+def _named(smooth_name, sm, deriv_name, de) -> dict[str, np.ndarray]:
+    return {deriv_name: de} if smooth_name is None else {smooth_name: sm, deriv_name: de}
+
+
+def _averaged(chunks: dict[str, list[np.ndarray]], rows: np.ndarray, window: np.ndarray, stride: np.ndarray, p: MonitorParams,
+              dt: float) -> dict[str, np.ndarray]:  # fmt: skip
+    """The signals of steps 2–3 at the evaluated ``rows`` (of the windows ``window``), each row's the
+    mean of the k rows it stands for (k: its window's ``stride``): the Savitzky–Golay values
+    on their stencil convolved with a k-row box, the raw signals read there averaged alike
+    (:func:`transforms.derivatives.savgol_at`'s ``box``). Every row's values carry independent
+    position noise (a cylinder transmitter's steps): their mean keeps the information of the k
+    rows that a single row would drop. Rows of the same stride are summed together."""
+    out: dict[str, np.ndarray] = {}
+    boxes = np.unique(stride)
+    for box in boxes:
+        at = None if boxes.shape[0] == 1 else np.flatnonzero((stride == box)[window])  # None: all rows
+        r = rows if at is None else rows[at]
+        parts = {c: box_mean_at(chunks[c], r, int(box)) for c in _GATHERED}
+        for column, (smooth_name, deriv_name) in _SG_OUTPUTS.items():
+            sm, de = savgol_at(chunks[column], r, window=p.savgol_window, order=p.savgol_order, sample_period_s=dt,
+                               smooth=smooth_name is not None, box=int(box))  # fmt: skip
+            parts.update(_named(smooth_name, sm, deriv_name, de))
+        for name, v in parts.items():
+            if at is None:
+                out[name] = v
+            else:
+                out.setdefault(name, np.empty(rows.shape[0]))[at] = v
+    return out
 
 
 def _valve_numba(lake_v, valve_id, p, leakage, with_ratio, want_points):
@@ -350,9 +392,9 @@ each of its populations clear of every threshold of the fit by this factor: at l
 ``THIN_MARGIN`` × ``min_points`` samples (k samples per evaluated point) and ``THIN_MARGIN`` ×
 ``min_coverage_m`` of u. Elsewhere — a window of sparse motion, an edge barely used — every row
 is evaluated, so that a window's verdict is the one it has at every row. The thresholds count
-samples at the sample rate, i.e. information: the points of a window are correlated over the
-21-sample Savitzky–Golay stencil, so every k-th of them (k ≤ 21) carries about what all of them
-do; k · points is the population's size in samples. Thinning moves that count by up to k per
+samples at the sample rate, i.e. information: a thinned point is the mean of the k rows it
+stands for (:func:`_averaged`), so it carries what they do; k · points is the population's size
+in samples. Thinning moves that count by up to k per
 run of selected rows, and the span of u by what the spool travels in k samples at its ends; a
 factor of 2 leaves both far inside the margin."""
 

@@ -154,9 +154,9 @@ class MonitorParams:
     """Relative deviation of a time step from the sample period beyond which the SG stencil is cut."""
     window_rows: int | None = None
     """Rows of a window that steps 2–3 and Eq. 7 evaluate, at most about this many: a window of n
-    samples is evaluated on every k-th row from its first, k = max(1, n // window_rows) (the
-    Savitzky–Golay stencil still spans every sample around an evaluated row, so its values there
-    are those of evaluating every row); a window whose thinned populations would fall short of
+    samples is evaluated on every k-th row from its first, k = max(1, n // window_rows), each
+    evaluated row the mean of the k rows it stands for (the Savitzky–Golay stencils convolved with
+    a k-row box, the raw signals averaged alike: every sample's information is kept); a window whose thinned populations would fall short of
     twice a fit threshold is evaluated at every row (:data:`transforms.monitor.THIN_MARGIN`), and
     the thresholds count samples, k per point. None = every row. The flows set it from the plant
     configuration (``[monitor] window_rows``, default 6,000: a 60 s window at 1 kHz every 10th

@@ -268,7 +268,8 @@ def _layout_kernel(n, starts, irregular, h, window_rows, dense):
     the evaluated rows (every k-th of a window from its first, k = max(1, length // window_rows);
     window_rows 0 or ``dense[w]``: every row), their window and their Savitzky–Golay validity: no
     uniform-run start (a window start or an ``irregular`` step's row) in (i − h, i] nor in
-    (i, i + h], and i + h < n. ``dense`` is empty or one flag per window."""
+    (i, i + k − 1 + h], and i + k − 1 + h < n (a row of a thinned window stands for the k rows
+    from it on, their stencils averaged: :func:`transforms.derivatives.savgol_at`'s ``box``). ``dense`` is empty or one flag per window."""
     nw = starts.shape[0]
     count = np.empty(nw, dtype=np.int64)
     stride = np.empty(nw, dtype=np.int64)
@@ -307,7 +308,7 @@ def _layout_kernel(n, starts, irregular, h, window_rows, dense):
             nxt = runs[j + 1] if j + 1 < m else n
             rows[r] = i
             win[r] = w
-            valid[r] = nxt - i > h and i - runs[j] >= h
+            valid[r] = nxt - i > h + stride[w] - 1 and i - runs[j] >= h
             r += 1
     return count, stride, rows, win, valid
 
@@ -327,11 +328,13 @@ class WindowLayout:
     stride: np.ndarray
     """Each window's stride k (int64): every k-th row of it is evaluated."""
     rows: np.ndarray
-    """The evaluated rows, sorted (int64): every k-th row of each window from its first."""
+    """The evaluated rows, sorted (int64): every k-th row of each window from its first (each
+    standing for the k rows from it on)."""
     window: np.ndarray
     """The window (0 … n_windows − 1) of each evaluated row (int64)."""
     valid: np.ndarray
-    """Per evaluated row: whether a centred Savitzky–Golay stencil stays inside one uniform run."""
+    """Per evaluated row: whether its Savitzky–Golay stencil stays inside one uniform run (at a
+    stride k, the stencils of the k rows from it on)."""
 
     @property
     def n_windows(self) -> int:

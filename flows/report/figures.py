@@ -19,8 +19,10 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import pickle
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
+from functools import cache
 from pathlib import Path
 
 import matplotlib
@@ -50,16 +52,59 @@ matplotlib's constrained layout (measuring every tick label) took half of their 
 def render_figures(jobs: list[tuple[Callable[..., Path], tuple]], workers: int | None = None) -> list[Path]:
     """Draw each (figure function, arguments) of ``jobs``; their paths, in order.
 
-    ``workers`` spawned processes draw them (None: one per CPU, at most :data:`MAX_WORKERS`,
-    and none for fewer than :data:`POOL_MIN_FIGURES` pictures; 0: all here). Each picture is
-    drawn by one process alone from its arguments, so the files are the same either way."""
+    A picture whose inputs are those it was last drawn from (:func:`figure_key`, kept beside it)
+    is kept as it is, not drawn again: a valve whose state and trend did not change costs the
+    nightly report nothing. ``workers`` spawned processes draw the others (None: one per CPU, at
+    most :data:`MAX_WORKERS`, and none for fewer than :data:`POOL_MIN_FIGURES` pictures; 0: all
+    here). Each picture is drawn by one process alone from its arguments, so the files are the
+    same either way."""
+    keys = [figure_key(fn, args) for fn, args in jobs]
+    todo = [(job, key) for job, key in zip(jobs, keys) if _stored_key(_path_of(job)) != key]
+    for job, _ in todo:
+        _key_file(_path_of(job)).unlink(missing_ok=True)  # a picture being redrawn is never taken for the old one
     if workers is None:
-        workers = min(MAX_WORKERS, os.cpu_count() or 1) if len(jobs) >= POOL_MIN_FIGURES else 0
+        workers = min(MAX_WORKERS, os.cpu_count() or 1) if len(todo) >= POOL_MIN_FIGURES else 0
     if workers <= 1:
-        return [fn(*args) for fn, args in jobs]
-    with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn")) as pool:
-        futures = [pool.submit(fn, *args) for fn, args in jobs]
-        return [f.result() for f in futures]
+        drawn = [fn(*args) for (fn, args), _ in todo]
+    else:
+        with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn")) as pool:
+            futures = [pool.submit(fn, *args) for (fn, args), _ in todo]
+            drawn = [f.result() for f in futures]
+    for path, (_, key) in zip(drawn, todo):
+        _key_file(path).write_text(key)
+    return [_path_of(job) for job in jobs]
+
+
+def _path_of(job: tuple[Callable[..., Path], tuple]) -> Path:
+    """The picture's file: its figure function's one Path argument."""
+    return next(a for a in job[1] if isinstance(a, Path))
+
+
+def _key_file(path: Path) -> Path:
+    return path.parent / f".{path.name}.key"
+
+
+def _stored_key(path: Path) -> str | None:
+    key = _key_file(path)
+    return key.read_text() if key.exists() and path.exists() else None
+
+
+@cache
+def _code_key() -> bytes:
+    """This module's source, the remaining-life wording it draws and matplotlib's version: a change
+    to how pictures are drawn redraws them all."""
+    here = Path(__file__).resolve()
+    return here.read_bytes() + (here.parent / "remaining.py").read_bytes() + matplotlib.__version__.encode()
+
+
+def figure_key(fn: Callable[..., Path], args: tuple) -> str:
+    """What a picture is drawn from: the figure function, its arguments (frames by their rows in
+    any order, as the report's queries give them; arrays by content) and the drawing code, as a
+    BLAKE3 hex digest."""
+    from blake3 import blake3  # noqa: PLC0415
+
+    rows = tuple(a.sort(a.columns, nulls_last=True) if isinstance(a, pl.DataFrame) and a.height else a for a in args)
+    return blake3(_code_key() + pickle.dumps((fn.__module__, fn.__qualname__, rows), protocol=5)).hexdigest()
 
 
 def _save(fig, path: Path) -> Path:

@@ -82,3 +82,41 @@ def test_rows_a_period_out_of_order_are_no_clock_step(tmp_path):
     assert table(wh, "quarantine").height == 0
     assert lake(wh).height == SECONDS and lake(wh)["ps_pa"].to_list()[:13] == pytest.approx([float(_value("ps", i)) * 1e5 for i in range(13)], rel=1e-6)
     assert pl.Series(lake(wh)["timestamp_utc"]).is_sorted()
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_clock_follows_batches_as_the_whole_recording_in_one_pass(seed):
+    """The one-pass step finder against its definition: a row is a step when it is more than the
+    limit earlier than the running maximum of the plausible, readable times before it (earlier
+    batches included); implausible and unreadable times neither step nor move the clock."""
+    import numpy as np
+
+    from transforms.ingest.clock import _NONE, ClockSteps
+
+    rng = np.random.default_rng(seed)
+    n, limit, allowed = 2_000, 4_000, 10**12
+    t = np.cumsum(rng.integers(0, 2_000, n)).astype(np.int64) + 10**9
+    t[rng.random(n) < 0.02] = allowed + 1  # implausible: ignored
+    nulls = rng.random(n) < 0.02
+    if seed % 2:  # a step back somewhere after the first batch edge
+        k = int(rng.integers(700, n))
+        t[k:] -= 10**6 * 3
+    shown = np.where(t > allowed, _NONE, t)
+    before = np.maximum.accumulate(np.r_[_NONE, np.where(nulls, _NONE, shown)[:-1]])
+    want = np.flatnonzero(~nulls & (shown != _NONE) & (shown + limit < before))
+    assert bool(len(want)) == bool(seed % 2)
+    clock = ClockSteps(limit, allowed)
+    series = pl.Series(t).cast(pl.Datetime("ns", "UTC")).scatter(np.flatnonzero(nulls), None)
+    lines = pl.Series(np.arange(n) + 2)
+    marked = []
+    for a in range(0, n, 600):
+        m = clock.after_step(series.slice(a, 600), lines.slice(a, 600))
+        marked.append(np.zeros(min(600, n - a), dtype=bool) if m is None else m.to_numpy())
+    marked = np.concatenate(marked)
+    if len(want):
+        i = int(want[0])
+        assert clock.line == i + 2 and clock.step_to_ns == t[i] and clock.latest_ns == before[i]
+        assert not marked[:i].any() and marked[i:].all()
+    else:
+        assert clock.line is None and not marked.any()
+        assert clock.latest_ns == max(_NONE, int(np.where(nulls, _NONE, shown).max()))

@@ -98,3 +98,25 @@ def test_parquet_of_text_columns_only_names_the_missing_column(plant, tmp_path):
     with pytest.raises(ValvemonError) as err:
         ingest(cfg, path, tmp_path / "wh")
     assert str(err.value).startswith(f"{path}: missing column 'timestamp' (export.timestamp_column)")
+
+
+@pytest.mark.parametrize(
+    ("groups", "rows"),
+    [([60_000] * 60, 599_186), ([1_000_000, 10, 10], 300_000), ([5], 1024), ([3, 3, 3], 5), ([7, 1, 7], 8)],
+)
+def test_typed_parquet_slices_end_at_row_group_ends(tmp_path, groups, rows):
+    import numpy as np
+    import pyarrow.parquet as pq
+
+    from flows.ingest.formats.parquet import _slices
+
+    path = tmp_path / "groups.parquet"
+    with pq.ParquetWriter(path, pa.schema([("x", pa.int64())])) as w:
+        for n in groups:
+            w.write_table(pa.table({"x": np.arange(n)}), row_group_size=n)
+    cuts = _slices(pq.ParquetFile(path).metadata, rows)
+    ends = set(np.cumsum(groups).tolist())
+    assert cuts[0] == 0 and cuts[-1] == sum(groups) and all(0 < b - a <= rows for a, b in zip(cuts[:-1], cuts[1:]))
+    for a, b in zip(cuts[1:-1], cuts[2:]):  # a cut inside a row group only where that row group alone exceeds a slice
+        assert a in ends or max(groups) > rows
+    assert len(cuts) - 1 <= 2 * (-(-sum(groups) // rows)) + 1

@@ -111,3 +111,31 @@ def test_times_going_back_across_a_batch_edge_are_not_streamable():
     stream.feed(df.slice(0, 24), first_line=2, final=False)
     with pytest.raises(NotStreamable):
         stream.feed(df.slice(24), first_line=26, final=True)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_a_tag_at_other_times_is_not_given_the_grid_of_the_tag_before(seed):
+    """The grid's pass is shared only by tags at equal times: a wide export's tag that misses
+    samples (interpolated across them) or has a gap gets its own grid, the others share one."""
+    import numpy as np
+
+    from transforms.ingest.grid import Grid, grid_times, to_grid
+
+    rng = np.random.default_rng(seed)
+    grid = Grid.from_export(1000.0, 0.005)
+    t = (np.arange(5_000, dtype=np.int64) + 10**9) * 1_000_000  # 1 kHz
+    v = rng.normal(size=len(t))
+    shared = grid_times(t, grid)
+    assert shared.gridded and shared.same_times(t.copy()) and not shared.same_times(t[:-1])
+    missing = np.delete(t, rng.integers(1, len(t) - 1, 3))  # three samples missing: interpolated
+    gap = np.delete(t, np.arange(2_000, 2_010))  # 10 ms missing: a gap
+    for other in (missing, gap):
+        w = np.interp(other, t, v)
+        assert not shared.same_times(other)
+        want, got = to_grid(other, w, grid), to_grid(other, w, grid, grid_times(other, grid))
+        assert np.array_equal(want.t_us, got.t_us) and np.array_equal(want.values, got.values)
+        assert np.array_equal(want.gap_start_ns, got.gap_start_ns)
+    assert len(to_grid(missing, np.interp(missing, t, v), grid).t_us) == len(t)  # interpolated onto every instant
+    assert len(to_grid(gap, np.interp(gap, t, v), grid).gap_start_ns) == 1
+    g = to_grid(t, v, grid, shared)
+    assert g.t_us is shared.t_us and np.array_equal(g.values, v)

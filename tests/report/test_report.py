@@ -351,3 +351,37 @@ def test_pictures_drawn_in_worker_processes_are_the_files_drawn_here(built, tmp_
     assert render_figures(jobs, workers=2) == [tmp_path / f"fleet_{k}.png" for k in range(3)]
     drawn_here = (warehouse / "reports" / "fleet_overview.png").read_bytes()
     assert all((tmp_path / f"fleet_{k}.png").read_bytes() == drawn_here for k in range(3))
+
+
+def test_a_picture_is_drawn_again_only_when_what_it_shows_changed(built, tmp_path):
+    from flows.common.warehouse_db import query_frame
+    from flows.report.figures import fleet_figure, render_figures
+
+    _, warehouse, result, _ = built
+    con = connect_snapshot(warehouse)
+    try:
+        conditions = query_frame(con, "SELECT * FROM valve_condition")
+    finally:
+        con.close()
+    drawn = []
+
+    def counted(ranking, conditions, path):
+        drawn.append(path)
+        return fleet_figure(ranking, conditions, path)
+
+    path = tmp_path / "fleet.png"
+    assert render_figures([(counted, (result.ranking, conditions, path))], workers=0) == [path]
+    first = path.read_bytes()
+    assert first == (warehouse / "reports" / "fleet_overview.png").read_bytes()
+    # the same rows in another order (a query without ORDER BY): kept, not drawn
+    assert render_figures([(counted, (result.ranking, conditions.reverse(), path))], workers=0) == [path]
+    assert drawn == [path] and path.read_bytes() == first
+    # a valve's state changed: drawn again, and the picture shows it
+    changed = conditions.with_columns(state=pl.when(pl.col("valve_id") == VALVES[0]).then(pl.lit("faulty")).otherwise(pl.col("state")))
+    assert changed["state"].to_list() != conditions["state"].to_list()
+    render_figures([(counted, (result.ranking, changed, path))], workers=0)
+    assert drawn == [path, path] and path.read_bytes() != first
+    # a picture whose record of its inputs is gone is drawn again, whatever it shows
+    (tmp_path / ".fleet.png.key").unlink()
+    render_figures([(counted, (result.ranking, changed, path))], workers=0)
+    assert len(drawn) == 3

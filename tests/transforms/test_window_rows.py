@@ -1,5 +1,6 @@
-"""A long window evaluated on every k-th row (``MonitorParams.window_rows``): the points are exactly
-those of evaluating every row, at the evaluated rows; both engines agree; the counts add up."""
+"""A long window evaluated on every k-th row (``MonitorParams.window_rows``): each evaluated row is
+the mean of the k rows it stands for (the Savitzky–Golay stencils and the raw signals averaged over
+them); both engines agree; the counts add up."""
 
 import dataclasses
 
@@ -8,7 +9,7 @@ import polars as pl
 import pytest
 import synth_valve as sv
 
-from transforms.derivatives import savgol_arrays, savgol_at, take_rows
+from transforms.derivatives import box_mean_at, savgol_arrays, savgol_at, take_rows
 from transforms.monitor import monitor_points
 from transforms.windows import window_layout
 
@@ -56,6 +57,23 @@ def test_savgol_at_any_number_of_rows_equals_the_full_pass_bit_for_bit(smooth):
         else:
             assert sm_at is None
 
+@pytest.mark.parametrize("box", [2, 10])
+def test_savgol_at_with_a_box_is_the_mean_of_the_full_pass_over_the_rows_it_stands_for(box):
+    """``box`` = k: at row i the mean of the full pass's values at rows i … i + k − 1 (one stencil
+    of 21 + k − 1 taps), NaN where that leaves the array; the raw signal's mean alike."""
+    x = np.random.default_rng(4).normal(size=400).cumsum().astype(np.float32)
+    sm, de = savgol_arrays(x, window=21, order=3, sample_period_s=1e-3)
+    rows = np.array([0, 9, 10, 11, 100, 250, 389 - box, 390 - box, 391 - box, 399])
+    sm_at, de_at = savgol_at(x, rows, window=21, order=3, sample_period_s=1e-3, box=box)
+    inside = (rows >= 10) & (rows + box - 1 < 390)
+    assert inside.sum() == 6 and np.isnan(de_at[~inside]).all() and np.isnan(sm_at[~inside]).all()
+    for got, full in ((sm_at, sm), (de_at, de)):
+        want = np.array([full[i : i + box].mean() for i in rows[inside]])
+        np.testing.assert_allclose(got[inside], want, rtol=1e-12, atol=1e-9 * np.abs(full[10:390]).max())
+    raw = box_mean_at(np.split(x, [5, 200]), rows[:-1], box)
+    np.testing.assert_allclose(raw, [x[i : i + box].astype(np.float64).mean() for i in rows[:-1]], rtol=1e-12)
+
+
 @pytest.mark.parametrize("sizes", [[500], [3, 250, 7, 1, 239], [100, 400], [20, 21, 459]])
 def test_savgol_at_over_chunks_equals_the_joined_array_bit_for_bit(sizes):
     """A column in chunks (row groups, as polars hands them over) is read where it is: the
@@ -85,23 +103,35 @@ def test_evaluated_rows_every_kth_row_of_each_long_window():
     np.testing.assert_array_equal(lay.rows, [0, 3, 6, *range(9, 100, 3), *range(100, 120), *range(120, 155)])
     every = layout(None)
     np.testing.assert_array_equal(lay.window, every.window[lay.rows])
-    np.testing.assert_array_equal(lay.valid, every.valid[lay.rows])
+    # a row of the first window (k = 3) is valid where the stencils of the 3 rows from it on are
+    valid3 = every.valid[lay.rows] & np.r_[every.valid, False, False][lay.rows + 2]
+    np.testing.assert_array_equal(lay.valid, np.where(lay.window == 0, valid3, every.valid[lay.rows]))
+    np.testing.assert_array_equal(lay.rows[lay.valid & (lay.window == 0)], range(12, 88, 3))
 
 
-def test_points_are_those_of_every_row_at_the_evaluated_rows(lake):
+def test_points_are_the_means_of_the_rows_they_stand_for(lake):
+    """A thinned window's points lie at every k-th row, each the mean of the k rows from it on: on
+    smooth signals its u and area are those of every row averaged over the same k rows (to the
+    curvature of 8 ms); the short window (k = 1) keeps every row's points exactly."""
     params = sv.params()
     full = monitor_points(lake, params)
     part = monitor_points(lake, dataclasses.replace(params, window_rows=WINDOW_ROWS))
     assert part.windows.equals(full.windows)
     k = full.windows.select("valve_id", "window_id", (pl.col("n_samples") // WINDOW_ROWS).clip(lower_bound=1).alias("k"))
     assert sorted(k["k"].to_list()) == [1, 8, 8]
-    kept = (
-        full.points.join(k, on=["valve_id", "window_id"])
-        .filter(((pl.col("timestamp_utc") - pl.col("window_start")).dt.total_milliseconds() % pl.col("k")) == 0)
-        .drop("k")
-    )
+    key = ["valve_id", "window_id", "edge"]
+    t = (pl.col("timestamp_utc") - pl.col("window_start")).dt.total_milliseconds()
+    block = full.points.join(k, on=["valve_id", "window_id"]).with_columns((t // pl.col("k")).alias("b"))
+    means = block.group_by(*key, "b", "k").agg(pl.len().alias("n"), pl.col("u_m", "area_m2").mean())
+    got = part.points.join(k, on=["valve_id", "window_id"]).with_columns((t // pl.col("k")).alias("b"))
+    assert (got.filter(pl.col("k") > 1).select(t % pl.col("k") == 0)).to_series().all()
+    both = got.join(means.filter(pl.col("n") == pl.col("k")), on=[*key, "b"], suffix="_every")
+    assert both.height > 0.9 * got.filter(pl.col("k") > 1).height
+    np.testing.assert_allclose(both["u_m"], both["u_m_every"], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(both["area_m2"], both["area_m2_every"], rtol=2e-3, atol=1e-10)
+    dense = pl.col("k") == 1
+    assert got.filter(dense).drop("k", "b").equals(full.points.join(k.filter(dense), on=["valve_id", "window_id"]).drop("k"))
     assert part.points.height < full.points.height // 4
-    assert part.points.equals(kept)
     # the counts are those of the evaluated rows and add up
     per = part.selection.group_by("valve_id", "window_id", "edge").agg(
         pl.col("n_removed").sum() + pl.col("n_selected").first() - pl.col("n_samples").first()

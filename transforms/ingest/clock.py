@@ -14,6 +14,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from datetime import datetime, timedelta, timezone
 
+import numba
 import numpy as np
 import polars as pl
 
@@ -23,6 +24,24 @@ beyond any jitter of a recorder's time stamps (a time stamp is rounded to a peri
 below the seconds to hours a clock is set back by."""
 
 _NONE = np.iinfo(np.int64).min
+
+
+@numba.njit(cache=True, nogil=True)
+def _first_step(t: np.ndarray, latest_ns: int, allowed_ns: int, limit_ns: int) -> tuple[int, int, int]:
+    """One pass over a batch's row times (file order; :data:`_NONE`: unreadable): the first row
+    more than ``limit_ns`` earlier than the latest readable, plausible (≤ ``allowed_ns``) time
+    before it, counting ``latest_ns`` from earlier batches. Returns ``(row, the latest time
+    before it, its time)``, or ``(-1, the latest time of all, 0)``."""
+    before = latest_ns
+    for i in range(len(t)):
+        ti = t[i]
+        if ti > allowed_ns:
+            continue  # an implausible time neither steps nor moves the clock
+        if ti != _NONE and ti + limit_ns < before:
+            return i, before, ti
+        if ti > before:
+            before = ti
+    return -1, before, 0
 
 
 def _iso(t_ns: int) -> str:
@@ -61,15 +80,11 @@ class ClockSteps:
         if self.line is not None:
             return pl.repeat(True, len(t_ns), eager=True)
         t = t_ns.cast(pl.Int64).fill_null(_NONE).to_numpy()
-        t = np.where(t > self.latest_ns_allowed, _NONE, t)
-        before = np.maximum.accumulate(np.r_[self.latest_ns, t[:-1]]) if len(t) else t
-        stepped = np.flatnonzero((t != _NONE) & (t + self.limit_ns < before))
-        if not len(stepped):
-            if len(t):
-                self.latest_ns = max(self.latest_ns, int(t.max()))
+        i, before, t_i = _first_step(t, self.latest_ns, self.latest_ns_allowed, self.limit_ns)
+        if i < 0:
+            self.latest_ns = before
             return None
-        i = int(stepped[0])
-        self.latest_ns, self.line, self.step_to_ns = int(before[i]), int(lines[i]), int(t[i])
+        self.latest_ns, self.line, self.step_to_ns = before, int(lines[i]), t_i
         mask = np.zeros(len(t), dtype=bool)
         mask[i:] = True
         return pl.Series(mask)

@@ -43,6 +43,14 @@ def empty_sensor_frame() -> pl.DataFrame:
     return pl.DataFrame(schema=SENSOR_POLARS_SCHEMA)
 
 
+def _same(a: np.ndarray, b: np.ndarray) -> bool:
+    """Whether two arrays of instants are equal: at once when they are the same memory (the tags
+    of a wide export share their grid), else element by element."""
+    if a.shape == b.shape and a.dtype == b.dtype and a.strides == b.strides and a.__array_interface__["data"][0] == b.__array_interface__["data"][0]:
+        return True
+    return np.array_equal(a, b)
+
+
 def assemble_valve(valve_id: str, signals: dict[str, Gridded]) -> pl.DataFrame:
     """One valve's gridded signals → its sensor frame, sorted by time.
 
@@ -55,7 +63,7 @@ def assemble_valve(valve_id: str, signals: dict[str, Gridded]) -> pl.DataFrame:
     """
     req = [signals[s] for s in REQUIRED_SIGNALS]
     t = req[0].t_us
-    aligned = all(np.array_equal(g.t_us, t) for g in req[1:])  # the usual case: one grid for all
+    aligned = all(_same(g.t_us, t) for g in req[1:])  # the usual case: one grid for all
     if not aligned:
         for g in req[1:]:
             t = np.intersect1d(t, g.t_us, assume_unique=True)
@@ -68,7 +76,7 @@ def assemble_valve(valve_id: str, signals: dict[str, Gridded]) -> pl.DataFrame:
         g = signals.get(s)
         if g is None:
             data[col] = pl.repeat(None, len(t), dtype=pl.Float32, eager=True)
-        elif (aligned and s in REQUIRED_SIGNALS) or np.array_equal(g.t_us, t):
+        elif (aligned and s in REQUIRED_SIGNALS) or _same(g.t_us, t):
             data[col] = g.values.astype(np.float32)
         else:
             pos = np.searchsorted(g.t_us, t)

@@ -191,18 +191,42 @@ class Gridded:
     """First sample after each gap."""
 
 
-def to_grid(t_ns: np.ndarray, values: np.ndarray, grid: Grid) -> Gridded:
-    """Put one tag's sorted, unique samples on the grid (module doc, 3–4)."""
+@dataclass
+class GridTimes:
+    """What the grid makes of one tag's times, whatever its values: :func:`grid_times`."""
+
+    t_ns: np.ndarray
+    t_us: np.ndarray
+    gridded: bool
+    """Every time is a grid instant and none is missing inside a segment: the samples are the grid."""
+    breaks: np.ndarray
+    """The samples after which a gap begins."""
+
+    def same_times(self, t_ns: np.ndarray) -> bool:
+        """Whether ``t_ns`` are these times (the tags of a wide export share them)."""
+        return len(t_ns) == len(self.t_ns) and np.array_equal(t_ns, self.t_ns)
+
+
+def grid_times(t_ns: np.ndarray, grid: Grid) -> GridTimes:
+    """The grid's one pass over a tag's sorted, unique, non-empty times (module doc, 3)."""
+    t_us, n_breaks, gridded = _grid_scan(t_ns, grid.period_ns, grid.max_gap_ns)
+    breaks = np.flatnonzero(np.diff(t_ns) > grid.max_gap_ns) if n_breaks else np.zeros(0, dtype=np.int64)
+    return GridTimes(t_ns, t_us, gridded, breaks)
+
+
+def to_grid(t_ns: np.ndarray, values: np.ndarray, grid: Grid, times: GridTimes | None = None) -> Gridded:
+    """Put one tag's sorted, unique samples on the grid (module doc, 3–4); ``times``: their
+    :func:`grid_times`, when the caller has it already (another tag's at the same times)."""
     n = len(t_ns)
     if n == 0:
         e = np.zeros(0, dtype=np.int64)
         return Gridded(e, np.zeros(0), e, e)
     P = grid.period_ns
-    t_us, n_breaks, gridded = _grid_scan(t_ns, P, grid.max_gap_ns)
-    breaks = np.flatnonzero(np.diff(t_ns) > grid.max_gap_ns) if n_breaks else np.zeros(0, dtype=np.int64)
+    times = times or grid_times(t_ns, grid)
+    breaks = times.breaks
     gap_start, gap_end = t_ns[breaks], t_ns[breaks + 1]
-    if gridded:  # exactly gridded and nothing missing inside a segment: the samples are the grid
-        return Gridded(t_us, values, gap_start, gap_end)
+    if times.gridded:  # exactly gridded and nothing missing inside a segment: the samples are the grid
+        return Gridded(times.t_us, values, gap_start, gap_end)
     seg_first = np.r_[0, breaks + 1]
     seg_last = np.r_[breaks, n - 1]
     k_lo = -((-t_ns[seg_first]) // P)  # ceil: first grid instant at or after the segment's start

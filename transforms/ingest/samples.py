@@ -334,6 +334,14 @@ class _Faults:
         self.t_hi = now_ns + FUTURE_TOLERANCE_NS
         self.counts = np.zeros((len(tags.tags), len(FAULT_REASONS)), dtype=np.int64)
         self.first: dict[tuple[int, int], str] = {}
+        self._span: tuple[pl.Series, int, int] | None = None
+
+    def _extent(self, ts: pl.Series, t_ns: pl.Series) -> tuple[int, int]:
+        """The earliest and latest of the times ``ts`` (``t_ns``: as ns), found once for the
+        columns of a wide frame that share them."""
+        if self._span is None or self._span[0] is not ts:
+            self._span = (ts, t_ns.min(), t_ns.max())
+        return self._span[1], self._span[2]
 
     def bad_timestamps(self, tag_id: np.ndarray, lines: np.ndarray, raw: pl.Series, fmt: str) -> None:
         """Samples whose timestamp cannot be read (arrays of them only)."""
@@ -362,7 +370,8 @@ class _Faults:
         one of its tags (else the times stay in polars: no copy of a chunked column)."""
         tags = self.tags
         t_ns = ts.cast(UTC_NS).to_physical()
-        if len(t_ns) and (t_ns.min() < tags.commissioned_ns[ids].max() or t_ns.max() > self.t_hi):
+        first, last = self._extent(ts, t_ns) if len(t_ns) else (0, 0)
+        if len(t_ns) and (first < tags.commissioned_ns[ids].max() or last > self.t_hi):
             t = t_ns.to_numpy()
         else:
             t = np.zeros(0, dtype=np.int64)

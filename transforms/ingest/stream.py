@@ -35,7 +35,7 @@ from schemas.fields import FAULT_REASONS, REQUIRED_SIGNALS, SIGNAL_COLUMN
 from schemas.plant_config import PlantConfig
 from transforms.ingest.errors import IngestError
 from transforms.ingest.frames import assemble_valve, validate_raw_rows, validate_sensor_frame
-from transforms.ingest.grid import Grid, Gridded, prepare_tag, to_grid
+from transforms.ingest.grid import Grid, Gridded, GridTimes, grid_times, prepare_tag, to_grid
 from transforms.ingest.clock import ClockSteps
 from transforms.ingest.samples import FUTURE_TOLERANCE_NS, QUARANTINE_COLUMNS, TagTable, check_required_signals, empty_quarantine, samples_of, split_by_tag, tag_blocks
 
@@ -188,6 +188,8 @@ class ExportStream:
         self._valves: dict[str, _ValveRows] = {}
         self._span: list[int] = []
         self._batches = 0
+        self._times: GridTimes | None = None
+        """The grid's pass over the last tag's times: the next tag of a wide batch has the same."""
         export = config.export
         self.clock = None
         if export.layout == "wide" and export.clock_steps == "quarantine":
@@ -341,7 +343,9 @@ class ExportStream:
         t_ns, values = series.t_ns, series.values
         if anchor is not None:
             t_ns, values = np.concatenate(([anchor[0]], t_ns)), np.concatenate(([anchor[1]], values))
-        g = to_grid(t_ns, values, self.grid)
+        if self._times is None or not self._times.same_times(t_ns):
+            self._times = grid_times(t_ns, self.grid)
+        g = to_grid(t_ns, values, self.grid, self._times)
         if anchor is not None:  # instants up to the anchor were given with the previous batch
             first = int(np.searchsorted(g.t_us, anchor[0] // 1000, side="right"))  # t_us * 1000 <= anchor ns
             g = Gridded(g.t_us[first:], g.values[first:], g.gap_start_ns, g.gap_end_ns)

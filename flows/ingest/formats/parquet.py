@@ -91,9 +91,10 @@ def iload(src, export: ExportSpec, tags: TagTable | None, batch_samples: int, bl
     n = pf.metadata.num_rows
     if not coded and n:  # typed columns only: polars decodes them faster than Arrow, slice by slice
         scan = pl.scan_parquet(path, hive_partitioning=False)
-        for a in range(0, n, rows):
-            df = scan.slice(a, rows).collect().rechunk()
-            yield df, a + 1, a + rows >= n
+        cuts = _slices(pf.metadata, rows)
+        for a, b in zip(cuts[:-1], cuts[1:]):
+            df = scan.slice(a, b - a).collect().rechunk()
+            yield df, a + 1, b >= n
         return
     empty = True
     for batch, final in lookahead(_coalesced(pf.iter_batches(batch_size=min(rows, 1 << 31), use_threads=False), rows)):
@@ -111,6 +112,23 @@ def iload(src, export: ExportSpec, tags: TagTable | None, batch_samples: int, bl
         first += df.height
     if empty:
         yield pl.read_parquet(path), 1, True
+
+
+def _slices(md: pq.FileMetaData, rows: int) -> list[int]:
+    """Row numbers that cut the file into slices of about ``rows`` rows, each at a row group's
+    end where the row groups allow (a row group is decoded once, not once for each slice it
+    falls into), else every ``rows`` rows; the first 0, the last the file's rows."""
+    ends = np.cumsum([md.row_group(i).num_rows for i in range(md.num_row_groups)])
+    cuts, previous = [0], 0
+    for end in map(int, ends):
+        if end - cuts[-1] > rows and previous > cuts[-1]:
+            cuts.append(previous)  # the slice ends where the row group before this one ends
+        while end - cuts[-1] > rows:  # a row group larger than a slice: cut inside it
+            cuts.append(cuts[-1] + rows)
+        previous = end
+    if previous > cuts[-1]:
+        cuts.append(previous)
+    return cuts
 
 
 def _coalesced(batches: Iterator[pa.RecordBatch], rows: int) -> Iterator[pa.Table]:
