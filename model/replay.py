@@ -226,7 +226,8 @@ class _LastReplay:
     states are copied instead of integrated: the same numbers. Placing a load step across a
     standstill by replay (``transforms.discrepancy.rows``) replays each candidate from its own
     sample on a common prefix; while the replayed cylinder sticks under both loads, the next
-    candidates' replays are the last one's."""
+    candidates' replays are the last one's. One replay is kept (its inputs and states: memory
+    bounded by one record); a replay that diverged is not kept."""
 
     def __init__(self):
         self.last = None
@@ -244,7 +245,7 @@ class _LastReplay:
         if args[4].size != 1 or args[0].size != last[0].size:
             return None
         k = int(args[4][0])
-        if int(last[4][-1]) > k or not np.array_equal(states[:, k], args[5][0]):
+        if int(last[4][-1]) > k or states[:, k].tobytes() != args[5][0].tobytes():  # bit for bit (0.0 is not -0.0)
             return None
         if any(a != b for a, b in zip(args[9:13], last[9:13])):
             return None

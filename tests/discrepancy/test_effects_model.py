@@ -1,6 +1,7 @@
 """model.effects and model.replay: the library's switchable terms, their neutral defaults, and the
 replay on recorded inputs."""
 
+import importlib
 import math
 from pathlib import Path
 
@@ -147,6 +148,38 @@ def test_replay_restarts_and_rejects_bad_arguments():
         replay(TABLE1, r.x_m[0], r.ps_pa[0], r.pr_pa[0], r.F_l_n[0], [1000, 100], st)
     with pytest.raises(ValueError):
         replay(TABLE1, r.x_m[0], r.ps_pa[0], r.pr_pa[0], r.F_l_n[0], [0], [st[0], st[1]])
+
+
+def test_a_replay_continued_from_the_last_ones_state_is_that_replay_bit_for_bit(monkeypatch):
+    """A replay that restarts at k on the exact state the last replay passed through at k, on the
+    same inputs from k on, is copied from that replay (model.replay._LastReplay): the same numbers
+    as integrating it, bit for bit. A load that differs after k, or a state one ulp off, is integrated."""
+    mr = importlib.import_module("model.replay")  # the package's ``replay`` is the function
+    r = simulate_windows(TABLE1, [TABLE1.nominal_condition], 2.0, seed=1)
+    args = (TABLE1, r.x_m[0], r.ps_pa[0], r.pr_pa[0])
+    first = replay(*args, r.F_l_n[0], [0], [[r.X_m[0, 0], r.vX_m_s[0, 0], r.p1_pa[0, 0], r.p2_pa[0, 0]]])
+    k = 700
+    at_k = np.array([first.X_m[k], first.vX_m_s[k], first.p1_pa[k], first.p2_pa[k]])
+    load = r.F_l_n[0].copy()
+    load[:k] += 500.0  # before k: not an input of a replay from k
+    calls = []
+    kernel = mr._replay_kernel
+    monkeypatch.setattr(mr, "_replay_kernel", lambda *a: calls.append(a[4][0]) or kernel(*a))
+    copied = replay(*args, load, [k], [at_k])
+    assert calls == []
+    monkeypatch.setattr(mr, "_LAST", mr._LastReplay())  # nothing to continue from
+    fresh = replay(*args, load, [k], [at_k])
+    assert calls == [k]
+    for a, b in zip((copied.X_m, copied.vX_m_s, copied.p1_pa, copied.p2_pa), (fresh.X_m, fresh.vX_m_s, fresh.p1_pa, fresh.p2_pa)):
+        assert np.all(np.isnan(a[:k])) and np.all(np.isnan(b[:k])) and a[k:].tobytes() == b[k:].tobytes()
+    assert np.max(np.abs(copied.X_m[k:] - first.X_m[k:])) == 0.0
+    later = load.copy()
+    later[k + 10] += 1.0
+    off = at_k.copy()
+    off[2] = np.nextafter(off[2], np.inf)
+    replay(*args, later, [k], [at_k])
+    replay(*args, load, [k], [off])
+    assert calls == [k, k, k]
 
 
 def test_valve_flows_with_supply_line_use_the_valve_pressure():
