@@ -256,6 +256,12 @@ def _grid_knots(valid, segment, n_segments, knot_samples) -> list[np.ndarray]:
     return [segment_knots(valid, segment, s, knot_samples) for s in range(n_segments)]
 
 
+def _grid_fit(f_hat, valid, segment, n_segments, knot_samples, motion):
+    """:func:`_ramp_fit` on the regular grid of ``knot_samples`` (:func:`_grid_knots`): the fit
+    :func:`follows_ramps` decides with and :func:`ramp_load` starts from, made once for both."""
+    return _ramp_fit(f_hat, valid, segment, _grid_knots(valid, segment, n_segments, knot_samples), motion)
+
+
 def _load_design(f_hat, valid, segment, knots: list[np.ndarray], motion):
     """(the ``valid`` samples where ``f_hat`` and the ``motion`` columns are finite, each segment's
     load columns there: hat functions on its ``knots``, one constant where they are empty, zero
@@ -347,7 +353,7 @@ def _corner_width(knot_samples: int, settings: DiscrepancySettings) -> int:
 
 
 def ramp_load(f_hat: np.ndarray, valid: np.ndarray, usable: np.ndarray, segment: np.ndarray, n_segments: int, knot_samples: int,
-              settings: DiscrepancySettings, levels: np.ndarray, motion: tuple | None = None) -> tuple[list[np.ndarray], np.ndarray]:
+              settings: DiscrepancySettings, levels: np.ndarray, motion: tuple | None = None, grid: tuple | None = None) -> tuple[list[np.ndarray], np.ndarray]:
     """(per segment the knots, the load at every sample [N]) of a load that is piecewise linear
     within segments and bends only at the ramps' corners and where the cylinder stood still:
 
@@ -389,7 +395,8 @@ def ramp_load(f_hat: np.ndarray, valid: np.ndarray, usable: np.ndarray, segment:
     the joint fit. (Such pieces were once tied to one value, which left missed gentle ramps inside
     them to the velocity column; docs/discrepancy.md, "How it works".)
 
-    A segment without usable samples keeps its ``levels`` value."""
+    A segment without usable samples keeps its ``levels`` value. ``grid``: step 1's fit
+    (:func:`_grid_fit`) where already made."""
     W = _corner_width(knot_samples, settings)
     dt = settings.load_knot_s / knot_samples
 
@@ -399,7 +406,7 @@ def ramp_load(f_hat: np.ndarray, valid: np.ndarray, usable: np.ndarray, segment:
         mcols = np.column_stack(motion)
         return np.where(np.all(np.isfinite(mcols), axis=1), mcols @ cm, 0.0)
 
-    _, _, cm = _ramp_fit(f_hat, valid, segment, _grid_knots(valid, segment, n_segments, knot_samples), motion)
+    _, _, cm = _grid_fit(f_hat, valid, segment, n_segments, knot_samples, motion) if grid is None else grid
     knots = _corners(f_hat - motion_part(cm), valid, segment, n_segments, W, dt, settings)
     f = settings.corner_coarse_factor
     load, _, cm = _ramp_fit(f_hat, usable, segment, knots, motion)
@@ -512,15 +519,15 @@ def missed_knot(f_hat: np.ndarray, usable: np.ndarray, segment: np.ndarray, knot
 
 
 def follows_ramps(f_hat: np.ndarray, valid: np.ndarray, segment: np.ndarray, n_segments: int, knot_samples: int, settings: DiscrepancySettings,
-                  motion: tuple | None = None) -> bool:
+                  motion: tuple | None = None, grid: tuple | None = None) -> bool:
     """Does the load vary within its segments? The piecewise-linear fit on the regular grid of
     ``knot_samples`` (jointly with the ``motion`` columns) leaves at most 1/``settings.ramp_ratio``
     of the residual RMS of one constant per segment (jointly with the same columns), and that is
-    above ``settings.ramp_min_n``."""
+    above ``settings.ramp_min_n``. ``grid``: the grid's fit (:func:`_grid_fit`) where already made."""
     if knot_samples <= 0:
         return False
     _, rms_const, _ = _ramp_fit(f_hat, valid, segment, _grid_knots(valid, segment, n_segments, 0), motion)
-    _, rms_ramp, _ = _ramp_fit(f_hat, valid, segment, _grid_knots(valid, segment, n_segments, knot_samples), motion)
+    _, rms_ramp, _ = _grid_fit(f_hat, valid, segment, n_segments, knot_samples, motion) if grid is None else grid
     return rms_const > settings.ramp_min_n and rms_ramp * settings.ramp_ratio <= rms_const
 
 
@@ -756,8 +763,9 @@ def estimate_load(f_hat: np.ndarray, v: np.ndarray, settings: DiscrepancySetting
     k = max(2, int(round(settings.load_knot_s / dt)))
     motion = (v, accel)
     n_seg = len(steps_arr) + 1
-    ramps = follows_ramps(f_hat, valid, segment, n_seg, k, settings, motion)
-    knots, load = ramp_load(f_hat, valid, usable, segment, n_seg, k, settings, levels, motion)
+    grid = _grid_fit(f_hat, valid, segment, n_seg, k, motion)
+    ramps = follows_ramps(f_hat, valid, segment, n_seg, k, settings, motion, grid)
+    knots, load = ramp_load(f_hat, valid, usable, segment, n_seg, k, settings, levels, motion, grid)
     if not (ramps or corners_pay(f_hat, usable, segment, n_seg, knots, settings, motion)):
         return est
     load = with_missed_knots(f_hat, usable, segment, knots, load, levels, k, settings, motion)

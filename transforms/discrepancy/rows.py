@@ -286,6 +286,8 @@ def _refine_rest_steps(rec: Record, load: LoadEstimate, f_hat: np.ndarray, plant
             if err < best_err:
                 best, best_err = int(c), err
         steps[i] = best
+    if np.array_equal(steps, load.steps):  # the estimate these steps were made with
+        return load
     return load.with_steps(steps, f_hat, settings, _load_motion(rec, settings))
 
 
