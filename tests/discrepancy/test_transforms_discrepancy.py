@@ -240,6 +240,44 @@ def test_a_ramp_under_both_corner_filters_gets_its_knots_one_at_a_time():
     assert len(est.corners) == len(off.corners) and all(np.array_equal(x, y) for x, y in zip(est.corners, off.corners))
 
 
+def test_the_block_reduced_ramp_fit_is_the_least_squares_of_the_whole_rows():
+    """load._ramp_fit reduces each block of rows by a QR before its least squares (an orthogonal
+    transform): the same solution as the dense least squares of the hat-function design with its
+    smoothing rows, to rounding (3 segments, one a constant, a gap the smoothing bridges, the
+    motion columns; blocks that straddle segments)."""
+    from transforms.discrepancy.load import RAMP_FIT_BLOCK, SMOOTHING, _grid_knots, _ramp_fit, hat_basis
+
+    rng = np.random.default_rng(7)
+    n = 9 * RAMP_FIT_BLOCK + 17
+    t = np.arange(n)
+    segment = (t >= 700).astype(np.int64) + (t >= 1700)
+    valid = (rng.random(n) > 0.1) & ~((t >= 1000) & (t < 1400))
+    v, a = np.sin(t / 300.0), np.cos(t / 170.0)
+    f = 40.0 * np.cumsum(rng.normal(size=n)) / np.sqrt(n) * 30 + 800.0 * v - 300.0 * a + rng.normal(size=n) * 50.0
+    knots = _grid_knots(valid, segment, 3, 100)
+    knots[2] = np.zeros(0)
+    load, rms, cm = _ramp_fit(f, valid, segment, knots, (v, a))
+    idx = np.flatnonzero(valid)
+    cols = [hat_basis(kn if kn.size else np.zeros(1), idx) * (segment[idx] == s)[:, None] for s, kn in enumerate(knots)]
+    X = np.hstack(cols + [np.column_stack([v, a])[idx]])
+    D = np.zeros((0, X.shape[1]))
+    o = 0
+    for kn in knots:
+        for i in range(max(kn.size - 2, 0)):
+            row = np.zeros(X.shape[1])
+            row[o + i:o + i + 3] = (1.0, -2.0, 1.0)
+            D = np.vstack([D, SMOOTHING * row])
+        o += max(kn.size, 1)
+    c = np.linalg.lstsq(np.vstack([X, D]), np.r_[f[idx], np.zeros(D.shape[0])], rcond=None)[0]
+    k = X.shape[1] - 2
+    dense = np.concatenate([hat_basis(kn, np.flatnonzero(segment == s)) @ c[sum(max(q.size, 1) for q in knots[:s]):][:kn.size] if kn.size > 1
+                            else np.full(np.sum(segment == s), c[k - 1]) for s, kn in enumerate(knots)])
+    np.testing.assert_allclose(load, dense, rtol=0, atol=1e-9 * np.max(np.abs(dense)))
+    np.testing.assert_allclose(cm, c[k:], rtol=1e-9)
+    assert rms == pytest.approx(np.sqrt(np.mean((f[idx] - X @ c) ** 2)), rel=1e-12)
+    assert np.ptp(load[:700]) > 100.0  # the grid follows the drift: not a constant fit
+
+
 def test_a_replay_holds_a_ramp_at_its_mean_over_the_interval_and_a_step_from_its_sample():
     # model.replay holds F_l between samples: a ramp within a segment is held at the mean of the
     # interval's ends (the ramp's own mean over it), a step between segments from the sample it

@@ -276,32 +276,97 @@ def _load_design(f_hat, valid, segment, knots: list[np.ndarray], motion):
     return idx, cols, None if M is None else M[idx]
 
 
+RAMP_FIT_BLOCK = 256
+"""Rows per block that :func:`_ramp_fit` reduces by a QR before its least squares."""
+
+
+def _hat_entries(knots: list[np.ndarray], segment: np.ndarray, idx: np.ndarray):
+    """The load columns of :func:`_load_design` as two entries per row (sample ``idx``): (first
+    column, its weight, second column, its weight, number of load columns); a segment without
+    knots has one constant column (weight 1, and 0 on the same column)."""
+    n = idx.size
+    c0, c1 = np.zeros(n, dtype=np.int64), np.zeros(n, dtype=np.int64)
+    w0, w1 = np.zeros(n), np.zeros(n)
+    off = 0
+    seg = segment[idx]
+    for s, kn in enumerate(knots):
+        rows = np.flatnonzero(seg == s)
+        if kn.size < 2:
+            c0[rows], c1[rows], w0[rows] = off, off, 1.0
+        else:
+            t = idx[rows].astype(float)
+            j = np.clip(np.searchsorted(kn, t, side="right") - 1, 0, kn.size - 2)
+            w = np.clip((t - kn[j]) / (kn[j + 1] - kn[j]), 0.0, 1.0)
+            c0[rows], c1[rows], w0[rows], w1[rows] = off + j, off + j + 1, 1.0 - w, w
+        off += max(kn.size, 1)
+    return c0, w0, c1, w1, off
+
+
+def _reduced_rows(c0, w0, c1, w1, M, y, n_cols: int):
+    """(R, Qᵀy) with the same least-squares solutions as the rows (two load entries each, the
+    dense ``M`` columns after the ``n_cols`` load columns, right-hand side ``y``): each block of
+    :data:`RAMP_FIT_BLOCK` rows replaced by the R of its QR on the columns it touches (an
+    orthogonal transform of those rows)."""
+    n, nm = y.size, M.shape[1]
+    if n == 0:
+        return np.zeros((0, n_cols + nm)), np.zeros(0)
+    B = RAMP_FIT_BLOCK
+    nb = -(-n // B)
+    pad = nb * B - n
+    c0, c1 = np.r_[c0, np.full(pad, c0[-1])].reshape(nb, B), np.r_[c1, np.full(pad, c1[-1])].reshape(nb, B)
+    w0, w1 = np.r_[w0, np.zeros(pad)].reshape(nb, B), np.r_[w1, np.zeros(pad)].reshape(nb, B)
+    lo = np.minimum(c0.min(axis=1), c1.min(axis=1))
+    width = int(np.max(np.maximum(c0.max(axis=1), c1.max(axis=1)) - lo)) + 1
+    W = width + nm
+    blocks = np.zeros((nb, B, W))
+    b, r = np.arange(nb)[:, None], np.arange(B)[None, :]
+    blocks[b, r, c1 - lo[:, None]] = w1
+    blocks[b, r, c0 - lo[:, None]] += w0
+    blocks[:, :, width:] = np.r_[M, np.zeros((pad, nm))].reshape(nb, B, nm)
+    Q, R = np.linalg.qr(blocks)
+    qy = np.einsum("bij,bi->bj", Q, np.r_[y, np.zeros(pad)].reshape(nb, B))
+    k = R.shape[1]
+    # a block's load columns lo .. lo + width - 1 (past n_cols, padding: R is exactly 0 there)
+    A = np.zeros((nb, k, n_cols + width))
+    A[np.arange(nb)[:, None, None], np.arange(k)[None, :, None], (lo[:, None] + np.arange(width))[:, None, :]] = R[:, :, :width]
+    return np.hstack([A.reshape(nb * k, -1)[:, :n_cols], R[:, :, width:].reshape(nb * k, nm)]), qy.reshape(-1)
+
+
 def _ramp_fit(f_hat, valid, segment, knots: list[np.ndarray], motion):
     """Least squares of ``f_hat`` over the valid samples on the segments' load (piecewise linear on
     each segment's ``knots``, a constant where they are empty) and the ``motion`` columns; returns
-    (load at every sample, RMS residual, the motion columns' coefficients)."""
+    (load at every sample, RMS residual, the motion columns' coefficients). The rows are reduced
+    block by block (:func:`_reduced_rows`) before the least squares, which truncates the singular
+    values as on the whole rows (relative ``eps`` × their number)."""
     n = f_hat.size
-    idx, cols, M = _load_design(f_hat, valid, segment, knots, motion)
+    m = valid & np.isfinite(f_hat)
+    M = np.zeros((n, 0))
+    if motion is not None:
+        M = np.column_stack(motion)
+        m &= np.all(np.isfinite(M), axis=1)
+    idx = np.flatnonzero(m)
+    M = M[idx]
+    c0, w0, c1, w1, k = _hat_entries(knots, segment, idx)
     spans = []
     off = 0
     for kn in knots:
         kn = kn if kn.size else np.zeros(1)
         spans.append((off, kn))
         off += kn.size
-    Bm = np.hstack(cols)
-    k = Bm.shape[1]
-    X = Bm if M is None else np.hstack([Bm, M])
+    N = k + M.shape[1]
     D = []
     for o, kn in spans:
         if kn.size > 2:
-            d = np.zeros((kn.size - 2, X.shape[1]))
+            d = np.zeros((kn.size - 2, N))
             for i in range(kn.size - 2):
                 d[i, o + i:o + i + 3] = (1.0, -2.0, 1.0)
             D.append(d)
-    A = np.vstack([X] + [SMOOTHING * d for d in D])
-    y = np.r_[f_hat[idx], np.zeros(A.shape[0] - idx.size)]
-    c = np.linalg.lstsq(A, y, rcond=None)[0]
-    res = f_hat[idx] - X @ c
+    R, qy = _reduced_rows(c0, w0, c1, w1, M, f_hat[idx], k)
+    A = np.vstack([R] + [SMOOTHING * d for d in D])
+    y = np.r_[qy, np.zeros(A.shape[0] - qy.size)]
+    n_rows = idx.size + sum(d.shape[0] for d in D)
+    c = np.linalg.lstsq(A, y, rcond=np.finfo(float).eps * max(n_rows, N))[0]
+    res = f_hat[idx] - (w0 * c[c0] + w1 * c[c1] + M @ c[k:])
     rms = float(np.sqrt(np.mean(res ** 2))) if idx.size else 0.0
     load = np.zeros(n)
     for s, (o, kn) in enumerate(spans):
