@@ -75,7 +75,7 @@ def window_figures(seed: int, n_windows: int, only: int | None = None, load_inte
     out = []
     for i, p in zip(windows, prepare_records([recs[i] for i in windows], plant, cond, s)):
         r = truth[i]
-        est = p.loads[key]
+        est = p.base_load
         true_load = r.true["F_l"][:p.rec.n].astype(float)
         at_speed = est.usable
         mc = _mechanical_model(p, plant, cond, fx, s, est.load)[0].cylinder

@@ -420,7 +420,7 @@ def test_the_mechanical_noise_floor_is_what_the_noise_leaves_through_the_replay(
     # its segments its own steps, which the replay takes at their samples (load.interval_load)
     true_load = np.asarray(res.F_l_n[0], float)
     segment = np.concatenate([[0], np.cumsum(np.diff(true_load) != 0)])
-    p.loads[key] = replace(p.loads[key], load=true_load, segment=segment, hold_until=0, friction_mismatch=0.0, mass_mismatch=0.0)
+    p.loads[key] = replace(p.base_load, load=true_load, segment=segment, hold_until=0, friction_mismatch=0.0, mass_mismatch=0.0)
     floor = noise_floors([p], TABLE1, cond, fx, s)["mechanical"]
     gaps = {kind: _gaps([q], TABLE1, cond, fx, s, set())[0].split_gap("mechanical")
             for kind, q in (("recorded", p), ("noise-free", replace(p, rec=prepare_record(noise_free, s))))}
@@ -469,7 +469,7 @@ def test_the_mechanical_replay_is_not_judged_through_a_load_step():
     cond = plant.nominal_condition
     recs = split_records(simulate_lake(None, n_windows=2, seed=104, params=plant), s)[1:]
     p = prepare_records(recs, plant, cond, s)
-    est = p[0].loads[(plant, cond, fx)]
+    est = p[0].base_load
     assert np.any((est.steps > 9640) & (est.steps < 9700)), est.steps
     judged, starts = _mechanical_restarts(p[0].rec, s, est)
     g = s.step_guard_samples

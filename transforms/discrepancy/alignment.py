@@ -128,17 +128,17 @@ def _vertex(s: np.ndarray, k: int) -> float:
 def pressure_delays(prepared, plant, condition, settings) -> PressureDelays:
     """The delay of the recorded p1 and p2, each against the model's hydraulic replay (module docstring)."""
     from model.effects import Effects
-    from transforms.discrepancy.rows import _replay_record
+    from transforms.discrepancy.rows import hydraulic_readings
 
     dt = prepared[0].rec.dt if prepared else 1.0
     kmax = int(round(MAX_DELAY_S / dt)) if prepared else 0
     sse = {ch: np.zeros(kmax + 1) for ch in CHAMBERS}
     box = np.ones(HIGHPASS_SAMPLES) / HIGHPASS_SAMPLES
     for p in prepared:
-        rr = _replay_record(p, plant, condition, Effects(), settings)
+        rr = dict(zip(CHAMBERS, hydraulic_readings(p, plant, condition, Effects(), settings)))
         n = p.rec.n
         for ch in CHAMBERS:
-            rep, rec = rr[f"{ch}_hydraulic"], p.rec.raw[ch]
+            rep, rec = rr[ch], p.rec.raw[ch]
             for k in range(kmax + 1):
                 e = rec[k + kmax:] - rep[kmax:n - k]  # the same replayed samples for every k
                 ok = np.isfinite(e)

@@ -462,7 +462,7 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
             verdict = beyond_selection(verdict, nuisance_verdict(prepared, nm, base_fit, [], rest, rows0, w_rows, settings, [], gap_of,
                                                                  stage_gaps[0], floors, stage_acc))
         for p, p0 in zip(prepared, prepared0):  # the same records (prepare_records keeps or drops a record by its length)
-            p.loads.setdefault((*nominal, base), p0.loads[(*nominal, base)])
+            p.loads.setdefault((*nominal, base), p0.base_load)
         gap_nominal = _gaps(prepared, *nominal, base, settings, set(), split=False)[0].gap()
     elif named and not named[0].confirmed:
         first = named[0]

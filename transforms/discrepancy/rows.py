@@ -41,9 +41,16 @@ class _Prepared:
     rec: Record
     regions: dict[str, np.ndarray]
     edges: np.ndarray
-    base_load: LoadEstimate
+    base_model: tuple  # (plant, condition, settings) of the base load (:attr:`base_load`)
     loads: dict = field(default_factory=dict)  # (plant, condition, Effects) -> LoadEstimate of that model
     seg: LoadEstimate | None = None  # the load segments of the regression (default base_load)
+
+    @property
+    def base_load(self) -> LoadEstimate:
+        """The base model's load (no effects), estimated on first use: the pressure delays are
+        measured on the hydraulic replay, which no load enters."""
+        plant, condition, settings = self.base_model
+        return _load_estimate_for(self, plant, condition, Effects(), settings)
 
     @property
     def segmentation(self) -> LoadEstimate:
@@ -51,7 +58,8 @@ class _Prepared:
 
 
 def prepare_records(records: list[Record], plant: PlantParams, condition: ValveCondition, settings: DiscrepancySettings) -> list[_Prepared]:
-    """Savitzky–Golay values, operating regions, interval edges and the base model's load."""
+    """Savitzky–Golay values, operating regions, interval edges (the base model's load on first
+    use, :attr:`_Prepared.base_load`)."""
     out = []
     h = settings.savgol_window // 2
     k = settings.interval_smoothing // 2
@@ -62,8 +70,7 @@ def prepare_records(records: list[Record], plant: PlantParams, condition: ValveC
         edges = interval_edges(rec.n - max(h, k), settings.interval_samples, max(h, k))
         if edges.size < 4:
             continue
-        load = _estimate_load(rec, plant, condition, Effects(), settings)
-        out.append(_Prepared(rec, regions, edges, load, {(plant, condition, Effects()): load}))
+        out.append(_Prepared(rec, regions, edges, (plant, condition, settings)))
     return out
 
 
@@ -417,14 +424,22 @@ def _hydraulic_replay(p: _Prepared, plant, condition, effects, start: tuple, loa
     return np.asarray(p1h, float).copy(), np.asarray(p2h, float).copy()
 
 
+def hydraulic_readings(p: _Prepared, plant, condition, effects, settings) -> tuple[np.ndarray, np.ndarray]:
+    """The p1, p2 readings of the hydraulic replay as :func:`_replay_record` gives them, without
+    the load estimate, the whole or the mechanical replay (no load enters the chambers)."""
+    h = settings.savgol_window // 2
+    out = _hydraulic_replay(p, plant, condition, effects, _replay_starts(p, effects, settings), 0.0)
+    for rep in out:
+        rep[p.rec.n - h:] = np.nan  # as _replay_record
+    return out
+
+
 def hydraulic_gap(prepared, plant, condition, effects, settings) -> float:
     """The hydraulic gap (``gaps.SPLIT_GAPS``) of ``effects`` on ``prepared``: the chamber replay
-    alone, without the load estimate, the whole or the mechanical replay (for fits on it)."""
+    alone (:func:`hydraulic_readings`; for fits on it)."""
     acc = GapAccumulator()
-    h = settings.savgol_window // 2
     for p in prepared:
-        for s, rep in zip(("p1_hydraulic", "p2_hydraulic"), _hydraulic_replay(p, plant, condition, effects, _replay_starts(p, effects, settings), 0.0)):
-            rep[p.rec.n - h:] = np.nan  # as _replay_record
+        for s, rep in zip(("p1_hydraulic", "p2_hydraulic"), hydraulic_readings(p, plant, condition, effects, settings)):
             acc.add(s, rep - p.rec.raw[RECORDED_OF[s]], p.regions)
     return acc.split_gap("hydraulic")
 
