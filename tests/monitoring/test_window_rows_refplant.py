@@ -21,6 +21,8 @@ from .shift_study import fits_against_truth
 from .sim_lake import START
 from .test_accuracy import LAWS, NOMINAL, PARAMS
 
+pytestmark = pytest.mark.xdist_group("window_rows_refplant")  # one worker builds the shared `plant` once
+
 WINDOW_S, WINDOW_ROWS, STRIDE = 20.0, 2000, 10
 WEAR = (0.05e-3, 0.95)
 """Every edge's shift [m] and α factor in the recording, against the commissioning."""

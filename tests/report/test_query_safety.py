@@ -71,6 +71,7 @@ REFUSED = [
 
 
 @pytest.mark.slow
+@pytest.mark.xdist_group("query_safety_warehouse")  # one worker builds the shared `warehouse` once
 @pytest.mark.parametrize("live", [False, True], ids=["snapshot", "live"])
 def test_a_query_refuses_every_write_and_leaves_every_file_unchanged(warehouse, live):
     wh, env = warehouse
@@ -87,6 +88,7 @@ def test_a_query_refuses_every_write_and_leaves_every_file_unchanged(warehouse, 
 
 
 @pytest.mark.slow
+@pytest.mark.xdist_group("query_safety_warehouse")
 def test_the_lake_and_the_views_stay_readable(warehouse):
     wh, env = warehouse
     rows = duckdb.sql(f"select count(*) from read_parquet('{_partition(wh)}')").fetchall()[0][0]

@@ -32,6 +32,8 @@ from schemas.fields import DISCREPANCY_FINDING_FIELDS, EDGE_FIT_FIELDS, FLEET_RA
 
 from tests.report.viewdb import COMMISSIONED, Warehouse
 
+pytestmark = pytest.mark.xdist_group("report_built")  # one worker builds the shared `built` once
+
 EXAMPLE = Path(__file__).parents[1] / "fixtures" / "plant_example.toml"
 VALVES = ("VA", "VB", "VC")
 HOURS = np.arange(0.0, 120.0, 1.0)

@@ -15,6 +15,8 @@ from schemas.plant_config import RetentionSpec
 from tests.ingest.conftest import run_cli
 from tests.retention.conftest import write_config
 
+pytestmark = pytest.mark.xdist_group("retention_base")  # one worker builds the shared `base` once
+
 
 def _cli(args, wh, cfg, monkeypatch, capsys):
     return run_cli(["retention", "--config", str(cfg), "--warehouse", str(wh), *args], monkeypatch, capsys)

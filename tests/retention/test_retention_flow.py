@@ -16,6 +16,8 @@ from flows.common.lake import day_files, dropped_folders, hour_path, partition_f
 from flows.common.warehouse_db import connect, query_frame
 from tests.retention.conftest import AS_OF, DAYS, plant_with
 
+pytestmark = pytest.mark.xdist_group("retention_base")  # one worker builds the shared `base` once
+
 
 def _fingerprint(wh: Path) -> dict[str, str]:
     """Every file of the warehouse (lake, database, hidden folders) → sha256 of its bytes."""

@@ -12,6 +12,8 @@ from transforms.derivatives import savgol_valid
 from transforms.monitor import monitor, monitor_points
 from transforms.windows import UnsortedTimes, assign_windows, window_layout
 
+pytestmark = pytest.mark.xdist_group("transforms_awkward_lake")  # one worker builds the shared `awkward_lake` once
+
 EDGES = ("s1", "1r", "s2", "2r")
 
 

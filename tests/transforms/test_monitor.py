@@ -13,6 +13,8 @@ from transforms.monitor import monitor, monitor_points
 from transforms.points import POINT_COLUMNS
 from transforms.selection import STATS_COLUMNS
 
+pytestmark = pytest.mark.xdist_group("transforms_lake")  # one worker builds the shared `lake` once
+
 EDGES = ("s1", "1r", "s2", "2r")
 UG = np.linspace(-3.5e-3, 3.5e-3, 1401)
 BASE = {e: Characteristic.from_arrays(UG, sv.TRUTH.area(e, UG)) for e in EDGES}
