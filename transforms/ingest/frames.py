@@ -77,7 +77,7 @@ def assemble_valve(valve_id: str, signals: dict[str, Gridded]) -> pl.DataFrame:
         if g is None:
             data[col] = pl.repeat(None, len(t), dtype=pl.Float32, eager=True)
         elif (aligned and s in REQUIRED_SIGNALS) or _same(g.t_us, t):
-            data[col] = g.values.astype(np.float32)
+            data[col] = np.asarray(g.values, dtype=np.float32)  # (no copy of float32 values: a gridded wide batch)
         else:
             pos = np.searchsorted(g.t_us, t)
             pos_c = np.minimum(pos, max(len(g.t_us) - 1, 0))
