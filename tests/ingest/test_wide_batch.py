@@ -80,7 +80,9 @@ def _streamed(df: pl.DataFrame, cuts: list[int], monkeypatch, gridded: bool):
         bounds = [0, *sorted(set(c for c in cuts if 0 < c < df.height)), df.height]
         frames = []
         for k, (a, b) in enumerate(zip(bounds[:-1], bounds[1:])):
-            frames += stream.feed(df.slice(a, b - a), first_line=1 + a, final=k == len(bounds) - 2)
+            batch = df.slice(a, b - a)
+            batch = pl.concat([batch.slice(0, batch.height // 2), batch.slice(batch.height // 2)], rechunk=False)  # as read: a chunk per row group
+            frames += stream.feed(batch, first_line=1 + a, final=k == len(bounds) - 2)
     return frames, stream, taken
 
 

@@ -241,6 +241,7 @@ class ExportStream:
         """:meth:`feed` by the general rules: samples, quarantine, each tag sorted, de-duplicated
         and put on the grid, a valve's rows where all its signals have reached."""
         export, tags = self.config.export, self.tags
+        df = df.rechunk()  # the columns contiguous: each tag's values taken without a copy
         samples = samples_of(df, self.config, tags, first_line=first_line, now_ns=self.now_ns, clock=self.clock, origin_ns=self.origin_ns)
         c = self.counts
         c.rows_in += samples.rows_in

@@ -74,7 +74,7 @@ class GriddedColumns:
     """Tag id → its values in SI as float32, slot 0 (left to the caller) and one per row, in the
     batch's column order."""
     raw: dict[int, np.ndarray]
-    """Tag id → its values as read (float64), for the last rows carried to the next batch."""
+    """Tag id → its last two values as read (float64), carried to the next batch."""
 
 
 def gridded_columns(df: pl.DataFrame, export: ExportSpec, timezone: str, tags: TagTable, period_ns: int, now_ns: int, origin_ns: int | None) -> GriddedColumns | None:
@@ -110,9 +110,13 @@ def gridded_columns(df: pl.DataFrame, export: ExportSpec, timezone: str, tags: T
         return None
     columns, raw = {}, {}
     for c, tid in zip(names, tids):
-        values = df[c].cast(pl.Float64).to_numpy()
+        col = df[c].cast(pl.Float64)
         out = np.empty(n + 1, dtype=np.float32)
-        if not _to_lake(values, float(tags.factors[tid]), float(tags.lo[tid]), float(tags.hi[tid]), out[1:]):
-            return None
-        columns[tid], raw[tid] = out, values
+        a = 1
+        for chunk in col.get_chunks():  # (a column read by row groups is not copied into one first)
+            values = chunk.to_numpy()
+            if not _to_lake(values, float(tags.factors[tid]), float(tags.lo[tid]), float(tags.hi[tid]), out[a : a + len(values)]):
+                return None
+            a += len(values)
+        columns[tid], raw[tid] = out, col.tail(2).to_numpy()
     return GriddedColumns(held, t_us, columns, raw)
