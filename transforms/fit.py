@@ -54,7 +54,6 @@ from collections.abc import Mapping, Sequence
 import numba
 import numpy as np
 import polars as pl
-from scipy.special import stdtrit  # Student's t quantile (scipy.stats.t.ppf), without importing scipy.stats (~1 s)
 
 from transforms.characteristic import Characteristic
 from transforms.params import EDGES, MonitorParams
@@ -656,6 +655,8 @@ def fit_arrays(
         var_x = sigma2 * shh / det
         rho_c = np.clip(np.nan_to_num(rho, nan=0.0), 0.0, 0.98)
         infl = np.sqrt((1.0 + rho_c) / (1.0 - rho_c))
+        from scipy.special import stdtrit  # noqa: PLC0415 - Student's t quantile (scipy.stats.t.ppf) without scipy.stats (~1 s); imported here, not by every command that imports this module (~0.3 s)
+
         tq = stdtrit(dof, 0.5 + ci_level / 2.0)
         half_a = tq * infl * np.sqrt(var_a)
         half_x = tq * infl * np.sqrt(var_x)

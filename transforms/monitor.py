@@ -25,7 +25,6 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 import polars as pl
-from scipy.special import stdtrit
 
 from transforms.baseline import (
     EDGE_LAWS,
@@ -615,6 +614,8 @@ def _leak_columns(fits, u, area, leak, offsets, lam_b, opposite, bk, pmap, valve
     lam = np.maximum(lam_b + step, 0.0)
     m = np.diff(offsets) // block  # block means
     levels = np.array([pmap[v].ci_level for v in valve_ids]) if len(valve_ids) else np.zeros(0)
+    from scipy.special import stdtrit  # noqa: PLC0415 - here, not at import (~0.3 s of the commands that import the monitor for its lake chunks)
+
     with np.errstate(invalid="ignore"):
         half = stdtrit(np.maximum(m - 3, 1), 0.5 + levels / 2) * se
     half = np.where(m > 3, half, np.nan)

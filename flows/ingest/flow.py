@@ -434,12 +434,15 @@ def run_ingest(
 
 @contextmanager
 def _progress(files: list[Path], show: bool) -> Iterator[Callable[[Path], None]]:
-    """A rich progress bar over the files' bytes (stderr, terminals only)."""
+    """A rich progress bar over the files' bytes (stderr, terminals only; rich is imported only then)."""
+    if not show or sys.stderr is None or not sys.stderr.isatty():
+        yield lambda f: None
+        return
     from rich.console import Console
     from rich.progress import BarColumn, DownloadColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
     console = Console(stderr=True)
-    if not show or not console.is_terminal:
+    if not console.is_terminal:
         yield lambda f: None
         return
     sizes = {f: (f.stat().st_size if f.exists() else 0) for f in files}

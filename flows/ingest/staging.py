@@ -27,7 +27,6 @@ from datetime import date
 from pathlib import Path
 from typing import Callable
 
-import numpy as np
 import polars as pl
 import pyarrow.parquet as pq
 
@@ -47,6 +46,7 @@ from flows.common.lake import (
 )
 from schemas.plant_config import PlantConfig
 from transforms.ingest import merge_partition, split_days, tags_by_column
+from transforms.ingest.frames import time_slices
 
 BUFFER_ROWS = 8_388_608
 """Lake rows held before everything buffered is written, complete or not (bounds memory when
@@ -55,11 +55,9 @@ US_PER_DAY = 24 * US_PER_HOUR
 
 
 def _hours(frame: pl.DataFrame) -> list[tuple[int, pl.DataFrame]]:
-    """A day's rows (sorted) → ``(UTC hour, rows)`` slices."""
-    t = frame["timestamp_utc"].to_physical().to_numpy()
-    hour = (t % US_PER_DAY) // US_PER_HOUR
-    cuts = np.r_[0, np.flatnonzero(np.diff(hour)) + 1, len(t)]
-    return [(int(hour[a]), frame.slice(int(a), int(b - a))) for a, b in zip(cuts[:-1], cuts[1:])]
+    """A day's rows (sorted) → ``(UTC hour, rows)`` slices (the hours' edges found by bisection,
+    not by a pass over the rows)."""
+    return [(int(k % 24), part) for k, part in time_slices(frame, US_PER_HOUR)]
 
 
 class LakeStager:
@@ -171,7 +169,7 @@ class LakeStager:
                 return None
             self._switch(vid, day, day_file)
         if before is not None:  # only the hours the export has gone past
-            cut = int(np.searchsorted(rows["timestamp_utc"].to_physical().to_numpy(), before))
+            cut = int(rows["timestamp_utc"].to_physical().search_sorted(before))
             rows, rest = rows.slice(0, cut), rows.slice(cut)
         else:
             rest = None

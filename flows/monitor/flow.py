@@ -44,7 +44,8 @@ from flows.common.errors import ValvemonError
 from flows.common.instants import utc_instant
 from flows.common.lake import SENSOR_POLARS_SCHEMA, grid_rows_before, grid_series, UNKNOWN_SPAN_US, list_partitions, read_lake, row_group_spans, time_grid
 from flows.common.prefect_run import flow, task
-from flows.common.warehouse_db import add_missing_columns, connect, ensure_tables, insert_frame, query_frame, transaction
+from flows.common.warehouse_db import connect, insert_frame, query_frame, transaction
+from flows.monitor.tables import INDEXED_TABLES, MONITOR_TABLES, ensure_monitor_tables  # noqa: F401 - the monitor's tables, also for the callers of this module
 from model.area import edge_area
 from schemas.fields import BASELINE_FIELDS, EDGE_FIT_FIELDS, EDGES, SELECTION_FIELDS, polars_schema
 from schemas.plant_config import PlantConfig, ValveSpec
@@ -53,19 +54,6 @@ from transforms.leakage import closed_leakage
 from transforms.monitor import LAKE_COLUMNS, MonitorResult, commissioning_baseline, monitor
 from transforms.params import MonitorParams
 from transforms.windows import LONG_RUN_FRACTION, window_starts
-
-MONITOR_TABLES = {
-    "baselines": (BASELINE_FIELDS, ("valve_id", "edge", "version")),
-    "edge_fits": (EDGE_FIT_FIELDS, ("valve_id", "edge", "window_start")),
-    "selection_stats": (SELECTION_FIELDS, ("valve_id", "edge", "window_start", "rule")),
-}
-"""Table → (fields, unique key)."""
-
-INDEXED_TABLES = frozenset({"baselines"})
-"""Tables whose key DuckDB enforces with a unique index. ``edge_fits`` and ``selection_stats``
-keep theirs by construction instead: every write deletes the spans it replaces and inserts their
-rows in one transaction (:func:`store_spans`). A unique (ART) index on them made each such write
-about 4× as expensive (~45 against ~12 ms CPU for a valve-week)."""
 
 LEAK_Z95 = 1.959963984540054
 """Normal 97.5 % quantile: the baselines' 95 % interval of ``leak_scale`` (a pooled commissioning
@@ -77,23 +65,6 @@ CHUNK_DAYS = 7
 NOMINAL_GRID_STEP_M = 0.05e-3
 """Knot spacing of the nominal characteristic; Eq. 3 is nearly linear on this scale (the
 piecewise-linear interpolation error is below 0.01 mm² on the open branch)."""
-
-
-def ensure_monitor_tables(con) -> None:
-    """Create ``baselines``, ``edge_fits`` and ``selection_stats`` if missing, with a unique index
-    on the :data:`INDEXED_TABLES` (one on the others, made by earlier versions, is dropped).
-    Catalog queries first, so that a warehouse that has them costs no DDL. A table made by an
-    earlier version gets the columns added since (after its own: ``leak_*``), NULL in old rows."""
-    ensure_tables(con, {name: (fields, None) for name, (fields, _) in MONITOR_TABLES.items()})
-    add_missing_columns(con, {name: fields for name, (fields, _) in MONITOR_TABLES.items()})
-    indexes = {r[0] for r in con.execute(
-        "SELECT index_name FROM duckdb_indexes() WHERE database_name = current_database()"
-    ).fetchall()}  # fmt: skip
-    for name, (_, key) in MONITOR_TABLES.items():
-        if name in INDEXED_TABLES and f"{name}_key" not in indexes:
-            con.execute(f"CREATE UNIQUE INDEX IF NOT EXISTS {name}_key ON {name} ({', '.join(key)})")
-        if name not in INDEXED_TABLES and f"{name}_key" in indexes:
-            con.execute(f"DROP INDEX {name}_key")
 
 
 def monitor_params(valve: ValveSpec, sample_rate_hz: float, window_s: float | None = None, window_rows: int | None = None) -> MonitorParams:

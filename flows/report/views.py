@@ -141,7 +141,7 @@ def ordered_views(views: dict[str, ViewFile]) -> list[ViewFile]:
 
 def ensure_report_tables(con: duckdb.DuckDBPyConnection) -> None:
     """Create the tables of :data:`REPORT_TABLES` (and the monitor's tables) if missing."""
-    from flows.monitor.flow import ensure_monitor_tables
+    from flows.monitor.tables import ensure_monitor_tables
 
     ensure_monitor_tables(con)
     ensure_tables(con, {name: (fields, None) for name, fields in REPORT_TABLES.items()})

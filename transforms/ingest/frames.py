@@ -77,7 +77,7 @@ def assemble_valve(valve_id: str, signals: dict[str, Gridded]) -> pl.DataFrame:
         if g is None:
             data[col] = pl.repeat(None, len(t), dtype=pl.Float32, eager=True)
         elif (aligned and s in REQUIRED_SIGNALS) or _same(g.t_us, t):
-            data[col] = g.values.astype(np.float32)
+            data[col] = np.asarray(g.values, dtype=np.float32)  # (no copy of float32 values: a gridded wide batch)
         else:
             pos = np.searchsorted(g.t_us, t)
             pos_c = np.minimum(pos, max(len(g.t_us) - 1, 0))
@@ -87,18 +87,23 @@ def assemble_valve(valve_id: str, signals: dict[str, Gridded]) -> pl.DataFrame:
     return pl.DataFrame(data).select(SENSOR_POLARS_SCHEMA.names()).cast(dict(SENSOR_POLARS_SCHEMA))
 
 
-def split_days(frame: pl.DataFrame) -> list[tuple[date, pl.DataFrame]]:
-    """A valve's sensor frame (sorted by time) → one slice per UTC date."""
+def time_slices(frame: pl.DataFrame, span_us: int) -> list[tuple[int, pl.DataFrame]]:
+    """A sensor frame (sorted by time) → ``(k, rows)`` for each span ``[k·span_us, (k+1)·span_us)``
+    that holds rows, in order; the edges are found by bisection (no pass over the rows)."""
     if frame.height == 0:
         return []
-    t = frame["timestamp_utc"].to_physical().to_numpy()
-    day = t // US_PER_DAY
-    cuts = np.r_[0, np.flatnonzero(np.diff(day)) + 1, len(t)]
-    out = []
-    for a, b in zip(cuts[:-1], cuts[1:]):
-        part = frame.slice(int(a), int(b - a))
-        out.append((part["date"][0], part))
-    return out
+    t = frame["timestamp_utc"].to_physical()
+    first, last = int(t[0]) // span_us, int(t[-1]) // span_us
+    if first == last:
+        return [(first, frame)]
+    ks = np.arange(first, last + 1, dtype=np.int64)
+    cuts = np.r_[0, t.search_sorted(pl.Series(ks[1:] * span_us)).to_numpy(), frame.height]  # (a chunked column is not copied)
+    return [(int(k), frame.slice(int(a), int(b - a))) for k, a, b in zip(ks, cuts[:-1], cuts[1:]) if b > a]
+
+
+def split_days(frame: pl.DataFrame) -> list[tuple[date, pl.DataFrame]]:
+    """A valve's sensor frame (sorted by time) → one slice per UTC date."""
+    return [(part["date"][0], part) for _, part in time_slices(frame, US_PER_DAY)]
 
 
 def _first_failure(err: pandera.errors.SchemaErrors) -> tuple[str | None, int | None, str, object]:

@@ -184,7 +184,7 @@ def _text(col: pl.Series) -> pl.Series:
     return col if col.dtype == pl.String else col.cast(pl.String)
 
 
-def _bad_quality(col: pl.Series, good: tuple[str, ...]) -> pl.Series | None:
+def bad_quality(col: pl.Series, good: tuple[str, ...]) -> pl.Series | None:
     """Rows whose quality code is not one of ``export.good_quality`` (a missing code is bad);
     None when no row is bad."""
     if isinstance(col.dtype, pl.Enum):  # judged per code, not per row
@@ -514,8 +514,8 @@ def long_samples(df: pl.DataFrame, export: ExportSpec, timezone: str, tags: TagT
         else:
             bad_ts = None
     values, missing, non_numeric, non_finite = _value_checks(df[export.value_column], export.decimal)
-    bad_quality = _bad_quality(df[export.quality_column], export.good_quality) if export.quality_column else None
-    masks = (missing_tag, bad_ts, None, bad_quality, missing, non_numeric, non_finite)
+    bad_q_rows = bad_quality(df[export.quality_column], export.good_quality) if export.quality_column else None
+    masks = (missing_tag, bad_ts, None, bad_q_rows, missing, non_numeric, non_finite)
     rejected = _any(masks)
     counts = _code_counts(tag_id.drop_nulls().to_numpy(), len(tags.tags))
     counts_with_broken = counts + faults.counts[:, FIELD_COUNT]  # a fault's share counts the broken rows' samples in
@@ -585,7 +585,7 @@ def wide_samples(
     bad_ts = ts.is_null() if ts.null_count() else None
     after_step = None if clock is None else clock.after_step(ts.to_physical(), lines)
     faults = _Faults(tags, time.time_ns() if now_ns is None else now_ns)
-    bad_quality = _bad_quality(df[export.quality_column], export.good_quality) if export.quality_column else None
+    bad_q_rows = bad_quality(df[export.quality_column], export.good_quality) if export.quality_column else None
     accepted, quarantined = [], []
     samples_in = 0
     tag_samples = np.zeros(len(tags.tags), dtype=np.int64)
@@ -610,7 +610,7 @@ def wide_samples(
         samples_in += n_present
         tid = ids[c]
         tag_samples[tid] += n_present
-        bad_q = None if bad_quality is None else (bad_quality if present is None else bad_quality & present)
+        bad_q = None if bad_q_rows is None else (bad_q_rows if present is None else bad_q_rows & present)
         bad_t = None if bad_ts is None else (bad_ts if present is None else bad_ts & present)
         if bad_t is not None and bad_t.any():
             at = bad_t.arg_true()

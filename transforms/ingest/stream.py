@@ -37,6 +37,7 @@ from transforms.ingest.errors import IngestError
 from transforms.ingest.frames import assemble_valve, validate_raw_rows, validate_sensor_frame
 from transforms.ingest.grid import Grid, Gridded, GridTimes, grid_times, prepare_tag, to_grid
 from transforms.ingest.clock import ClockSteps
+from transforms.ingest.wide_batch import gridded_columns, lake_value
 from transforms.ingest.samples import FUTURE_TOLERANCE_NS, QUARANTINE_COLUMNS, TagTable, check_required_signals, empty_quarantine, samples_of, split_by_tag, tag_blocks
 
 GAP_COLUMNS = {
@@ -215,7 +216,32 @@ class ExportStream:
             The export cannot be taken batch by batch (module doc).
         """
         self._batches += 1
+        frames = self._feed_gridded(df, first_line=first_line, final=final)
+        if frames is None:
+            frames = self._feed_samples(df, first_line=first_line, final=final)
+        if final and self._span:
+            c = self.counts
+            c.time_start, c.time_end = pl.Series([min(self._span), max(self._span)], dtype=pl.Int64).cast(pl.Datetime("ns", "UTC")).to_list()
+        return frames
+
+    def _close(self) -> None:
+        """After the last batch's counts: the fault totals, and the file refused where its faults
+        or tags say so."""
+        c = self.counts
+        totals = dict(zip(FAULT_REASONS, (int(x) for x in self._faults.sum(axis=0))))
+        c.bad_timestamp, c.implausible_time, c.out_of_range = totals["bad_timestamp"], totals["implausible_time"], totals["out_of_range"]
+        c.clock_step_message = None if self.clock is None else self.clock.message(c.clock_step)
+        self._refuse_if_mostly_faulty()
+        if c.other_tags and not self._present:
+            names = ", ".join(list(c.other_tags)[:5]) + (", …" if len(c.other_tags) > 5 else "")
+            raise IngestError(f"no tag of the plant configuration in the file, only {len(c.other_tags)} other tags ({names})")
+        c.valves = tuple(check_required_signals(frozenset(self._present), self.config))
+
+    def _feed_samples(self, df: pl.DataFrame, *, first_line: int, final: bool) -> list[pl.DataFrame]:
+        """:meth:`feed` by the general rules: samples, quarantine, each tag sorted, de-duplicated
+        and put on the grid, a valve's rows where all its signals have reached."""
         export, tags = self.config.export, self.tags
+        df = df.rechunk()  # the columns contiguous: each tag's values taken without a copy
         samples = samples_of(df, self.config, tags, first_line=first_line, now_ns=self.now_ns, clock=self.clock, origin_ns=self.origin_ns)
         c = self.counts
         c.rows_in += samples.rows_in
@@ -235,14 +261,7 @@ class ExportStream:
         for name, k in samples.other_tags.items():
             c.other_tags[name] = c.other_tags.get(name, 0) + k
         if final:
-            totals = dict(zip(FAULT_REASONS, (int(x) for x in self._faults.sum(axis=0))))
-            c.bad_timestamp, c.implausible_time, c.out_of_range = totals["bad_timestamp"], totals["implausible_time"], totals["out_of_range"]
-            c.clock_step_message = None if self.clock is None else self.clock.message(c.clock_step)
-            self._refuse_if_mostly_faulty()
-            if c.other_tags and not self._present:
-                names = ", ".join(list(c.other_tags)[:5]) + (", …" if len(c.other_tags) > 5 else "")
-                raise IngestError(f"no tag of the plant configuration in the file, only {len(c.other_tags)} other tags ({names})")
-            c.valves = tuple(check_required_signals(frozenset(self._present), self.config))
+            self._close()
         acc = samples.accepted
         validate_raw_rows(acc)
         local = not export.relative_time  # relative times are counted from a start in UTC: never ambiguous
@@ -275,9 +294,91 @@ class ExportStream:
         frames = self._give(final)
         if frames:  # every valve in one check (one call per valve costs more)
             validate_sensor_frame(pl.concat(frames), {f["valve_id"][0]: tags_by_column(self.config, f["valve_id"][0]) for f in frames})
-        if final and self._span:
-            c.time_start, c.time_end = pl.Series([min(self._span), max(self._span)], dtype=pl.Int64).cast(pl.Datetime("ns", "UTC")).to_list()
         return frames
+
+    def _feed_gridded(self, df: pl.DataFrame, *, first_line: int, final: bool) -> list[pl.DataFrame] | None:
+        """:meth:`feed` for a wide batch that already is the lake's grid
+        (``transforms.ingest.wide_batch``), continuing the batch before it on the grid: its rows
+        become lake rows in one pass per column, and the state left for the next batch is the one
+        :meth:`_feed_samples` leaves (the last row held, the row before it given). None, with
+        nothing changed, for any other batch."""
+        export, tags, grid = self.config.export, self.tags, self.grid
+        P = grid.period_ns
+        if export.layout != "wide" or P > grid.max_gap_ns or (self.clock is not None and self.clock.line is not None):
+            return None
+        try:
+            b = gridded_columns(df, export, self.config.timezone, tags, P, self.now_ns, self.origin_ns)
+        except IngestError:
+            return None  # the general path names it
+        if b is None or (self.clock is not None and b.t_ns[1] + self.clock.limit_ns < self.clock.latest_ns):
+            return None
+        t0, t1 = int(b.t_ns[1]), int(b.t_ns[-1])
+        if not export.relative_time and not (final and self._batches == 1) and self.config.timezone != "UTC" and near_clock_change(t0, t1, self.config.timezone):
+            return None
+        tids = list(b.columns)
+        by_valve: dict[str, dict[str, int]] = {}
+        for tid in tids:
+            by_valve.setdefault(tags.valve_ids[tid], {})[tags.signals[tid]] = tid
+        if any(s not in signals for signals in by_valve.values() for s in REQUIRED_SIGNALS):
+            return None
+        first = self._continues(by_valve, t0 - P)
+        if first is None:
+            return None
+        if self.clock is not None:
+            self.clock.latest_ns = max(self.clock.latest_ns, t1)
+        if first == 0:
+            for tid in tids:
+                b.columns[tid][0] = self._carry[tid].held_v[0]
+        n = len(b.t_ns) - 1  # rows of the batch (slot 0: the held row of the batch before)
+        stop = n + 1 if final else n  # the last row waits for the next batch, as a held sample
+        c = self.counts
+        c.rows_in += n
+        c.samples_in += n * len(tids)
+        for tid in tids:
+            self._tag_samples[tid] += n
+        self._present |= {tags.tags[tid] for tid in tids}
+        if final:
+            self._close()
+        rows = stop - first
+        c.accepted += rows * len(tids)
+        self._span += [int(b.t_ns[first]), int(b.t_ns[stop - 1])]
+        given = _DONE if final else int(b.t_us[stop - 1])
+        self._carry.clear()
+        frames = []
+        for valve in self.config.valves:
+            signals = by_valve.get(valve.id)
+            if signals is None:
+                continue
+            frame = assemble_valve(valve.id, {s: Gridded(b.t_us[first:stop], b.columns[tid][first:stop], _NONE, _NONE) for s, tid in signals.items()})
+            c.rows_out += frame.height
+            frames.append(frame)
+            self._valves[valve.id] = _ValveRows({}, dict.fromkeys(signals, given), given)
+        if not final:
+            for tid in tids:
+                factor = tags.factors[tid]
+                v_last, v_before = b.raw[tid][-1] * factor, b.raw[tid][-2] * factor
+                self._carry[tid] = _TagCarry(t1, b.t_ns[-1:].copy(), np.array([v_last]), np.array([first_line + n - 1], dtype=np.int64), (int(b.t_ns[-2]), float(v_before)))
+        return frames
+
+    def _continues(self, by_valve: dict[str, dict[str, int]], held_ns: int) -> int | None:
+        """Where a gridded batch's lake rows begin in its columns: 1 for a file's first batch (no
+        state), 0 when every tag of the batch (and no other) holds one sample at ``held_ns``, one
+        period before the batch, its row before that given (and it fits the lake), None else."""
+        tids = {tid for signals in by_valve.values() for tid in signals.values()}
+        if not self._carry and not self._valves:
+            return 1
+        if set(self._carry) != tids or set(self._valves) != set(by_valve):
+            return None
+        given = (held_ns - self.grid.period_ns) // 1000
+        for tid in tids:
+            h = self._carry[tid]
+            if len(h.held_t) != 1 or h.last_ns != held_ns or h.anchor is None or h.anchor[0] != held_ns - self.grid.period_ns or not lake_value(float(h.held_v[0]), tid, self.tags):
+                return None
+        for vid, signals in by_valve.items():
+            rows = self._valves[vid]
+            if rows.pending or rows.given_to != given or rows.reached != dict.fromkeys(signals, given):
+                return None
+        return 0
 
     def _refuse_if_mostly_faulty(self) -> None:
         """Refuse the file (after its last batch, before anything is committed) when a tag's

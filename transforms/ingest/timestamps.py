@@ -30,7 +30,6 @@ import re
 import numpy as np
 import polars as pl
 import pyarrow as pa
-import pyarrow.compute as pc
 
 from transforms.ingest.errors import IngestError
 from transforms.ingest.iso8601 import parse_iso_column
@@ -328,6 +327,8 @@ def _arrow_iso(text: pl.Series, *, zoned: bool) -> pl.Series | None:
     arr = pa.chunked_array([c.to_arrow(compat_level=pl.CompatLevel.newest()) for c in text.get_chunks()], type=pa.string_view())
     parsed = parse_iso_column(arr, zoned=zoned)
     if parsed is None:
+        import pyarrow.compute as pc  # noqa: PLC0415 - only here (~40 ms of start-up for every command otherwise)
+
         try:
             parsed = pc.cast(arr.cast(pa.large_string()), pa.timestamp("ns", "UTC" if zoned else None))
         except (pa.ArrowInvalid, pa.ArrowNotImplementedError, pa.ArrowTypeError):

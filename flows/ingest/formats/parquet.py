@@ -93,7 +93,7 @@ def iload(src, export: ExportSpec, tags: TagTable | None, batch_samples: int, bl
         scan = pl.scan_parquet(path, hive_partitioning=False)
         cuts = _slices(pf.metadata, rows)
         for a, b in zip(cuts[:-1], cuts[1:]):
-            df = scan.slice(a, b - a).collect().rechunk()
+            df = scan.slice(a, b - a).collect()  # a chunk per row group: a batch that is the lake's grid is converted chunk by chunk
             yield df, a + 1, b >= n
         return
     empty = True
