@@ -376,6 +376,7 @@ def commissioned():
 
 
 @pytest.mark.slow
+@pytest.mark.xdist_group("commissioned")  # one worker calibrates the shared `commissioned` once (~12 s)
 def test_commissioned_model_gap_is_near_the_noise_floor(commissioned):
     recs = _records(None, seed=311)
     calibrated = diagnose(recs, *commissioned, SETTINGS, monitoring=False)
@@ -385,6 +386,7 @@ def test_commissioned_model_gap_is_near_the_noise_floor(commissioned):
 
 
 @pytest.mark.slow
+@pytest.mark.xdist_group("commissioned")
 @pytest.mark.parametrize("key,value", CLEAR_GAP, ids=[k for k, _ in CLEAR_GAP])
 def test_commissioned_effect_is_named_and_shrinks_the_gap(commissioned, key, value):
     d = diagnose(_records(library_entry(key).effects(value), seed=312), *commissioned, SETTINGS, monitoring=False)
