@@ -423,9 +423,8 @@ def valve_flows(x_m, p1_pa, p2_pa, p_s_pa, p_r_pa, params: PlantParams,
     cond = params.nominal_condition if condition is None else condition
     x = np.ascontiguousarray(np.asarray(x_m, float).ravel())
     n = x.size
-    arrs = [np.ascontiguousarray(np.broadcast_to(np.asarray(a, float).ravel() if np.ndim(a)
-                                                 else float(a), (n,)))
-            for a in (p1_pa, p2_pa, p_s_pa, p_r_pa)]
+    arrs = [np.array(np.broadcast_to(np.asarray(a, float).ravel() if np.ndim(a) else float(a), (n,)))
+            for a in (p1_pa, p2_pa, p_s_pa, p_r_pa)]  # writable copies: one compiled kind of array
     areas = _valve_areas_array(x, valve_edge_constants(params.geometry, cond))
     R = 0.0 if effects is None else effects.supply_resistance_pa_s2_m6
     return _flows_array(areas, np.asarray(cond.alpha, float), *arrs,

@@ -176,10 +176,11 @@ def replay(params: PlantParams, x_m, p_s_pa, p_r_pa, F_l_n, restart_at, restart_
     ReplayResult
     """
     cond = params.nominal_condition if condition is None else condition
-    x = np.ascontiguousarray(np.asarray(x_m, float))
+    # writable copies, whatever the callers hold (read-only views of polars, broadcasts): the
+    # kernel is compiled for one kind of array, not for each mix
+    x = np.array(x_m, dtype=float)
     n = x.size
-    ps, pr, fl = (np.ascontiguousarray(np.broadcast_to(np.asarray(a, float), (n,)))
-                  for a in (p_s_pa, p_r_pa, F_l_n))
+    ps, pr, fl = (np.array(np.broadcast_to(np.asarray(a, float), (n,))) for a in (p_s_pa, p_r_pa, F_l_n))
     at = np.ascontiguousarray(np.asarray(restart_at, dtype=np.int64))
     st = np.ascontiguousarray(np.asarray(restart_states, dtype=float).reshape(-1, 4))
     if at.size == 0 or at.size != st.shape[0]:

@@ -56,6 +56,7 @@ import numpy as np
 import polars as pl
 
 from transforms.characteristic import Characteristic
+from transforms.derivatives import read_only
 from transforms.params import EDGES, MonitorParams
 
 __all__ = [
@@ -598,8 +599,8 @@ def fit_arrays(
     ``u_spread_m``, ``x_hat_determined`` (:data:`FIT_COLUMNS`).
     Estimates are NaN where the status says there is none.
     """
-    u = np.ascontiguousarray(u, dtype=np.float64)
-    area = np.ascontiguousarray(area, dtype=np.float64)
+    u = read_only(np.ascontiguousarray(u, dtype=np.float64))
+    area = read_only(np.ascontiguousarray(area, dtype=np.float64))
     offsets = np.ascontiguousarray(offsets, dtype=np.int64)
     if u.shape != area.shape or u.ndim != 1:
         raise ValueError("u and area must be 1-D arrays of equal length")
@@ -684,8 +685,8 @@ def fit_arrays(
 
 def profile_cost(u: np.ndarray, area: np.ndarray, characteristic: Characteristic, x_hat: float):
     """(f, f', f'', α̂) of the profile cost at ``x_hat`` for one population (for tests/diagnostics)."""
-    u = np.ascontiguousarray(u, dtype=np.float64)
-    area = np.ascontiguousarray(area, dtype=np.float64)
+    u = read_only(np.ascontiguousarray(u, dtype=np.float64))
+    area = read_only(np.ascontiguousarray(area, dtype=np.float64))
     pk = _Packed([characteristic])
     tb = (pk.tab, int(pk.tstart[0]), float(pk.tlo[0]), float(pk.tinv[0]), int(pk.tn[0]))
     saa = float(area @ area)

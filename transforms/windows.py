@@ -42,6 +42,8 @@ import numba
 import numpy as np
 import polars as pl
 
+from transforms.derivatives import read_only
+
 __all__ = [
     "LONG_RUN_FRACTION", "WINDOW_COLUMNS", "UnsortedTimes", "WindowLayout", "assign_windows", "infer_sample_period_s", "window_layout",
     "window_length_us", "window_starts", "window_table",
@@ -174,7 +176,7 @@ def window_starts(t_us: np.ndarray, gap_us: float, window_s: float | None = None
     sample after a step longer than ``gap_us`` and, with a length ``window_s``, the first sample
     of every clock cell of a run at least :data:`LONG_RUN_FRACTION` · ``window_s`` long. One
     compiled pass over the time stamps, one bisection per clock cut."""
-    t_us = np.ascontiguousarray(t_us, dtype=np.int64)
+    t_us = read_only(np.ascontiguousarray(t_us, dtype=np.int64))
     length_us = window_length_us(window_s)
     _, gaps = _gap_rows(t_us, -np.inf, float(gap_us), float(gap_us))
     return _starts_kernel(t_us, gaps, length_us)
@@ -373,7 +375,7 @@ def window_layout(
     if gap_limit_s < sample_period_s * (1.0 + step_tolerance):
         raise ValueError("gap_limit_s must exceed the sample period (plus tolerance)")
     period_us = sample_period_s * 1e6
-    t_us = np.ascontiguousarray(timestamp_us, dtype=np.int64)
+    t_us = read_only(np.ascontiguousarray(timestamp_us, dtype=np.int64))
     irregular, gaps = _gap_rows(t_us, period_us * (1.0 - step_tolerance), period_us * (1.0 + step_tolerance), float(gap_limit_s * 1e6))
     starts = _starts_kernel(t_us, gaps, window_length_us(window_s))
     flags = np.zeros(0, dtype=np.bool_) if dense is None else np.ascontiguousarray(dense, dtype=np.bool_)

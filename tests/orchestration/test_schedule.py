@@ -27,7 +27,7 @@ import pytest
 from flows.simulate.archive import SimulateRequest, run_simulate
 
 FIRE_WITHIN_S = 240  # a deadline, not a wait: generous for a loaded machine
-FIRST_FIRE_S = 20  # serve registers the deployment well within this on an idle machine
+FIRST_FIRE_S = 10  # serve registers the deployment 2.5-2.8 s after it starts, idle or with both cores busy
 
 
 def free_port() -> int:

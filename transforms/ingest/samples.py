@@ -52,6 +52,7 @@ import polars as pl
 
 from schemas.fields import FAULT_REASONS, REQUIRED_SIGNALS, SENSOR_FIELDS, SIGNAL_COLUMN
 from schemas.plant_config import ExportSpec, PlantConfig
+from transforms.derivatives import read_only
 from transforms.ingest.clock import ClockSteps
 from transforms.ingest.errors import IngestError
 from transforms.ingest.text_rows import FIELD_COUNT as TEXT_FIELD_COUNT
@@ -375,7 +376,7 @@ class _Faults:
             t = t_ns.to_numpy()
         else:
             t = np.zeros(0, dtype=np.int64)
-        value_si, fault, bad = _to_si(values.to_numpy(), tag_id, t, tags.factors, tags.lo, tags.hi, tags.commissioned_ns, self.t_hi)
+        value_si, fault, bad = _to_si(read_only(values.to_numpy()), read_only(tag_id), read_only(t), tags.factors, tags.lo, tags.hi, tags.commissioned_ns, self.t_hi)
         if not bad:
             return value_si, None
         rows = np.flatnonzero(fault)
