@@ -50,13 +50,11 @@ chromium:
 
 # the set-up and Chromium's install side by side (-j2): on a fresh machine the install waits on
 # the network and dpkg for ~26 s, as long as the set-up
-# -n 3 on 2 cores: a tenth of the suite's time is waits (servers, subprocesses, the schedule), which a
-# third worker fills (the whole suite 246 s against 260 with two, numba's cache warm)
-# OPENBLAS_NUM_THREADS=1: the xdist workers, each with its own BLAS threads, spun
+# OPENBLAS_NUM_THREADS=1: two xdist workers on two cores, each with its own BLAS threads, spun
 # against each other (the discrepancy tests' least squares: 41 s of CPU for 39 s of wall, 16 for 19 without)
 test:
 	$(MAKE) --no-print-directory -j2 setup chromium
-	OPENBLAS_NUM_THREADS=1 $(VENV)/bin/python -m pytest -n 3 --dist loadgroup --durations=15
+	OPENBLAS_NUM_THREADS=1 $(VENV)/bin/python -m pytest -n 2 --dist loadgroup --durations=15
 
 bench: setup
 	$(VENV)/bin/python bench/simulate.py
