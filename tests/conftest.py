@@ -60,6 +60,9 @@ def pytest_collection_modifyitems(items):
         callspec = getattr(item, "callspec", None)
         if "prefect_server" in names or (callspec is not None and callspec.params.get("prefect") is True):
             item.add_marker(pytest.mark.xdist_group("prefect"))
+    # the end-to-end tests (tens of seconds each) first: xdist hands the tests out in this order
+    # (after the groups, largest first), so a long one never starts last while the other worker idles
+    items.sort(key=lambda item: item.get_closest_marker("slow") is None)
 
 
 @pytest.fixture(scope="session")

@@ -74,10 +74,6 @@ def fits_count(wh: Path) -> int:
 def test_scheduled_nightly_run_fires_and_makes_fits(tmp_path):
     yesterday = (datetime.now(timezone.utc) - timedelta(days=1)).date()
     archive = tmp_path / "archive"
-    run_simulate(
-        SimulateRequest(out=archive, n_valves=2, start=yesterday.isoformat(), days=1, windows_per_day=4, format="parquet", seed=5, workers=0),
-        show_progress=False,
-    )
     wh = tmp_path / "wh"
     port = free_port()
     api = f"http://127.0.0.1:{port}/api"
@@ -100,6 +96,10 @@ def test_scheduled_nightly_run_fires_and_makes_fits(tmp_path):
             [str(bindir / "prefect"), "server", "start", "--host", "127.0.0.1", "--port", str(port)],
             env=env, stdout=logs["server"], stderr=subprocess.STDOUT, start_new_session=True,
         )  # fmt: skip
+        run_simulate(  # while the server starts
+            SimulateRequest(out=archive, n_valves=2, start=yesterday.isoformat(), days=1, windows_per_day=4, format="parquet", seed=5, workers=0),
+            show_progress=False,
+        )
         deadline = time.monotonic() + 120
         while True:
             try:
