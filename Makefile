@@ -18,10 +18,12 @@ $(UV):
 	$(PYTHON) -m venv $(TOOLS)
 	$(TOOLS)/bin/pip install --quiet uv==$(UV_VERSION)
 
-# --compile-bytecode: the dependencies' .pyc files are written once here; without them every run
-# with PYTHONDONTWRITEBYTECODE=1 (as on CI) compiles ~1200 modules again (~10 s a command)
+# the dependencies' .pyc files are written once here; without them every run with
+# PYTHONDONTWRITEBYTECODE=1 (as on CI) compiles ~1200 modules again (~10 s a command). Their own
+# test suites (2,657 of 10,977 files, never imported) are left out: 11.7 s instead of 16.5
 $(VENV)/.synced: $(UV) uv.lock pyproject.toml
-	$(UV) sync --frozen --compile-bytecode --python $(PYTHON)
+	$(UV) sync --frozen --python $(PYTHON)
+	$(VENV)/bin/python -m compileall -q -j 0 -x '/tests/' "$$($(VENV)/bin/python -c 'import sysconfig; print(sysconfig.get_path("purelib"))')"
 	touch $@
 
 # our own packages are installed editable (uv compiles only site-packages): compile them too,
