@@ -29,6 +29,8 @@ import numba
 import numpy as np
 import polars as pl
 
+from transforms.arrays import float_array
+
 __all__ = [
     "DEFAULT_OUTPUTS",
     "add_savgol",
@@ -171,29 +173,6 @@ def add_savgol(
     return framed.with_columns(savgol_valid(window).alias("_sg_valid")).with_columns(exprs).drop("_sg_valid")
 
 
-def read_only(a: np.ndarray) -> np.ndarray:
-    """``a`` as a read-only view (itself if it is one). polars and Arrow hand their columns out as
-    read-only views and copies of them are writable; numba compiles a kernel, and loads it from
-    its cache, once for each kind (a clean clone's test suite compiled 15 CPU-s of such twins; a
-    command's start-up pays ~8 ms a load): the arrays a kernel only reads are given to it as one
-    kind."""
-    if not a.flags.writeable:
-        return a
-    v = a.view()
-    v.flags.writeable = False
-    return v
-
-
-def _float_array(a) -> np.ndarray:
-    """A contiguous float32 or float64 array as it is (the kernels compute in float64 either
-    way, and a float32 lake column needs no conversion pass), anything else as float64; read-only
-    (:func:`read_only`)."""
-    a = np.asarray(a)
-    if a.dtype in (np.float32, np.float64):
-        return read_only(np.ascontiguousarray(a))
-    return read_only(np.ascontiguousarray(a, dtype=np.float64))
-
-
 # --------------------------------------------------------------------------------------------
 # compiled path (used by transforms.monitor for throughput)
 # --------------------------------------------------------------------------------------------
@@ -247,7 +226,7 @@ def savgol_arrays(x: np.ndarray, *, window: int, order: int, sample_period_s: fl
     entries and wherever the stencil touches a NaN (the validity is the caller's, as there)."""
     if sample_period_s <= 0:
         raise ValueError("sample_period_s must be > 0")
-    x = _float_array(x)
+    x = float_array(x)
     w0 = np.array(_weights(window, order, 0))
     w1 = np.array(_weights(window, order, 1))
     out0 = np.empty(x.shape[0]) if smooth else np.empty(0)
@@ -363,7 +342,7 @@ def stencil_at(x, rows: np.ndarray, w0: np.ndarray, w1: np.ndarray, before: int,
     out1 = np.empty(rows.shape[0])
 
     def run(xs, rs, r0, r1):  # the rows rows[r0:r1], at rs in the array xs
-        _savgol_at_kernel(_float_array(xs), rs, w0, w1, before, scale1, out0[r0:r1] if smooth else out0, out1[r0:r1], bool(smooth))
+        _savgol_at_kernel(float_array(xs), rs, w0, w1, before, scale1, out0[r0:r1] if smooth else out0, out1[r0:r1], bool(smooth))
 
     chunks = [x] if isinstance(x, np.ndarray) else list(x)
     if len(chunks) == 1:

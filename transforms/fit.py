@@ -56,7 +56,7 @@ import numpy as np
 import polars as pl
 
 from transforms.characteristic import Characteristic
-from transforms.derivatives import read_only
+from transforms.arrays import read_only
 from transforms.params import EDGES, MonitorParams
 
 __all__ = [

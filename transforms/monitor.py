@@ -37,7 +37,8 @@ from transforms.baseline import (
     recognise_edge_law,
 )
 from transforms.characteristic import Characteristic, scaled_shifted
-from transforms.derivatives import add_savgol, box_mean_at, box_mean_expr, read_only, savgol_arrays, savgol_at, savgol_exprs
+from transforms.arrays import read_only
+from transforms.derivatives import add_savgol, box_mean_at, box_mean_expr, savgol_arrays, savgol_at, savgol_exprs
 from transforms.fit import fit_arrays, fit_groups, sorted_fits, walk_segment
 from transforms.leakage import LEAK_RESOLUTION, closed_leakage, effective_scale, inflation, leak_columns, leak_scale_step
 from transforms.params import EDGES, MonitorParams

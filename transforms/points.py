@@ -37,7 +37,7 @@ import numpy as np
 import polars as pl
 
 from transforms.characteristic import Characteristic
-from transforms.derivatives import _float_array
+from transforms.arrays import float_array
 from transforms.params import EDGES, MonitorParams
 
 __all__ = [
@@ -310,7 +310,7 @@ def points_arrays(
     return _points_kernel(
         codes, codes.dtype.type(selected_code),
         np.ascontiguousarray(n_selected, dtype=np.int64),
-        *(_float_array(arrays[k]) for k in (
+        *(float_array(arrays[k]) for k in (
             s.ps, s.pr, s.p1, s.p2, s.x_spool, s.x_cyl, s.dp1_dt, s.dp2_dt, s.v_cyl)),
         c, lkn, lkv, loff, leakage is not None, bool(with_ratio),
     )

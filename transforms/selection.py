@@ -27,7 +27,7 @@ import numba
 import numpy as np
 import polars as pl
 
-from transforms.derivatives import _float_array
+from transforms.arrays import float_array
 from transforms.params import EDGES, MonitorParams
 from transforms.points import DEFAULT_SIGNALS, EDGE_PORT, EDGE_SIGN, Signals, edge_dp_expr
 
@@ -326,7 +326,7 @@ def selection_codes(
     valid = np.ones(n, dtype=np.bool_) if valid is None else np.ascontiguousarray(valid, dtype=np.bool_)
     return _selection_kernel(
         np.ascontiguousarray(window_id, dtype=np.int64), int(n_windows), valid,
-        *(_float_array(arrays[k]) for k in (
+        *(float_array(arrays[k]) for k in (
             s.ps, s.pr, s.p1, s.p2, s.x_spool, s.x_cyl, s.dp1_dt, s.dp2_dt, s.v_cyl)),
         _constants(params),
     )

@@ -42,7 +42,7 @@ import numba
 import numpy as np
 import polars as pl
 
-from transforms.derivatives import read_only
+from transforms.arrays import read_only
 
 __all__ = [
     "LONG_RUN_FRACTION", "WINDOW_COLUMNS", "UnsortedTimes", "WindowLayout", "assign_windows", "infer_sample_period_s", "window_layout",

@@ -19,9 +19,10 @@ import pyarrow as pa
 from numba import types
 from numba.extending import intrinsic
 
+from transforms.arrays import read_only
+
 _NS_PER_S = 1_000_000_000
-_NO_VIEWS = np.zeros((1, 4), np.int32)
-_NO_VIEWS.flags.writeable = False  # as Arrow's views are: one compiled kind of array
+_NO_VIEWS = read_only(np.zeros((1, 4), np.int32))  # as Arrow's views are: one compiled kind of array
 
 
 @numba.njit(cache=True, nogil=True)
@@ -246,8 +247,7 @@ def _parse_chunk(arr: pa.Array, zoned: bool, out: np.ndarray, valid: np.ndarray)
     elif arr.type == pa.string_view():
         buffers = arr.buffers()
         views_buf, data_bufs = buffers[1], buffers[2:]
-        views = np.frombuffer(views_buf, dtype=np.int32, count=n * 4, offset=arr.offset * 16).reshape(n, 4)
-        views.flags.writeable = False  # read-only whatever the buffer: one compiled kind of array
+        views = read_only(np.frombuffer(views_buf, dtype=np.int32, count=n * 4, offset=arr.offset * 16).reshape(n, 4))
         addresses = np.array([b.address if b is not None else 0 for b in data_bufs] or [0], dtype=np.int64)
         sizes = np.array([b.size if b is not None else 0 for b in data_bufs] or [0], dtype=np.int64)
         status = _parse_column(True, no_offsets, 0, views, views_buf.address + arr.offset * 16, addresses, sizes, valid, zoned, out)

@@ -52,7 +52,7 @@ import polars as pl
 
 from schemas.fields import FAULT_REASONS, REQUIRED_SIGNALS, SENSOR_FIELDS, SIGNAL_COLUMN
 from schemas.plant_config import ExportSpec, PlantConfig
-from transforms.derivatives import read_only
+from transforms.arrays import read_only
 from transforms.ingest.clock import ClockSteps
 from transforms.ingest.errors import IngestError
 from transforms.ingest.text_rows import FIELD_COUNT as TEXT_FIELD_COUNT
