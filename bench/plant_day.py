@@ -151,13 +151,11 @@ def fleet_day(config: Path, files: list[Path], k: int, out: Path) -> tuple[Path,
     (valve,) = plant["valves"]
     tags = {t["tag"] for t in valve["tags"].values()}
 
-    def renamed(i: int):
-        return (lambda name: name) if i == 0 else (lambda name: name.replace(valve["id"], f"{valve['id']}-{i}"))
+    def renamed(name: str, i: int) -> str:  # valve i's name of the valve's id or tag (valve 0: the valve itself)
+        return name if i == 0 else name.replace(valve["id"], f"{valve['id']}-{i}")
 
-    copies = []
-    for i in range(k):
-        r = renamed(i)
-        copies.append(valve | {"id": r(valve["id"]), "tags": {s: t | {"tag": r(t["tag"])} for s, t in valve["tags"].items()}})
+    copies = [valve | {"id": renamed(valve["id"], i), "tags": {s: t | {"tag": renamed(t["tag"], i)} for s, t in valve["tags"].items()}}
+              for i in range(k)]
     out.mkdir(parents=True, exist_ok=True)
     fleet_config = out / "plant.toml"
     fleet_config.write_text(tomli_w.dumps(plant | {"valves": copies}))
@@ -167,7 +165,7 @@ def fleet_day(config: Path, files: list[Path], k: int, out: Path) -> tuple[Path,
             raise SystemExit("--fleet: Parquet exports only")
         source = pq.ParquetFile(f)
         table = source.read()
-        extra = [(renamed(i)(c), table[c]) for i in range(1, k) for c in table.column_names if c in tags]
+        extra = [(renamed(c, i), table[c]) for i in range(1, k) for c in table.column_names if c in tags]
         for name, column in extra:
             table = table.append_column(name, column)
         # as the recorder wrote the valve's file: its codec and row groups (the ingest reads a row group at a time)
