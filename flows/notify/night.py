@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import json
 import logging
+import time
 import uuid
 from dataclasses import dataclass, field
 from datetime import datetime
@@ -88,11 +89,19 @@ def _queue(config: PlantConfig, changes: pl.DataFrame, run_id: str, now: datetim
     return pl.DataFrame(rows, schema=polars_schema(NOTIFICATION_FIELDS))
 
 
+def run_id_in_time_order() -> str:
+    """A run's id: 16 hex digits of the wall clock's nanoseconds, then 16 random ones. Its text
+    sorts as the runs were recorded, so view ``condition_changes`` (which orders by ``run_at``,
+    whole seconds, then ``run_id``) compares tonight with the run before even when both fall in
+    the same second; a random id sorted them by chance."""
+    return f"{time.time_ns():016x}{uuid.uuid4().hex[:16]}"
+
+
 def record_run(config: PlantConfig, warehouse: str | Path, conditions: pl.DataFrame, *, now: datetime, kind: str,
                report: str = "", send: bool = True) -> NightChanges:  # fmt: skip
     """Record the run's ``conditions`` (``valve_condition`` rows), read its changes and queue its
     message (module doc); ``send=False`` queues it ``suppressed``."""
-    run_id = uuid.uuid4().hex
+    run_id = run_id_in_time_order()
     spec = config.notify
     rows = history_rows(conditions, run_id=run_id, run_at=now, kind=kind, report=report,
                         remaining_below_h=spec.remaining_below_h if spec is not None else None)  # fmt: skip
