@@ -69,20 +69,24 @@ def true_plant(seed: int, family: str = "eq3"):
 REF_OUTSIDE = ("pressure_dependent_friction", "transmitter_lag")
 
 
-def ref_lake(key: str | None, value, valve_seed: int, window_seed: int, n_windows: int, load_interval_s: tuple[float, float] | None = None):
+def ref_lake(key: str | None, value, valve_seed: int, window_seed: int, n_windows: int, load_interval_s: tuple[float, float] | None = None,
+             sensors: str = "quiet"):
     """Lake rows of the reference plant's valve ``valve_seed`` (``manufactured``) over windows drawn
     from ``window_seed``, with effect ``key`` (a library key or one of ``REF_OUTSIDE``) at ``value``
     (None: its typical magnitude); ``load_interval_s`` the range of the load's intervals between
-    new levels [s] (None: the plant's 1–4 s)."""
+    new levels [s] (None: the plant's 1–4 s); ``sensors``: ``quiet`` (positions at 1 µm) or
+    ``noisy_end`` (spool 0.2 % of x_max, cylinder 10 µm in 5 µm steps)."""
     from datetime import datetime, timezone
 
-    from tests.refplant import NAMEPLATE, effect, manufactured, simulate_windows, to_lake_frame
+    from tests.refplant import NAMEPLATE, effect, manufactured, noisy_end, simulate_windows, to_lake_frame
 
     fx = None
     if key is not None:
         name, _, ch = key.partition("[")
         fx = effect(name, value, channel=ch.rstrip("]") or "p1")
     plant = manufactured(NAMEPLATE, seed=valve_seed)
+    if sensors == "noisy_end":
+        plant = noisy_end(plant)
     if load_interval_s is not None:
         plant = replace(plant, operation=replace(plant.operation, load_interval_s=tuple(load_interval_s)))
     recs = simulate_windows(plant, n_windows, window_seed, effects=fx)
@@ -123,7 +127,7 @@ def commissioning_condition_before(seed: int, n_windows: int, family: str = "eq3
 
 @functools.lru_cache(maxsize=4)
 def commissioning_model(seed: int, n_windows: int, family: str = "eq3", declared: str = "nameplate", plant_source: str = "model",
-                        load_interval_s: tuple[float, float] | None = None):
+                        load_interval_s: tuple[float, float] | None = None, sensors: str = "quiet"):
     """The nuisances calibrated on a clean commissioning window of the seed's valve."""
     from transforms.discrepancy import DiscrepancySettings, split_records
     from transforms.discrepancy.calibration import calibrate
@@ -132,7 +136,7 @@ def commissioning_model(seed: int, n_windows: int, family: str = "eq3", declared
     design = design_plant(family, declared)
     s = DiscrepancySettings()
     if plant_source == "ref":
-        recs = split_records(ref_lake(None, None, seed, 5000 + seed, n_windows, load_interval_s), s)
+        recs = split_records(ref_lake(None, None, seed, 5000 + seed, n_windows, load_interval_s, sensors), s)
     else:
         plant, _ = true_plant(seed, family)
         recs = split_records(_lake(None, 5000 + seed, n_windows, plant), s)
@@ -141,7 +145,8 @@ def commissioning_model(seed: int, n_windows: int, family: str = "eq3", declared
 
 
 def run_cell(key: str, magnitude: str, commissioning: bool, seed: int, n_windows: int, method: str = "nuisance", family: str = "eq3",
-             declared: str = "nameplate", plant_source: str = "model", load_interval_s: tuple[float, float] | None = None) -> dict:
+             declared: str = "nameplate", plant_source: str = "model", load_interval_s: tuple[float, float] | None = None,
+             sensors: str = "quiet") -> dict:
     from model.effects import library_entry
     from transforms.discrepancy import DiscrepancySettings, split_records
     from transforms.discrepancy.nuisance import NuisancePriors
@@ -160,7 +165,7 @@ def run_cell(key: str, magnitude: str, commissioning: bool, seed: int, n_windows
         effects = spec.effects(value)
     s = DiscrepancySettings()
     if plant_source == "ref":
-        lake = ref_lake(None if key == "none" else key, value, seed, 100 + seed, n_windows, load_interval_s)
+        lake = ref_lake(None if key == "none" else key, value, seed, 100 + seed, n_windows, load_interval_s, sensors)
     else:
         lake = _lake(effects, 100 + seed, n_windows, true_plant(seed, family)[0])
     recs = split_records(lake, s)
@@ -169,7 +174,7 @@ def run_cell(key: str, magnitude: str, commissioning: bool, seed: int, n_windows
             cp, cc = design, design.nominal_condition
         else:
             cp, cc = (commissioning_model if method == "nuisance" else commissioning_condition_before)(seed, n_windows, family, declared,
-                                                                                                    *((plant_source, load_interval_s) if method == "nuisance" else ()))
+                                                                                                    *((plant_source, load_interval_s, sensors) if method == "nuisance" else ()))
         d = diagnose(recs, cp, cc, s, monitoring=False)
         if d.verdict is not None:  # unexplained (or gain/offset ambiguous): the verdict decides
             v = d.verdict
@@ -217,7 +222,7 @@ def run_cell(key: str, magnitude: str, commissioning: bool, seed: int, n_windows
         rel_err = abs(got_value - value) / abs(value - spec.neutral)
     return {
         "effect": key, "magnitude": magnitude, "commissioning": commissioning, "seed": seed, "value": value, "method": method, "family": family, "declared": declared,
-        "plant": plant_source, "load_interval_s": load_interval_s, "pressure_delay_samples": d.pressure_delay_samples, "pressure_delays": d.pressure_delays,
+        "plant": plant_source, "sensors": sensors, "load_interval_s": load_interval_s, "pressure_delay_samples": d.pressure_delay_samples, "pressure_delays": d.pressure_delays,
         "lag_finding": d.lag_finding, "reason": d.verdict.reason if d.verdict is not None else "",
         "verdict": verdict, "got": got, "got_value": got_value, "alternatives": alts, "confidence": conf, "outcome": outcome,
         "rel_err": rel_err, "gap_nominal": d.gap_nominal, "gap_before": d.stage_gaps[0], "gap_after": d.stage_gaps[-1],
@@ -275,6 +280,8 @@ def main(argv=None) -> None:
                     help="the area law the workflow is given: the valve type's (sharp for the sharp family, Eq. 3 for worn lands) or Eq. 3 always")
     ap.add_argument("--plant", default="model", choices=("model", "ref"), help="the true plants: model/'s own code with perturbed parameters, or the second reference plant (tests/refplant)")
     ap.add_argument("--load-interval-s", default=None, help="with --plant ref: LOW,HIGH, the load's intervals between new levels [s] (default 1,4)")
+    ap.add_argument("--sensors", default="quiet", choices=("quiet", "noisy_end"),
+                    help="with --plant ref: positions recorded at 1 µm, or at the noisy end of plants (spool 0.2 %% of x_max, cylinder 10 µm in 5 µm steps)")
     ap.add_argument("--out", default="bench/discrepancy_robustness.jsonl")
     a = ap.parse_args(argv)
     keys = [s.key for s in EFFECT_LIBRARY] + (list(REF_OUTSIDE) if a.plant == "ref" else []) if a.effects == "all" else a.effects.split(",")
@@ -283,15 +290,17 @@ def main(argv=None) -> None:
     seeds = range(a.first_seed, a.first_seed + a.seeds)
     if a.load_interval_s is not None and a.plant != "ref":
         ap.error("--load-interval-s needs --plant ref")
+    if a.sensors != "quiet" and a.plant != "ref":
+        ap.error("--sensors needs --plant ref")
     interval = tuple(float(v) for v in a.load_interval_s.split(",")) if a.load_interval_s else None
     tasks = []
     for c in comms:
         for seed in seeds:  # seed-major, so a worker reuses its commissioning calibration
             if a.effects == "all" or "none" in keys:
-                tasks.append(("none", "typical", c, seed, a.windows, a.method, a.family, a.declared, a.plant, interval))
+                tasks.append(("none", "typical", c, seed, a.windows, a.method, a.family, a.declared, a.plant, interval, a.sensors))
             for m in mags:
                 for k in (k for k in keys if k != "none"):
-                    tasks.append((k, m, c, seed, a.windows, a.method, a.family, a.declared, a.plant, interval))
+                    tasks.append((k, m, c, seed, a.windows, a.method, a.family, a.declared, a.plant, interval, a.sensors))
     t0 = time.time()
     rows = []
     out = Path(a.out)
