@@ -532,49 +532,65 @@ NOISE_SEED = 2013
 
 def noise_floors(prepared, plant, condition, effects, settings, draws: int = NOISE_DRAWS, seed: int = NOISE_SEED) -> dict[str, float]:
     """The split gaps (``gaps.SPLIT_GAPS``) the recorded sensor noise alone leaves through the
-    replay, on the gap scales (:func:`gaps.noise_rms` estimates each signal's noise from the records).
+    replay, on the gap scales (:func:`gaps.noise_rms` estimates each channel's noise from the records).
 
-    * hydraulic: the recorded noise of p1, p2 (what the spool position's noise leaves through the
-      chamber replay, ~0.027 bar, and the smoothed X's, ~0.010 bar, is not added: measured and
-      left, docs/discrepancy.md);
+    Both by Monte Carlo: fresh white noise of each channel's estimated RMS is added to the records,
+    they are prepared again (Savitzky–Golay) and replayed, and the RMS difference from the replay
+    of the records as they are is taken over ``draws`` draws from ``seed``:
+
+    * hydraulic: per chamber, sqrt(p noise² + e²), e what noise on every recorded channel (p_s,
+      p_r, p1, p2, the spool position x and the cylinder position X) leaves in the hydraulic
+      replay (:func:`hydraulic_readings`): the spool's noise enters through the flows, X's
+      through the chamber volumes' rate (β/V1 · A1 · 10 µm is ~0.4 bar on Table 1's cylinder),
+      the pressures' through the restarts;
     * mechanical: sqrt((X noise / 1 mm)² + (e / 1 mm)²), e the RMS over the judged samples of the
       mechanical replay (:func:`_mechanical_replay`, the model ``plant`` with its
-      :func:`_mechanical_model` friction and mass, ``condition``, ``effects`` and its load) with fresh white noise of the estimated RMS added to the recorded
-      p1, p2 and X (X enters through the restarts: the position and its Savitzky–Golay velocity)
-      minus the replay of the records as they are, averaged over ``draws`` draws from ``seed``.
-      The replay integrates the force twice, so the pressures' noise (0.05 bar: ~30 N on Table
-      1's cylinder) leaves ~10 µm, ten times the X noise.
+      :func:`_mechanical_model` friction and mass, ``condition``, ``effects`` and its load) with
+      the noise added to p1, p2 and X (X enters through the restarts: the position and its
+      Savitzky–Golay velocity). The replay integrates the force twice, so the pressures' noise
+      (0.05 bar: ~30 N on Table 1's cylinder) leaves ~10 µm, ten times the X noise.
     """
     from scipy.signal import savgol_coeffs
 
     h = settings.savgol_window // 2
     h0 = float(savgol_coeffs(settings.savgol_window, settings.savgol_order)[h])
-    tot = {"p1": [0.0, 0], "p2": [0.0, 0], "X": [0.0, 0]}
+    tot = {k: [0.0, 0] for k in ("p1", "p2", "X", "x", "ps", "pr")}
     for p in prepared:
         for k in tot:
             ss, c = noise_rms(p.rec.raw[k], p.rec.sg[k], h0)
             tot[k][0] += ss
             tot[k][1] += c
-    rms = {k: np.sqrt(ss / c) if c else float("nan") for k, (ss, c) in tot.items()}
-    sse, n = 0.0, 0
+    rms = {k: np.sqrt(ss / c) if c else 0.0 for k, (ss, c) in tot.items()}
+    mech, hyd = [0.0, 0], {"p1": [0.0, 0], "p2": [0.0, 0]}
     for i, p in enumerate(prepared):
         rec = p.rec
         judged, mstarts = _mechanical_restarts(rec, settings, _load_estimate_for(p, plant, condition, effects, settings))
         judged[rec.n - h:] = False
         mplant, load = _mechanical_model(p, plant, condition, effects, settings, _replay_load_for(p, plant, condition, effects, settings))
         nominal = _mechanical_replay(rec, mplant, condition, effects, load, mstarts)
+        nominal_h = hydraulic_readings(p, plant, condition, effects, settings)
         rng = np.random.default_rng([seed, i])
+        rng_h = np.random.default_rng([seed, i, 1])
         for _ in range(draws):
             raw = dict(rec.raw)
-            for k in tot:
+            for k in ("p1", "p2", "X"):
                 raw[k] = raw[k] + rng.normal(0.0, rms[k], rec.n)
             noisy = prepare_record(Record(rec.valve_id, rec.start_us, rec.end_us, rec.dt, raw), settings)
             d = (_mechanical_replay(noisy, mplant, condition, effects, load, mstarts) - nominal)[judged]
             ok = np.isfinite(d)
-            sse += float(np.sum(d[ok] ** 2))
-            n += int(ok.sum())
-    replayed = np.sqrt(sse / n) if n else 0.0
-    return {"hydraulic": float(np.sqrt(((rms["p1"] / GAP_SCALES["p1"]) ** 2 + (rms["p2"] / GAP_SCALES["p2"]) ** 2) / 2)),
+            mech[0] += float(np.sum(d[ok] ** 2))
+            mech[1] += int(ok.sum())
+            for k in ("x", "ps", "pr"):
+                raw[k] = raw[k] + rng_h.normal(0.0, rms[k], rec.n)
+            noisy = prepare_record(Record(rec.valve_id, rec.start_us, rec.end_us, rec.dt, raw), settings)
+            for k, rep, ref in zip(("p1", "p2"), hydraulic_readings(replace(p, rec=noisy, loads={}), plant, condition, effects, settings), nominal_h):
+                e = (rep - ref)[p.regions["all"]]
+                ok = np.isfinite(e)
+                hyd[k][0] += float(np.sum(e[ok] ** 2))
+                hyd[k][1] += int(ok.sum())
+    replayed = np.sqrt(mech[0] / mech[1]) if mech[1] else 0.0
+    chamber = {k: np.hypot(rms[k], np.sqrt(ss / n) if n else 0.0) / GAP_SCALES[k] for k, (ss, n) in hyd.items()}
+    return {"hydraulic": float(np.sqrt((chamber["p1"] ** 2 + chamber["p2"] ** 2) / 2)),
             "mechanical": float(np.hypot(rms["X"], replayed) / GAP_SCALES["X_mechanical"])}
 
 
