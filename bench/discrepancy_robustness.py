@@ -127,14 +127,14 @@ def commissioning_condition_before(seed: int, n_windows: int, family: str = "eq3
 
 @functools.lru_cache(maxsize=4)
 def commissioning_model(seed: int, n_windows: int, family: str = "eq3", declared: str = "nameplate", plant_source: str = "model",
-                        load_interval_s: tuple[float, float] | None = None, sensors: str = "quiet"):
+                        load_interval_s: tuple[float, float] | None = None, sensors: str = "quiet", reconstruct: str = ""):
     """The nuisances calibrated on a clean commissioning window of the seed's valve."""
     from transforms.discrepancy import DiscrepancySettings, split_records
     from transforms.discrepancy.calibration import calibrate
     from transforms.discrepancy.nuisance import NuisancePriors
 
     design = design_plant(family, declared)
-    s = DiscrepancySettings()
+    s = DiscrepancySettings(reconstruct_spool="x" in reconstruct, reconstruct_cylinder="X" in reconstruct)
     if plant_source == "ref":
         recs = split_records(ref_lake(None, None, seed, 5000 + seed, n_windows, load_interval_s, sensors), s)
     else:
@@ -146,7 +146,7 @@ def commissioning_model(seed: int, n_windows: int, family: str = "eq3", declared
 
 def run_cell(key: str, magnitude: str, commissioning: bool, seed: int, n_windows: int, method: str = "nuisance", family: str = "eq3",
              declared: str = "nameplate", plant_source: str = "model", load_interval_s: tuple[float, float] | None = None,
-             sensors: str = "quiet") -> dict:
+             sensors: str = "quiet", reconstruct: str = "") -> dict:
     from model.effects import library_entry
     from transforms.discrepancy import DiscrepancySettings, split_records
     from transforms.discrepancy.nuisance import NuisancePriors
@@ -163,7 +163,7 @@ def run_cell(key: str, magnitude: str, commissioning: bool, seed: int, n_windows
         sign = -1.0 if spec.neutral == 1.0 and seed % 2 else 1.0  # gains both ways
         value = spec.neutral + sign * mag
         effects = spec.effects(value)
-    s = DiscrepancySettings()
+    s = DiscrepancySettings(reconstruct_spool="x" in reconstruct, reconstruct_cylinder="X" in reconstruct)
     if plant_source == "ref":
         lake = ref_lake(None if key == "none" else key, value, seed, 100 + seed, n_windows, load_interval_s, sensors)
     else:
@@ -174,7 +174,7 @@ def run_cell(key: str, magnitude: str, commissioning: bool, seed: int, n_windows
             cp, cc = design, design.nominal_condition
         else:
             cp, cc = (commissioning_model if method == "nuisance" else commissioning_condition_before)(seed, n_windows, family, declared,
-                                                                                                    *((plant_source, load_interval_s, sensors) if method == "nuisance" else ()))
+                                                                                                    *((plant_source, load_interval_s, sensors, reconstruct) if method == "nuisance" else ()))
         d = diagnose(recs, cp, cc, s, monitoring=False)
         if d.verdict is not None:  # unexplained (or gain/offset ambiguous): the verdict decides
             v = d.verdict
@@ -222,7 +222,7 @@ def run_cell(key: str, magnitude: str, commissioning: bool, seed: int, n_windows
         rel_err = abs(got_value - value) / abs(value - spec.neutral)
     return {
         "effect": key, "magnitude": magnitude, "commissioning": commissioning, "seed": seed, "value": value, "method": method, "family": family, "declared": declared,
-        "plant": plant_source, "sensors": sensors, "load_interval_s": load_interval_s, "pressure_delay_samples": d.pressure_delay_samples, "pressure_delays": d.pressure_delays,
+        "plant": plant_source, "sensors": sensors, "reconstruct": reconstruct, "load_interval_s": load_interval_s, "pressure_delay_samples": d.pressure_delay_samples, "pressure_delays": d.pressure_delays,
         "lag_finding": d.lag_finding, "reason": d.verdict.reason if d.verdict is not None else "",
         "verdict": verdict, "got": got, "got_value": got_value, "alternatives": alts, "confidence": conf, "outcome": outcome,
         "rel_err": rel_err, "gap_nominal": d.gap_nominal, "gap_before": d.stage_gaps[0], "gap_after": d.stage_gaps[-1],
@@ -282,6 +282,8 @@ def main(argv=None) -> None:
     ap.add_argument("--load-interval-s", default=None, help="with --plant ref: LOW,HIGH, the load's intervals between new levels [s] (default 1,4)")
     ap.add_argument("--sensors", default="quiet", choices=("quiet", "noisy_end"),
                     help="with --plant ref: positions recorded at 1 µm, or at the noisy end of plants (spool 0.2 %% of x_max, cylinder 10 µm in 5 µm steps)")
+    ap.add_argument("--reconstruct", default="", choices=("", "x", "X", "xX"),
+                    help="reconstruct the spool (x), the cylinder (X) or both before the diagnosis (settings.reconstruct_spool, reconstruct_cylinder)")
     ap.add_argument("--out", default="bench/discrepancy_robustness.jsonl")
     a = ap.parse_args(argv)
     keys = [s.key for s in EFFECT_LIBRARY] + (list(REF_OUTSIDE) if a.plant == "ref" else []) if a.effects == "all" else a.effects.split(",")
@@ -297,10 +299,10 @@ def main(argv=None) -> None:
     for c in comms:
         for seed in seeds:  # seed-major, so a worker reuses its commissioning calibration
             if a.effects == "all" or "none" in keys:
-                tasks.append(("none", "typical", c, seed, a.windows, a.method, a.family, a.declared, a.plant, interval, a.sensors))
+                tasks.append(("none", "typical", c, seed, a.windows, a.method, a.family, a.declared, a.plant, interval, a.sensors, a.reconstruct))
             for m in mags:
                 for k in (k for k in keys if k != "none"):
-                    tasks.append((k, m, c, seed, a.windows, a.method, a.family, a.declared, a.plant, interval, a.sensors))
+                    tasks.append((k, m, c, seed, a.windows, a.method, a.family, a.declared, a.plant, interval, a.sensors, a.reconstruct))
     t0 = time.time()
     rows = []
     out = Path(a.out)

@@ -454,6 +454,30 @@ def test_the_hydraulic_replay_is_driven_by_the_smoothed_position(seed):
     assert moved_rms < 0.4 * floor * 1e5, (moved_rms, floor)  # the recorded X: 0.55-0.66x the floor
 
 
+@pytest.mark.parametrize("reconstruct", [False, True])
+def test_the_hydraulic_floor_holds_what_plant_grade_positions_leave(reconstruct):
+    """The exact model recorded as plants record positions (spool 7 um, cylinder 10 um in 5 um
+    steps; pressures 0.05 bar): the hydraulic gap lies within 1.5x its floor, which holds what
+    every channel's noise leaves through the replay (gap 0.166, floor 0.217); the pressures' own
+    noise would be a floor of 0.05 bar, a third of the gap. Reconstructed positions leave less
+    of it (gap 0.112, floor 0.128)."""
+    from dataclasses import replace
+
+    from transforms.discrepancy.rows import hydraulic_gap, noise_floors, prepare_records
+
+    s, cond, fx = DiscrepancySettings(reconstruct_spool=reconstruct, reconstruct_cylinder=reconstruct), TABLE1.nominal_condition, Effects()
+    sensors = replace(TABLE1.sensors, x_spool=replace(TABLE1.sensors.x_spool, noise_std=7e-6),
+                      x_cyl=replace(TABLE1.sensors.x_cyl, noise_std=10e-6, step=5e-6))
+    res = simulate_windows(TABLE1, [cond], 10.0, seed=3)
+    m = measure(res, sensors, np.random.default_rng([3, 99]))
+    names = ("ps", "pr", "p1", "p2", "x", "X", "x_ref")
+    raw = {k: np.asarray(v[0], float) for k, v in zip(names, (m.ps, m.pr, m.p1, m.p2, m.x_spool, m.x_cyl, m.x_ref))}
+    p = prepare_records([Record("V", 0, 0, 1e-3, raw)], TABLE1, cond, s)
+    floor, gap = noise_floors(p, TABLE1, cond, fx, s)["hydraulic"], hydraulic_gap(p, TABLE1, cond, fx, s)
+    assert floor > (0.1 if not reconstruct else 0.07), floor
+    assert floor / 1.5 < gap < 1.5 * floor, (gap, floor)
+
+
 def test_the_mechanical_replay_is_not_judged_through_a_load_step():
     """The robustness study's ``model/`` plant of seed 4, window 1: near the end of a move the load
     steps 11.2 -> 8.1 -> 0 kN, 36 ms apart, which the estimate reads as one step (its step filter

@@ -114,7 +114,7 @@ def shifted(rec: Record, k: int | dict) -> Record:
         return rec
     n = rec.n
     raw = {c: (v[ks[c]:n - kmax + ks[c]] if c in PRESSURES else v[:n - kmax]).copy() for c, v in rec.raw.items()}
-    return replace(rec, end_us=rec.end_us - int(round(kmax * rec.dt * 1e6)), raw=raw, sg={})
+    return replace(rec, end_us=rec.end_us - int(round(kmax * rec.dt * 1e6)), raw=raw, sg={}, pos={}, noise={})
 
 
 def _vertex(s: np.ndarray, k: int) -> float:

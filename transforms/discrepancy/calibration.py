@@ -129,7 +129,7 @@ class _RowsAround:
         c = plant.cylinder
         for i, p in enumerate(prepared):
             t = _terms_raw(p.rec, plant, condition, effects)
-            integrals = interval_integrals(t, p.rec.raw["X"], p.rec.dt, p.edges, settings.interval_smoothing)
+            integrals = interval_integrals(t, p.rec.position("X"), p.rec.dt, p.edges, settings.interval_smoothing)
             ir = residuals_of_integrals(integrals, t["mass"], c.A1, c.A2, p.rec.dt, p.edges)
             mine = rec_of == i
             i1, i2, im = (np.flatnonzero(mine & (rows0.eq == k)) for k in range(3))
@@ -153,7 +153,7 @@ class _RowsAround:
         c = plant.cylinder
         for p, integrals, mass, i1, i2, im, at in self.parts:
             t = equation_terms(_signals(p.rec, False), plant, condition, self.effects, DEFAULT_REG_BAND_PA, only=need)
-            new = {**integrals, **interval_integrals(t, p.rec.raw["X"], p.rec.dt, p.edges, self.settings.interval_smoothing, only=redo)}
+            new = {**integrals, **interval_integrals(t, p.rec.position("X"), p.rec.dt, p.edges, self.settings.interval_smoothing, only=redo)}
             ir = residuals_of_integrals(new, t.get("mass", mass), c.A1, c.A2, p.rec.dt, p.edges)
             y[i1], y[i2], y[im] = ir.r1, ir.r2, ir.rm[at]
         if "force" not in terms and "mass" not in terms:  # the motion rows, and so their load elimination, are unchanged

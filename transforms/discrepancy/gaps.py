@@ -29,17 +29,19 @@ each effect is judged where it acts and an error in the load estimate cannot hid
   step the estimate holds no sample: ``rows._mechanical_restarts``); mass and friction act here.
 
 Their **noise floors** are what the sensor noise alone leaves through the replay, on the same
-scales (``rows.noise_floors``; each signal's noise RMS from its high-frequency part,
-:func:`noise_rms`): for the hydraulic gap the recorded noise of p1, p2; for the mechanical one the X
-noise together with what fresh noise on the recorded pressures and X leaves in the mechanical
-replay, which integrates the force twice (~10 µm on Table 1's sensors, not the X channel's 1 µm).
+scales (``rows.noise_floors``; each channel's noise RMS from its high-frequency part,
+:func:`transforms.discrepancy.records.noise_rms`), by Monte Carlo: for the hydraulic gap the
+recorded noise of p1, p2 together with what fresh noise on every recorded channel (the positions
+too) leaves in the hydraulic replay; for the mechanical one the X noise together with what fresh
+noise on the recorded pressures and X leaves in the mechanical replay, which integrates the
+force twice (~10 µm on Table 1's sensors, not the X channel's 1 µm).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["GAP_SCALES", "GAP_SIGNALS", "NOISE_GAP", "SPLIT_GAPS", "GapAccumulator", "noise_rms", "normalised_gap"]
+__all__ = ["GAP_SCALES", "GAP_SIGNALS", "NOISE_GAP", "SPLIT_GAPS", "GapAccumulator", "normalised_gap"]
 
 GAP_SIGNALS = ("p1", "p2", "X")
 GAP_SCALES = {"p1": 1.0e5, "p2": 1.0e5, "X": 1.0e-3, "p1_hydraulic": 1.0e5, "p2_hydraulic": 1.0e5, "X_mechanical": 1.0e-3}
@@ -57,15 +59,6 @@ model on Table 1's sensors: 0.04–0.2, docs/discrepancy.md)."""
 def normalised_gap(rms: dict[str, float]) -> float:
     """sqrt(mean over p1, p2, X of (rms / scale)²) (module docstring)."""
     return float(np.sqrt(np.mean([(rms[s] / GAP_SCALES[s]) ** 2 for s in GAP_SIGNALS])))
-
-
-def noise_rms(raw: np.ndarray, smooth: np.ndarray, centre_weight: float) -> tuple[float, int]:
-    """(sum of squares, count) of the recorded noise of one signal: raw − its Savitzky–Golay
-    smoothing, scaled by 1/(1 − ``centre_weight``) (the smoother's central coefficient: the
-    residual of a projection keeps 1 − h₀ of white noise's variance)."""
-    d = raw - smooth
-    ok = np.isfinite(d)
-    return float(np.sum(d[ok] ** 2)) / (1.0 - centre_weight), int(ok.sum())
 
 
 class GapAccumulator:

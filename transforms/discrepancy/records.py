@@ -20,13 +20,16 @@ from dataclasses import dataclass, field
 import numpy as np
 import polars as pl
 
+from model.params import SpoolParams
 from transforms.derivatives import savgol_weights
 from transforms.discrepancy.settings import DiscrepancySettings
+from transforms.discrepancy.states import cylinder_states, spool_from_reference
 from transforms.windows import window_starts
 
 __all__ = [
     "REGIONS",
     "Record",
+    "noise_rms",
     "operating_regions",
     "pick_evenly",
     "prepare_record",
@@ -38,6 +41,8 @@ __all__ = [
 
 SIGNAL_COLUMNS = {"ps": "ps_pa", "pr": "pr_pa", "p1": "p1_pa", "p2": "p2_pa", "x": "x_spool_m", "X": "x_cyl_m"}
 """Record signal → lake column."""
+REFERENCE_COLUMN = ("x_ref", "x_ref_m")
+"""The spool reference (optional; the record holds it where every sample has it)."""
 
 REGIONS = (
     "all",
@@ -63,10 +68,18 @@ class Record:
     dt : float
         Sample period. [s]
     raw : dict of ndarray
-        Recorded ``ps``, ``pr``, ``p1``, ``p2`` [Pa], ``x`` (spool) and ``X`` (cylinder) [m].
+        Recorded ``ps``, ``pr``, ``p1``, ``p2`` [Pa], ``x`` (spool) and ``X`` (cylinder) [m];
+        ``x_ref`` (the spool reference) [m] where recorded.
     sg : dict of ndarray
-        Savitzky–Golay values (:func:`prepare_record`): ``ps``, ``pr``, ``p1``, ``p2``, ``x``,
-        ``X`` smoothed; ``v`` = dX/dt [m/s], ``a`` = d²X/dt² [m/s²], ``dp1``, ``dp2`` [Pa/s].
+        Savitzky–Golay values (:func:`prepare_record`): ``ps``, ``pr``, ``p1``, ``p2`` smoothed,
+        ``dp1``, ``dp2`` [Pa/s]; ``x``, ``X`` the positions, ``v`` = dX/dt [m/s], ``a`` = d²X/dt²
+        [m/s²], reconstructed (:mod:`transforms.discrepancy.states`) or Savitzky–Golay.
+    noise : dict of (float, int)
+        (sum of squares, count) of each recorded signal's noise (:func:`noise_rms`, on the
+        Savitzky–Golay values), for the noise floors and the reconstruction.
+    pos : dict of ndarray
+        The positions ``x``, ``X`` [m] the equations and the replays' restarts take in place of
+        the recorded ones (:meth:`position`): the reconstructed ones, or none (the recorded).
     """
 
     valve_id: str
@@ -75,6 +88,12 @@ class Record:
     dt: float
     raw: dict[str, np.ndarray]
     sg: dict[str, np.ndarray] = field(default_factory=dict)
+    pos: dict[str, np.ndarray] = field(default_factory=dict)
+    noise: dict[str, tuple[float, int]] = field(default_factory=dict)
+
+    def position(self, key: str) -> np.ndarray:
+        """The spool (``"x"``) or cylinder (``"X"``) position the equations take [m]."""
+        return self.pos.get(key, self.raw[key])
 
     @property
     def n(self) -> int:
@@ -122,6 +141,11 @@ def record_from_rows(rows: pl.DataFrame, valve_id: str, dt: float) -> Record | N
     raw = {k: rows[c].to_numpy().astype(float) for k, c in SIGNAL_COLUMNS.items()}
     if not all(np.all(np.isfinite(v)) for v in raw.values()):
         return None
+    key, column = REFERENCE_COLUMN
+    if column in rows.columns:
+        ref = rows[column].cast(pl.Float64).fill_null(float("nan")).to_numpy()
+        if np.all(np.isfinite(ref)):
+            raw[key] = ref
     ts = rows["timestamp_utc"].cast(pl.Datetime("us", "UTC")).to_physical()
     return Record(valve_id, int(ts[0]), int(ts[-1]), dt, raw)
 
@@ -168,15 +192,38 @@ def savgol(y: np.ndarray, window: int, order: int, deriv: int, dt: float) -> np.
     return out
 
 
-def prepare_record(rec: Record, settings: DiscrepancySettings) -> Record:
-    """Fill ``rec.sg`` (see :class:`Record`); returns the record."""
+def noise_rms(raw: np.ndarray, smooth: np.ndarray, window: int, order: int) -> tuple[float, int]:
+    """(sum of squares, count) of the recorded noise of one signal: raw − its Savitzky–Golay
+    smoothing ``smooth`` (``window``, ``order``), scaled by 1/(1 − h₀), h₀ the smoother's central
+    coefficient (the residual of a projection keeps 1 − h₀ of white noise's variance)."""
+    h0 = float(savgol_weights(window, order, 0)[window // 2])
+    d = raw - smooth
+    ok = np.isfinite(d)
+    return float(np.sum(d[ok] ** 2)) / (1.0 - h0), int(ok.sum())
+
+
+def prepare_record(rec: Record, settings: DiscrepancySettings, spool: SpoolParams | None = None) -> Record:
+    """Fill ``rec.sg`` and ``rec.pos`` (see :class:`Record`; the positions reconstructed with
+    ``settings.reconstruct_spool`` and ``reconstruct_cylinder``, the spool through Eq. 1 with
+    ``spool``, default the nameplate's); returns the record."""
     L, o, dt = settings.savgol_window, settings.savgol_order, rec.dt
-    sg = {k: savgol(v, L, o, 0, dt) for k, v in rec.raw.items()}
+    sg = {k: savgol(v, L, o, 0, dt) for k, v in rec.raw.items() if k != "x_ref"}
     sg["v"] = savgol(rec.raw["X"], L, o, 1, dt)
     sg["a"] = savgol(rec.raw["X"], L, o, 2, dt)
     sg["dp1"] = savgol(rec.raw["p1"], L, o, 1, dt)
     sg["dp2"] = savgol(rec.raw["p2"], L, o, 1, dt)
     rec.sg = sg
+    rec.noise = {k: noise_rms(rec.raw[k], sg[k], L, o) for k in SIGNAL_COLUMNS}
+    sd = {k: float(np.sqrt(ss / n)) if n else 0.0 for k, (ss, n) in rec.noise.items()}
+    rec.pos = {}
+    if settings.reconstruct_spool:
+        x = spool_from_reference(rec.raw["x"], rec.raw.get("x_ref"), dt, spool or SpoolParams(), sd["x"], settings.spool_offset_s)
+        if x is not None:
+            sg["x"] = rec.pos["x"] = x
+    if settings.reconstruct_cylinder and rec.n > 3:
+        X, v, a = cylinder_states(rec.raw["X"], dt, sd["X"])
+        sg["X"] = rec.pos["X"] = X
+        sg["v"], sg["a"] = v, a
     return rec
 
 

@@ -12,7 +12,7 @@ from model.effects import Effects, EffectSpec, equation_terms, sensor_readings, 
 from model.params import PlantParams, ValveCondition
 from model.replay import DRIVE_HYDRAULIC, DRIVE_MECHANICAL, replay
 from model.simulate import DEFAULT_REG_BAND_PA
-from transforms.discrepancy.gaps import GAP_SCALES, RECORDED_OF, GapAccumulator, noise_rms
+from transforms.discrepancy.gaps import GAP_SCALES, RECORDED_OF, GapAccumulator
 from transforms.discrepancy.load import LoadEstimate, away_from_steps, estimate_load, load_projector, friction_within, motion_mismatch, interval_load, project_out, replay_load, robust_sigma, stuck_spans
 from transforms.discrepancy.records import REGIONS, Record, operating_regions, prepare_record
 from transforms.discrepancy.residuals import (
@@ -64,7 +64,7 @@ def prepare_records(records: list[Record], plant: PlantParams, condition: ValveC
     h = settings.savgol_window // 2
     k = settings.interval_smoothing // 2
     for rec in records:
-        prepare_record(rec, settings)
+        prepare_record(rec, settings, plant.spool)
         sg = rec.sg
         regions = operating_regions(sg["v"], sg["p1"], sg["p2"], sg["ps"], settings)
         edges = interval_edges(rec.n - max(h, k), settings.interval_samples, max(h, k))
@@ -76,7 +76,8 @@ def prepare_records(records: list[Record], plant: PlantParams, condition: ValveC
 
 def _signals(rec: Record, smooth: bool) -> dict:
     src = rec.sg if smooth else rec.raw
-    return {"x": src["x"], "p1": src["p1"], "p2": src["p2"], "ps": src["ps"], "pr": src["pr"], "X": rec.raw["X"], "v": rec.sg["v"]}
+    x = rec.sg["x"] if smooth else rec.position("x")
+    return {"x": x, "p1": src["p1"], "p2": src["p2"], "ps": src["ps"], "pr": src["pr"], "X": rec.position("X"), "v": rec.sg["v"]}
 
 
 def _terms_raw(rec, plant, condition, effects):
@@ -89,14 +90,14 @@ def _terms_sg(rec, plant, condition, effects):
 
 def _force_balance(rec: Record, plant, condition, effects, settings) -> np.ndarray:
     t = _terms_raw(rec, plant, condition, effects)
-    return triangular_force_balance(t["force"], rec.raw["X"], t["mass"], rec.dt, settings.interval_samples)
+    return triangular_force_balance(t["force"], rec.position("X"), t["mass"], rec.dt, settings.interval_samples)
 
 
 def _load_motion(rec: Record, settings) -> tuple[np.ndarray, np.ndarray]:
     """(v_X [m/s], the acceleration averaged as in the force balance, (X₊ − 2X + X₋)/(L T)²
     [m/s²]): the columns of a friction and a mass mismatch in the load fit."""
     L = settings.interval_samples
-    X = rec.raw["X"]
+    X = rec.position("X")
     a = np.full(X.size, np.nan)
     if X.size > 2 * L:
         a[L:-L] = (X[2 * L:] - 2.0 * X[L:-L] + X[:-2 * L]) / (L * rec.dt) ** 2
@@ -218,7 +219,7 @@ def _replay_span_states(rec: Record, plant, condition, effects, a: int, b: int, 
     shape (4, b − a), or None if the replay diverged."""
     x_true, p1_true, p2_true = true_signals(_smoothed(rec, "x")[a:b], rec.sg["p1"][a:a + 1], rec.sg["p2"][a:a + 1], effects)
     v0 = rec.sg["v"][a]
-    state = [[rec.raw["X"][a], 0.0 if abs(v0) < 1e-3 else v0, p1_true[0], p2_true[0]]]
+    state = [[rec.position("X")[a], 0.0 if abs(v0) < 1e-3 else v0, p1_true[0], p2_true[0]]]
     try:
         r = replay(plant, x_true, rec.raw["ps"][a:b], rec.raw["pr"][a:b], load, [0], state, condition=condition, effects=effects)
     except FloatingPointError:
@@ -328,7 +329,7 @@ def _rows(prepared: list[_Prepared], plant, condition, effects, settings) -> _Ro
     knots = {}
     for i, p in enumerate(prepared):
         rec = p.rec
-        ir = interval_residuals(_terms_raw(rec, plant, condition, effects), rec.raw["X"], c.A1, c.A2, rec.dt, p.edges, settings.interval_smoothing)
+        ir = interval_residuals(_terms_raw(rec, plant, condition, effects), rec.position("X"), c.A1, c.A2, rec.dt, p.edges, settings.interval_smoothing)
         e = p.edges
         nb = RECORD_STRIDE
         bc = (ir.t_cont // settings.block_s).astype(np.int64) + i * nb
@@ -409,7 +410,7 @@ def _replay_starts(p: _Prepared, effects, settings) -> tuple:
     v_all = _velocity(rec)
     v = v_all[starts]
     v = np.where(np.abs(v) < 1e-3, 0.0, v)
-    states = np.column_stack([rec.raw["X"][starts], v, p1_true[starts], p2_true[starts]])
+    states = np.column_stack([rec.position("X")[starts], v, p1_true[starts], p2_true[starts]])
     return x_src, x_true, p1_true, p2_true, v_all, starts, states
 
 
@@ -475,7 +476,7 @@ def _mechanical_replay(rec: Record, plant, condition, effects, load, mstarts: np
     _, p1_rec, p2_rec = true_signals(x_src, rec.raw["p1"], rec.raw["p2"], effects)
     given_p = np.vstack([np.where(np.isfinite(p1_true), p1_true, p1_rec), np.where(np.isfinite(p2_true), p2_true, p2_rec)])
     vm = _velocity(rec)[mstarts]
-    mstates = np.column_stack([rec.raw["X"][mstarts], np.where(np.abs(vm) < 1e-3, 0.0, vm), given_p[0, mstarts], given_p[1, mstarts]])
+    mstates = np.column_stack([rec.position("X")[mstarts], np.where(np.abs(vm) < 1e-3, 0.0, vm), given_p[0, mstarts], given_p[1, mstarts]])
     mech = replay(plant, x_true, rec.raw["ps"], rec.raw["pr"], load, mstarts, mstates, condition=condition, effects=effects,
                   drive=DRIVE_MECHANICAL, given=given_p)
     return mech.X_m.copy()
@@ -532,7 +533,7 @@ NOISE_SEED = 2013
 
 def noise_floors(prepared, plant, condition, effects, settings, draws: int = NOISE_DRAWS, seed: int = NOISE_SEED) -> dict[str, float]:
     """The split gaps (``gaps.SPLIT_GAPS``) the recorded sensor noise alone leaves through the
-    replay, on the gap scales (:func:`gaps.noise_rms` estimates each channel's noise from the records).
+    replay, on the gap scales (each channel's noise as the records estimate it, :attr:`Record.noise`).
 
     Both by Monte Carlo: fresh white noise of each channel's estimated RMS is added to the records,
     they are prepared again (Savitzky–Golay) and replayed, and the RMS difference from the replay
@@ -550,14 +551,11 @@ def noise_floors(prepared, plant, condition, effects, settings, draws: int = NOI
       Savitzky–Golay velocity). The replay integrates the force twice, so the pressures' noise
       (0.05 bar: ~30 N on Table 1's cylinder) leaves ~10 µm, ten times the X noise.
     """
-    from scipy.signal import savgol_coeffs
-
     h = settings.savgol_window // 2
-    h0 = float(savgol_coeffs(settings.savgol_window, settings.savgol_order)[h])
     tot = {k: [0.0, 0] for k in ("p1", "p2", "X", "x", "ps", "pr")}
     for p in prepared:
         for k in tot:
-            ss, c = noise_rms(p.rec.raw[k], p.rec.sg[k], h0)
+            ss, c = p.rec.noise[k]
             tot[k][0] += ss
             tot[k][1] += c
     rms = {k: np.sqrt(ss / c) if c else 0.0 for k, (ss, c) in tot.items()}
@@ -575,14 +573,14 @@ def noise_floors(prepared, plant, condition, effects, settings, draws: int = NOI
             raw = dict(rec.raw)
             for k in ("p1", "p2", "X"):
                 raw[k] = raw[k] + rng.normal(0.0, rms[k], rec.n)
-            noisy = prepare_record(Record(rec.valve_id, rec.start_us, rec.end_us, rec.dt, raw), settings)
+            noisy = prepare_record(Record(rec.valve_id, rec.start_us, rec.end_us, rec.dt, raw), settings, plant.spool)
             d = (_mechanical_replay(noisy, mplant, condition, effects, load, mstarts) - nominal)[judged]
             ok = np.isfinite(d)
             mech[0] += float(np.sum(d[ok] ** 2))
             mech[1] += int(ok.sum())
             for k in ("x", "ps", "pr"):
                 raw[k] = raw[k] + rng_h.normal(0.0, rms[k], rec.n)
-            noisy = prepare_record(Record(rec.valve_id, rec.start_us, rec.end_us, rec.dt, raw), settings)
+            noisy = prepare_record(Record(rec.valve_id, rec.start_us, rec.end_us, rec.dt, raw), settings, plant.spool)
             for k, rep, ref in zip(("p1", "p2"), hydraulic_readings(replace(p, rec=noisy, loads={}), plant, condition, effects, settings), nominal_h):
                 e = (rep - ref)[p.regions["all"]]
                 ok = np.isfinite(e)

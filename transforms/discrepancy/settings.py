@@ -143,6 +143,15 @@ class DiscrepancySettings:
     gauss_newton_iterations : int
         Refinement iterations of a named effect's parameter on the exact (non-linearised)
         residuals.
+    reconstruct_spool, reconstruct_cylinder : bool
+        Reconstruct the spool position from the recorded reference, the cylinder's X, v_X, a_X
+        with a smoother, before anything else (:mod:`transforms.discrepancy.states`); off (the
+        default): their Savitzky–Golay values. On, the reference plant's valves at the noisy end
+        of plant sensors read better, and at 1 µm some clean valves worse
+        (docs/discrepancy.md, "Positions as plants record them").
+    spool_offset_s : float
+        The recorded spool position's offset from Eq. 1's response to the reference is smoothed
+        over this long. [s]
     """
 
     sample_period_s: float | None = None
@@ -185,11 +194,14 @@ class DiscrepancySettings:
     min_z: float = 5.0
     ci_level: float = 0.95
     gauss_newton_iterations: int = 6
+    reconstruct_spool: bool = False
+    reconstruct_cylinder: bool = False
+    spool_offset_s: float = 1.0
 
     def __post_init__(self) -> None:
         for f in fields(self):
             v = getattr(self, f.name)
-            if v is None:
+            if v is None or isinstance(v, bool):
                 continue
             if not v > 0:
                 raise ValueError(f"{f.name} must be > 0, got {v}")

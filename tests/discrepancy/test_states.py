@@ -1,0 +1,72 @@
+"""The reconstructed positions (transforms/discrepancy/states.py): Eq. 1's step response against
+its closed form, the smoother on a known trajectory, and both on the second reference plant at
+the noisy end of plant sensors, against its true spool and cylinder."""
+
+import numpy as np
+import pytest
+
+from model.params import SpoolParams
+from tests.refplant import NAMEPLATE, manufactured, noisy_end, simulate_windows
+from transforms.discrepancy.records import savgol
+from transforms.discrepancy.states import cylinder_states, spool_from_reference, spool_response
+
+DT = 1.0e-3
+
+
+def test_spool_response_is_the_critically_damped_step_response():
+    """ζ = 1, T = 1 ms, a 10 µm step (peak speed 3.7 mm/s, far below v_max): x(t) = Δ (1 − (1 + t/T) e^(−t/T))."""
+    sp = SpoolParams()
+    ref = np.r_[np.zeros(5), np.full(60, 10e-6)]
+    x = spool_response(ref, DT, sp)
+    t = (np.arange(60) + 1) * DT
+    exact = 10e-6 * (1 - (1 + t / sp.T_s) * np.exp(-t / sp.T_s))
+    np.testing.assert_allclose(x[5:], exact, atol=0.35e-6)  # explicit steps of 0.1 ms: 0.31 µm at the first sample
+    assert np.all(x[:5] == 0.0)
+
+
+def test_spool_speed_is_limited_to_v_max():
+    sp = SpoolParams()
+    x = spool_response(np.r_[0.0, np.full(40, 3e-3)], DT, sp)
+    assert np.max(np.diff(x)) <= sp.v_max_m_s * DT * (1 + 1e-9)
+
+
+def test_a_reading_that_does_not_follow_the_reference_keeps_its_own_value():
+    rng = np.random.default_rng(3)
+    ref = np.sin(np.arange(4000) * DT * 2 * np.pi) * 1e-3
+    follows = spool_response(ref, DT, SpoolParams()) + 2e-6 + rng.normal(0, 5e-6, ref.size)
+    assert spool_from_reference(follows, ref, DT, SpoolParams(), 5e-6, 1.0) is not None
+    assert spool_from_reference(-ref, ref, DT, SpoolParams(), 5e-6, 1.0) is None
+    assert spool_from_reference(ref, None, DT, SpoolParams(), 5e-6, 1.0) is None
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_smoother_beats_savitzky_golay_on_a_smooth_move(seed):
+    """X = 50 mm · sin(2π 0.4 t) with 10 µm of white noise: the smoother's velocity and
+    acceleration errors are below half of Savitzky–Golay's (21, cubic)."""
+    t = np.arange(8000) * DT
+    w = 2 * np.pi * 0.4
+    X, v, a = 0.05 * np.sin(w * t), 0.05 * w * np.cos(w * t), -0.05 * w * w * np.sin(w * t)
+    y = X + np.random.default_rng(seed).normal(0, 10e-6, t.size)
+    Xs, vs, as_ = cylinder_states(y, DT, 10e-6)
+    inner = slice(50, -50)
+    rms = lambda e: float(np.sqrt(np.mean(e[inner] ** 2)))  # noqa: E731
+    assert rms(vs - v) < 0.5 * rms(savgol(y, 21, 3, 1, DT) - v)
+    assert rms(as_ - a) < 0.5 * rms(savgol(y, 21, 3, 2, DT) - a)
+    assert rms(Xs - X) < 4e-6
+
+
+def test_reference_plant_positions_at_the_noisy_end():
+    """Spool 0.2 % of x_max (7 µm), cylinder 10 µm in 5 µm steps, valve seed 1: the spool within
+    0.6 µm of the truth (Savitzky–Golay 2.3–2.4 µm), the cylinder's velocity within 0.45 mm/s (0.9)."""
+    from transforms.discrepancy.records import noise_rms
+
+    rec = simulate_windows(noisy_end(manufactured(NAMEPLATE, seed=1)), 1, 101)[0]
+    x, X = rec.x_spool.astype(float), rec.x_cyl.astype(float)
+    sd = {k: np.sqrt(np.divide(*noise_rms(y, savgol(y, 21, 3, 0, DT), 21, 3))) for k, y in (("x", x), ("X", X))}
+    assert 6e-6 < sd["x"] < 8e-6 and 9e-6 < sd["X"] < 11.5e-6, sd
+    inner = slice(100, -100)
+    rms = lambda e: float(np.sqrt(np.mean(e[inner] ** 2)))  # noqa: E731
+    spool = spool_from_reference(x, rec.x_ref.astype(float), DT, SpoolParams(), sd["x"], 1.0)
+    assert spool is not None and rms(spool - rec.true["x"]) < 0.6e-6
+    _, v, _ = cylinder_states(X, DT, sd["X"])
+    assert rms(v - rec.true["vX"]) < 0.45e-3 < 0.5 * rms(savgol(X, 21, 3, 1, DT) - rec.true["vX"])
