@@ -171,18 +171,19 @@ def test_noisy_end_with_commissioning_and_reconstructed_positions():
     positions reconstructed, the model calibrated on a clean commissioning window of the same
     valve: the clean valve is ``none``, and one effect of each kind at its typical magnitude is
     named with its value within 5 % (hydraulic: internal leakage; a transmitter: the p1 offset;
-    mechanical: the friction change). The study's seeds 0-5 (docs/discrepancy.md, DIS-17): all
-    named but one p1 offset ``ambiguous`` with it first; errors 0.01-0.4 %, 0.1-0.4 %, 0.5-13 %."""
+    mechanical: the friction change); one 10 s window diagnosed, two calibrated on. The study
+    (two windows diagnosed, seeds 0-5; docs/discrepancy.md, DIS-17): all named but one p1 offset
+    ``ambiguous`` with it first; errors 0.01-0.4 %, 0.1-0.4 %, 0.5-13 %."""
     from tests.refplant import noisy_end
     from transforms.discrepancy.calibration import calibrate
 
     s = DiscrepancySettings(reconstruct_spool=True, reconstruct_cylinder=True)
     plant = noisy_end(manufactured(NAMEPLATE, seed=0))
 
-    def records(fx, window_seed):
-        return split_records(to_lake_frame(simulate_windows(plant, 2, window_seed, effects=fx), "V1", T0), s)
+    def records(fx, window_seed, n=1):
+        return split_records(to_lake_frame(simulate_windows(plant, n, window_seed, effects=fx), "V1", T0), s)
 
-    cal = calibrate(records(None, 5000), TABLE1, TABLE1.nominal_condition, NuisancePriors(), s)
+    cal = calibrate(records(None, 5000, 2), TABLE1, TABLE1.nominal_condition, NuisancePriors(), s)
     clean = diagnose(records(None, 100), cal.plant, cal.condition, s, monitoring=False)
     assert clean.verdict is None and clean.named == [], (clean.verdict, clean.named)
     for key in ("internal_leakage", "pressure_sensor_offset[p1]", "friction_change"):
