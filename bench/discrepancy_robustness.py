@@ -93,6 +93,13 @@ def ref_lake(key: str | None, value, valve_seed: int, window_seed: int, n_window
     return to_lake_frame(recs, "V1", datetime(2025, 3, 1, tzinfo=timezone.utc))
 
 
+def settings_for(reconstruct: str):
+    """The workflow's settings with the positions ``reconstruct``-ed: ``x`` the spool, ``X`` the cylinder."""
+    from transforms.discrepancy import DiscrepancySettings
+
+    return DiscrepancySettings(reconstruct_spool="x" in reconstruct, reconstruct_cylinder="X" in reconstruct)
+
+
 def design_plant(family: str, declared: str):
     """The design data the workflow is given: Table 1 with the area law the plant configuration
     declares. ``nameplate``: a sharp-edged valve type is configured ``area_law = "sharp"``, worn
@@ -129,12 +136,12 @@ def commissioning_condition_before(seed: int, n_windows: int, family: str = "eq3
 def commissioning_model(seed: int, n_windows: int, family: str = "eq3", declared: str = "nameplate", plant_source: str = "model",
                         load_interval_s: tuple[float, float] | None = None, sensors: str = "quiet", reconstruct: str = ""):
     """The nuisances calibrated on a clean commissioning window of the seed's valve."""
-    from transforms.discrepancy import DiscrepancySettings, split_records
+    from transforms.discrepancy import split_records
     from transforms.discrepancy.calibration import calibrate
     from transforms.discrepancy.nuisance import NuisancePriors
 
     design = design_plant(family, declared)
-    s = DiscrepancySettings(reconstruct_spool="x" in reconstruct, reconstruct_cylinder="X" in reconstruct)
+    s = settings_for(reconstruct)
     if plant_source == "ref":
         recs = split_records(ref_lake(None, None, seed, 5000 + seed, n_windows, load_interval_s, sensors), s)
     else:
@@ -148,7 +155,7 @@ def run_cell(key: str, magnitude: str, commissioning: bool, seed: int, n_windows
              declared: str = "nameplate", plant_source: str = "model", load_interval_s: tuple[float, float] | None = None,
              sensors: str = "quiet", reconstruct: str = "") -> dict:
     from model.effects import library_entry
-    from transforms.discrepancy import DiscrepancySettings, split_records
+    from transforms.discrepancy import split_records
     from transforms.discrepancy.nuisance import NuisancePriors
     from transforms.discrepancy.pipeline import diagnose
     from transforms.discrepancy.verdict import acting_gap
@@ -163,7 +170,7 @@ def run_cell(key: str, magnitude: str, commissioning: bool, seed: int, n_windows
         sign = -1.0 if spec.neutral == 1.0 and seed % 2 else 1.0  # gains both ways
         value = spec.neutral + sign * mag
         effects = spec.effects(value)
-    s = DiscrepancySettings(reconstruct_spool="x" in reconstruct, reconstruct_cylinder="X" in reconstruct)
+    s = settings_for(reconstruct)
     if plant_source == "ref":
         lake = ref_lake(None if key == "none" else key, value, seed, 100 + seed, n_windows, load_interval_s, sensors)
     else:

@@ -83,6 +83,7 @@ def spool_from_reference(x_m: np.ndarray, x_ref_m: np.ndarray | None, dt_s: floa
     if x_ref_m is None or w < 5 or not np.all(np.isfinite(x_ref_m)) or not noise > 0:
         return None
     response = spool_response(x_ref_m, dt_s, spool)
+    reading = np.asarray(x_m, float)
     best, left = None, np.inf
     for k in SPOOL_SHIFTS:
         shifted = np.roll(response, k)
@@ -90,7 +91,7 @@ def spool_from_reference(x_m: np.ndarray, x_ref_m: np.ndarray | None, dt_s: floa
             shifted[:k] = response[0]
         elif k < 0:
             shifted[k:] = response[-1]
-        diff = np.asarray(x_m, float) - shifted
+        diff = reading - shifted
         offset = savgol_filter(diff, w, 1)
         rms = float(np.sqrt(np.mean((diff - offset) ** 2)))
         if rms < left:
@@ -99,10 +100,9 @@ def spool_from_reference(x_m: np.ndarray, x_ref_m: np.ndarray | None, dt_s: floa
 
 
 @njit(cache=True)
-def _kalman(y, dt, r, q, smooth):
-    """Forward Kalman filter (and with ``smooth`` the RTS pass) of the white-jerk model of y;
-    returns (states (n, 3), negative log-likelihood of the innovations). Written out in scalars:
-    no array is made per sample."""
+def _smooth(y, dt, r, q):
+    """The Rauch–Tung–Striebel smoother (forward Kalman filter, backward pass) of the white-jerk
+    model of y, states (n, 3). Written out in scalars: no array is made per sample."""
     n = y.size
     A = np.array([[1.0, dt, 0.5 * dt * dt], [0.0, 1.0, dt], [0.0, 0.0, 1.0]])
     Q = q * np.array([[dt**5 / 20.0, dt**4 / 8.0, dt**3 / 6.0], [dt**4 / 8.0, dt**3 / 3.0, dt**2 / 2.0], [dt**3 / 6.0, dt**2 / 2.0, dt]])
@@ -115,7 +115,6 @@ def _kalman(y, dt, r, q, smooth):
     P[0, 0], P[1, 1], P[2, 2] = r, 1.0, 1.0e4
     AP = np.zeros((3, 3))
     K = np.zeros(3)
-    nll = 0.0
     for k in range(n):
         if k > 0:
             for i in range(3):
@@ -130,7 +129,6 @@ def _kalman(y, dt, r, q, smooth):
         Pp[k] = P
         s = P[0, 0] + r
         nu = y[k] - x[0]
-        nll += np.log(s) + nu * nu / s
         for i in range(3):
             K[i] = P[i, 0] / s
         for i in range(3):
@@ -141,15 +139,13 @@ def _kalman(y, dt, r, q, smooth):
         P[:, :] = AP
         xf[k] = x
         Pf[k] = P
-    if not smooth:
-        return xf, nll
     xs = xf.copy()
     for k in range(n - 2, -1, -1):
         C = Pf[k] @ A.T @ np.linalg.inv(Pp[k + 1])
         d = xs[k + 1] - A @ xf[k]
         for i in range(3):
             xs[k, i] = xf[k, i] + C[i, 0] * d[0] + C[i, 1] * d[1] + C[i, 2] * d[2]
-    return xs, nll
+    return xs
 
 
 def cylinder_states(X_m: np.ndarray, dt_s: float, noise: float) -> np.ndarray:
@@ -163,8 +159,8 @@ def cylinder_states(X_m: np.ndarray, dt_s: float, noise: float) -> np.ndarray:
     impulse[IMPULSE_SAMPLES // 2] = 1.0
     best, best_score = None, np.inf
     for q in JERK_GRID:
-        xs = _kalman(y, dt, r, q, True)[0]
-        h = _kalman(impulse, dt, r, q, True)[0][IMPULSE_SAMPLES // 2, 0]
+        xs = _smooth(y, dt, r, q)
+        h = _smooth(impulse, dt, r, q)[IMPULSE_SAMPLES // 2, 0]
         score = float(np.mean(((y - xs[:, 0]) / (1.0 - h)) ** 2))
         if score < best_score:
             best, best_score = xs, score
