@@ -17,7 +17,7 @@ from model import TABLE1
 from model.effects import Effects, library_entry
 from model.params import GEOMETRY_FAMILIES
 from transforms.discrepancy import DiscrepancySettings, split_records
-from transforms.discrepancy.calibration import _split_gains, calibrate
+from transforms.discrepancy.calibration import _split_gains, calibrate, corrected_lstsq
 from transforms.discrepancy.load import LoadEstimate
 from transforms.discrepancy.nuisance import NUISANCES, NuisancePriors, apply_nuisances, nuisance_sigmas, nuisance_values
 from transforms.discrepancy.pipeline import _project_out, diagnose
@@ -95,6 +95,25 @@ def test_project_out_removes_what_the_nuisances_explain():
     a, b = _project_out(N, inside, outside)
     assert np.linalg.norm(a) < 1e-2 * np.linalg.norm(inside)
     assert np.linalg.norm(b) > 0.9 * np.linalg.norm(outside)
+
+
+def test_corrected_least_squares_undoes_a_noisy_regressors_attenuation():
+    # m a = F with the acceleration recorded with noise of variance s2: least squares reads m
+    # short by m s2 / (var a + s2) (errors in variables, 20 % here); subtracting the noise's
+    # expected part k (m0 + x)² with k = n s2 from the sum of squares gives back m
+    rng = np.random.default_rng(7)
+    n, m, s2 = 200_000, 6000.0, 0.25
+    a = rng.normal(0.0, 1.0, n)
+    a_rec = a + rng.normal(0.0, np.sqrt(s2), n)
+    f = m * a + rng.normal(0.0, 50.0, n)
+    m0 = 5000.0
+    A, b = -a_rec[:, None], -(f - m0 * a_rec)  # the residual f - (m0 + x) a_rec and its column
+    plain, _ = corrected_lstsq(A, b, np.array([1.0]), 0.0, m0)
+    fixed, obj = corrected_lstsq(A, b, np.array([1.0]), n * s2, m0)
+    assert abs(m0 + plain[0] - m / (1 + s2)) < 0.005 * m, plain
+    assert abs(m0 + fixed[0] - m) < 0.005 * m, fixed
+    resid = f - (m0 + fixed[0]) * a_rec
+    assert obj == pytest.approx(resid @ resid - n * s2 * (m0 + fixed[0]) ** 2)
 
 
 def test_split_gains_peak_at_a_level_change_and_added_step_splits_the_segment():

@@ -6,10 +6,13 @@ selection regresses (:func:`transforms.discrepancy.rows._rows`: both chamber equ
 20-sample intervals and the motion equation integrated twice, the load eliminated per
 segment), each row weighted by 1/σ of its equation, with the prior as extra rows: it minimises
 
-    Σ_rows (w r(z, θ))² + |z|²
+    Σ_rows (w r(z, θ))² − K m(z, θ)² + |z|²
 
 over the standardised nuisances z (prior N(0, I)) and the effect parameters θ (flat prior, kept
-on their physical side). Derivatives are finite differences of the exact residual functions
+on their physical side); K m² is what the cylinder position's noise puts into the motion rows,
+where it enters the mass's column too (:func:`transforms.discrepancy.rows.mass_term_noise`):
+without it, least squares reads the mass lighter by ~m K / I (a corrected score; m the moving
+mass with any mass change). Derivatives are finite differences of the exact residual functions
 (central, step :data:`Z_STEP` σ for a nuisance; a nuisance's rows are evaluated from the equation
 terms it enters only, :data:`TERMS_OF`, the same arithmetic as the whole rows). The equation weights are re-estimated from the calibrated
 residuals once (the nominal model's residuals carry its own error and would under-weight the data).
@@ -225,6 +228,9 @@ class JointFit:
     z_se, effect_se : posterior standard deviations (Gauss–Newton, data rows taken independent)
     data_ss, prior_ss : Σ (w r)² and |z|² at the optimum
     r, Jz, Je : residual rows and derivatives at the optimum (unweighted)
+    mass_noise, noise_ss : K [1/kg²] and K m² at the optimum (the fit's objective is
+        data_ss − noise_ss + prior_ss; module docstring)
+    mass_gradient : dm/d(z, θ) [kg per unit]
     """
 
     z: np.ndarray
@@ -236,28 +242,81 @@ class JointFit:
     r: np.ndarray
     Jz: np.ndarray
     Je: np.ndarray
+    mass_noise: float = 0.0
+    noise_ss: float = 0.0
+    mass_gradient: np.ndarray | None = None
+
+
+def moving_mass(nm: NuisanceModel, z, effects: Effects) -> float:
+    """The model's moving mass at nuisances ``z`` with ``effects``' mass change. [kg]"""
+    return float(nm.model(z)[0].cylinder.mass_kg + effects.delta_mass_kg)
+
+
+def mass_gradient(nm: NuisanceModel, specs: list[EffectSpec]) -> np.ndarray:
+    """dm/d(z, θ) over the active nuisances and the parameters of ``specs``. [kg per unit]"""
+    g = np.zeros(len(nm.active) + len(specs))
+    mass = NUISANCES.index("mass")
+    if mass in nm.active:
+        g[nm.active.index(mass)] = nm.sigma[mass]
+    for j, spec in enumerate(specs):
+        g[len(nm.active) + j] = 1.0 if spec.attribute == "delta_mass_kg" else 0.0
+    return g
+
+
+CORRECTION_SHARE = 0.5
+"""The noise's correction of the normal equations takes at most this share of the data's
+information along the mass (beyond it the mass is not identifiable from the rows anyway)."""
+
+
+def capped_mass_noise(k: float, A: np.ndarray, g: np.ndarray) -> float:
+    """``k`` at most :data:`CORRECTION_SHARE` of the information along ``g`` of the rows ``A``."""
+    if k <= 0.0 or not np.any(g):
+        return 0.0
+    sc = np.sqrt(np.mean(A * A, axis=0))
+    sc = np.where(sc > 0, sc, 1.0)
+    gs = g / sc
+    return float(min(k, CORRECTION_SHARE / float(gs @ np.linalg.pinv((A / sc).T @ (A / sc)) @ gs)))
+
+
+def corrected_lstsq(A: np.ndarray, b: np.ndarray, g: np.ndarray, k: float, m0: float) -> tuple[np.ndarray, float]:
+    """(x, objective) minimising |A x − b|² − k (m0 + g·x)² (columns scaled to unit RMS): least
+    squares with the position noise's expected part of the mass term taken out (module docstring;
+    ``k`` as :func:`capped_mass_noise`, so that the quadratic stays convex)."""
+    sc = np.sqrt(np.mean(A * A, axis=0))
+    sc = np.where(sc > 0, sc, 1.0)
+    As, gs = A / sc, g / sc
+    if k <= 0.0 or not np.any(gs):
+        x, *_ = np.linalg.lstsq(As, b, rcond=None)
+    else:
+        x = np.linalg.pinv(As.T @ As - k * np.outer(gs, gs)) @ (As.T @ b + k * m0 * gs)
+    x = x / sc
+    return x, float(np.sum((A @ x - b) ** 2) - k * (m0 + g @ x) ** 2)
 
 
 def joint_fit(prepared, nm: NuisanceModel, z0, specs: list[EffectSpec], effects0: Effects, rows0, w_rows, settings, iterations: int = 8) -> JointFit:
     """MAP Gauss–Newton for the active nuisances and the parameters of ``specs`` (module docstring)."""
+    from transforms.discrepancy.rows import mass_term_noise
+
     z = np.array(z0, float)
     fx = effects0
     q, p = len(nm.active), len(specs)
+    g = mass_gradient(nm, specs)
     r, Jz, Je = jacobians(prepared, nm, z, fx, specs, rows0, settings)
+    k = 0.0
+    if np.any(g):
+        ok = np.isfinite(r) & np.all(np.isfinite(Jz), axis=1) & np.all(np.isfinite(Je), axis=1)
+        k = capped_mass_noise(float(np.sum(mass_term_noise(prepared, rows0, w_rows, settings)[ok])), np.column_stack([Jz[ok], Je[ok]]) * w_rows[ok, None], g)
 
-    def objective(rr, zz):
+    def objective(rr, zz, ff):
         ok = np.isfinite(rr)
-        return float(np.sum((rr[ok] * w_rows[ok]) ** 2) + zz @ zz)
+        return float(np.sum((rr[ok] * w_rows[ok]) ** 2) + zz @ zz - k * moving_mass(nm, zz, ff) ** 2)
 
-    obj = objective(r, z)
+    obj = objective(r, z, fx)
     for _ in range(iterations):
         ok = np.isfinite(r) & np.all(np.isfinite(Jz), axis=1) & np.all(np.isfinite(Je), axis=1)
         A = np.vstack([np.column_stack([Jz[ok], Je[ok]]) * w_rows[ok, None], np.hstack([np.eye(q), np.zeros((q, p))])])
         b = np.r_[-r[ok] * w_rows[ok], -z]
-        sc = np.sqrt(np.mean(A * A, axis=0))
-        sc = np.where(sc > 0, sc, 1.0)
-        step, *_ = np.linalg.lstsq(A / sc, b, rcond=None)
-        step = step / sc
+        step, _ = corrected_lstsq(A, b, g, k, moving_mass(nm, z, fx))
         accepted = False
         for lam in (1.0, 0.5, 0.25, 0.1):
             z_new = z + lam * step[:q]
@@ -265,7 +324,7 @@ def joint_fit(prepared, nm: NuisanceModel, z0, specs: list[EffectSpec], effects0
             if fx_new is None:
                 continue
             r_new = _residuals(prepared, nm, z_new, fx_new, rows0, settings)
-            o = objective(r_new, z_new)
+            o = objective(r_new, z_new, fx_new)
             if np.isfinite(o) and o <= obj:
                 accepted = True
                 break
@@ -280,13 +339,16 @@ def joint_fit(prepared, nm: NuisanceModel, z0, specs: list[EffectSpec], effects0
     A = np.column_stack([Jz[ok], Je[ok]]) * w_rows[ok, None]
     H = A.T @ A
     H[:q, :q] += np.eye(q)
+    H -= k * np.outer(g, g)
     try:
         cov = np.linalg.pinv(H)
         se = np.sqrt(np.maximum(np.diag(cov), 0.0))
     except np.linalg.LinAlgError:
         se = np.full(q + p, np.inf)
     data_ss = float(np.sum((r[ok] * w_rows[ok]) ** 2))
-    return JointFit(z=z, effects=fx, z_se=se[:q], effect_se=se[q:], data_ss=data_ss, prior_ss=float(z @ z), r=r, Jz=Jz, Je=Je)
+    m = moving_mass(nm, z, fx)
+    return JointFit(z=z, effects=fx, z_se=se[:q], effect_se=se[q:], data_ss=data_ss, prior_ss=float(z @ z), r=r, Jz=Jz, Je=Je,
+                    mass_noise=k, noise_ss=k * m * m, mass_gradient=g)
 
 
 @dataclass(frozen=True)

@@ -58,6 +58,7 @@ from transforms.discrepancy.rows import (  # noqa: F401 (ReplayTrace, prepare_re
     _residual_summary,
     _Rows,
     _rows,
+    mass_term_noise,
     noise_floors,
     perturbed,
     prepare_records,
@@ -176,9 +177,13 @@ class Diagnosis:
 def _refine(prepared, plant, condition, specs: list[EffectSpec], start: Effects, rows0: _Rows, w_rows: np.ndarray, settings) -> tuple[Effects, np.ndarray, np.ndarray]:
     """Gauss–Newton on the exact residuals for the parameters of ``specs`` from ``start``;
     returns the effects, the jackknife SEs and the final Jacobian."""
+    from transforms.discrepancy.calibration import capped_mass_noise, corrected_lstsq
+
     fx = start
     J = None
     r = None
+    g = np.array([1.0 if spec.attribute == "delta_mass_kg" else 0.0 for spec in specs])
+    e2 = mass_term_noise(prepared, rows0, w_rows, settings) if np.any(g) else None
     for _ in range(settings.gauss_newton_iterations):
         y_here = _rows(prepared, plant, condition, fx, settings).y
         r = _eliminate_load(y_here, rows0)
@@ -186,10 +191,8 @@ def _refine(prepared, plant, condition, specs: list[EffectSpec], start: Effects,
         ok = np.isfinite(r) & np.all(np.isfinite(J), axis=1)
         Jw = J[ok] * w_rows[ok, None]
         rw = r[ok] * w_rows[ok]
-        scale = np.sqrt(np.mean(Jw * Jw, axis=0))
-        scale = np.where(scale > 0, scale, 1.0)
-        step, *_ = np.linalg.lstsq(Jw / scale, -rw, rcond=None)
-        step = step / scale
+        k = capped_mass_noise(float(np.sum(e2[ok])), Jw, g) if e2 is not None else 0.0
+        step, _ = corrected_lstsq(Jw, -rw, g, k, plant.cylinder.mass_kg + fx.delta_mass_kg)
         new = fx
         for spec, d in zip(specs, step):
             v = spec.value(new) + float(d)
@@ -207,11 +210,28 @@ def _refine(prepared, plant, condition, specs: list[EffectSpec], start: Effects,
     y_here = _rows(prepared, plant, condition, fx, settings).y
     r = _eliminate_load(y_here, rows0)
     J = _jacobian(prepared, plant, condition, fx, specs, rows0, settings, y_here)
-    st = block_stats(-r * w_rows, J * w_rows[:, None], rows0.block)
+    st = block_stats(-r * w_rows, J * w_rows[:, None], rows0.block, _mass_noise(specs, e2, J * w_rows[:, None], r, plant.cylinder.mass_kg + fx.delta_mass_kg))
     _, _, loo = cv_losses(st, list(range(len(specs))))
     B = loo.shape[0]
     se = np.sqrt((B - 1) / B * np.sum((loo - loo.mean(axis=0)) ** 2, axis=0)) / st.scale if B > 1 else np.full(len(specs), np.inf)
     return fx, se, J
+
+
+def _mass_noise(specs: list[EffectSpec], e2: np.ndarray | None, Jw: np.ndarray, r: np.ndarray, m0: float) -> tuple | None:
+    """``block_stats``' noise correction of a mass change's column (``rows.mass_term_noise``'s
+    ``e2`` per row, scaled down as ``calibration.capped_mass_noise`` caps it), or None."""
+    from transforms.discrepancy.calibration import capped_mass_noise
+
+    j = next((i for i, spec in enumerate(specs) if spec.attribute == "delta_mass_kg"), None)
+    if j is None or e2 is None:
+        return None
+    ok = np.isfinite(r) & np.all(np.isfinite(Jw), axis=1)
+    k = float(np.sum(e2[ok]))
+    if k <= 0.0:
+        return None
+    g = np.zeros(Jw.shape[1])
+    g[j] = 1.0
+    return j, e2 * (capped_mass_noise(k, Jw[ok], g) / k), m0
 
 
 def _project_out(Nw: np.ndarray, *cols: np.ndarray) -> list[np.ndarray]:
@@ -250,6 +270,9 @@ def _select(prepared, plant, condition, specs, settings, nuisance=None):
     J0 = _jacobian(prepared, plant, condition, base, specs, rows0, settings, rows0.y)
     yw, Jw = -r0 * w_rows, J0 * w_rows[:, None]
     cand = list(range(len(specs)))
+    noise = None
+    if nuisance is None and any(spec.attribute == "delta_mass_kg" for spec in specs):
+        noise = _mass_noise(specs, mass_term_noise(prepared, rows0, w_rows, settings), Jw, r0, plant.cylinder.mass_kg)
     if nuisance is not None:
         from transforms.discrepancy.calibration import jacobians
 
@@ -262,7 +285,7 @@ def _select(prepared, plant, condition, specs, settings, nuisance=None):
         # a candidate the nuisances reproduce (a spool offset is an underlap pattern, a mass change
         # the mass) has nothing left to select on; the verdict weighs it against the priors
         cand = [j for j in cand if after[j] > NUISANCE_COLLINEAR * before[j]]
-    st = block_stats(yw, Jw, rows0.block)
+    st = block_stats(yw, Jw, rows0.block, noise)
     sel: SelectionResult = forward_select(
         st, cand, max_effects=settings.max_effects, min_t_stat=settings.min_t_stat,
         min_relative_gain=settings.min_relative_gain, min_z=settings.min_z,
@@ -320,8 +343,9 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
     z_cal = None
     if nm is not None:
         # calibrate the nuisances (loads from the nominal model), then again on the loads of the
-        # calibrated model; the calibrated base model is stage 0
-        z_cal = calibrate_best(prepared, nm, settings)[0].z
+        # calibrated model, each adding the load steps the detector missed (as a commissioning
+        # calibration does: a missed step reads as a mass ~500 kg off); the calibrated base model is stage 0
+        z_cal = calibrate_best(prepared, nm, settings, split=True)[0].z
         if is_sharp(nm, z_cal):
             # the data show sharp edges, not the configured Eq. 3's: diagnose with that family
             sharp = replace(nominal[0], geometry=replace(nominal[0].geometry, area_law="sharp"))
@@ -331,7 +355,7 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
         nm = refine_breakaway(prepared, nm, z_cal, settings)
         plant, condition = nm.model(z_cal)
         prepared = prepare_records(records, plant, condition, settings)
-        z_cal = calibrate_prepared(prepared, nm, settings, z0=z_cal)[0].z
+        z_cal = calibrate_prepared(prepared, nm, settings, z0=z_cal, split=True)[0].z
         plant, condition = nm.model(z_cal)
     # step 2: the base model's residuals and the library's regressors; the load segments come
     # from the base model's motion equation, which a friction or mass change disturbs (where the
@@ -357,7 +381,7 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
         for p in prepared:
             p.seg = _estimate_load(p.rec, fp, fc, fitted, settings)
         if nm is not None:
-            z_cal = calibrate_prepared(prepared, nm, settings, z0=z_cal)[0].z
+            z_cal = calibrate_prepared(prepared, nm, settings, z0=z_cal, split=True)[0].z
             plant, condition = nm.model(z_cal)
         rows0, w_rows, sel, sig = _select(prepared, plant, condition, specs, settings, None if nm is None else (nm, z_cal))
     B = sel.n_blocks

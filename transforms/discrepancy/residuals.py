@@ -97,7 +97,7 @@ class IntervalResiduals:
     t_motion: np.ndarray
 
 
-def _box_at(y: np.ndarray, at: np.ndarray, m: int) -> np.ndarray:
+def box_at(y: np.ndarray, at: np.ndarray, m: int) -> np.ndarray:
     """Centred moving averages of ``y`` over m (odd) samples, at the sample indices ``at`` only
     (a dot product per index, not a convolution of the whole record); NaN within m // 2 of the
     ends."""
@@ -135,15 +135,15 @@ def interval_integrals(terms: dict, X: np.ndarray, dt: float, edges: np.ndarray,
     out = {}
     # the boxcar'd running integrals and X, at the interval edges only
     if "Q1" in want:
-        out["Q1"] = _box_at(_cum_trapz(terms["q1"] - terms["ql1"], dt), e, m)
+        out["Q1"] = box_at(_cum_trapz(terms["q1"] - terms["ql1"], dt), e, m)
     if "Q2" in want:
-        out["Q2"] = _box_at(_cum_trapz(terms["q2"] + terms["ql2"], dt), e, m)
+        out["Q2"] = box_at(_cum_trapz(terms["q2"] + terms["ql2"], dt), e, m)
     if "C1" in want:
-        out["C1"] = _box_at(_cum_stieltjes(terms["c1"], terms["p1"]), e, m)
+        out["C1"] = box_at(_cum_stieltjes(terms["c1"], terms["p1"]), e, m)
     if "C2" in want:
-        out["C2"] = _box_at(_cum_stieltjes(terms["c2"], terms["p2"]), e, m)
+        out["C2"] = box_at(_cum_stieltjes(terms["c2"], terms["p2"]), e, m)
     if "Xs" in want:
-        out["Xs"] = _box_at(X, e, m)
+        out["Xs"] = box_at(X, e, m)
     if "fw" in want:
         # motion: triangular weights over [e_{i-1}, e_{i+1}] (Σ w = 1), then the same boxcar, at
         # the inner edges only

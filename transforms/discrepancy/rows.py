@@ -16,6 +16,7 @@ from transforms.discrepancy.gaps import GAP_SCALES, RECORDED_OF, GapAccumulator
 from transforms.discrepancy.load import LoadEstimate, away_from_steps, estimate_load, load_projector, friction_within, motion_mismatch, interval_load, project_out, replay_load, robust_sigma, stuck_spans
 from transforms.discrepancy.records import REGIONS, Record, operating_regions, prepare_record
 from transforms.discrepancy.residuals import (
+    box_at,
     demean_by_group,
     interval_edges,
     interval_residuals,
@@ -313,6 +314,7 @@ class _Rows:
     sample: np.ndarray  # motion rows: the record's sample the row is centred at; -1 otherwise
     knots: dict = field(default_factory=dict)  # motion group -> knots of its piecewise-linear load (absent: a constant)
     _projector: list | None = None
+    _mass_noise: dict = field(default_factory=dict)  # weights' bytes -> mass_term_noise
 
     @property
     def projector(self) -> list:
@@ -359,6 +361,55 @@ def _eliminate_load(values: np.ndarray, rows: _Rows) -> np.ndarray:
     if m.any():
         out[m] = project_out(out[m], rows.projector) if rows.knots else demean_by_group(out[m], rows.group[m])
     return out
+
+
+MASS_NOISE_DRAWS = 16
+"""Draws of :func:`mass_term_noise` (its scatter over draws: ~9 % per draw, ~2 % over 16)."""
+
+
+def mass_term_noise(prepared, rows: _Rows, w_rows: np.ndarray, settings, draws: int = MASS_NOISE_DRAWS, seed: int = 2013) -> np.ndarray:
+    """E (w P ε)² per row [1/kg²]: what the recorded cylinder position's noise puts into each
+    weighted motion row per kg² of moving mass, with the load eliminated (P) as in the rows (0 on
+    the chamber rows); K below is their sum over the rows a fit uses.
+
+    A motion row is F̄ − m ΔΔX̄ / T² (:func:`transforms.discrepancy.residuals.residuals_of_integrals`):
+    the mass multiplies a second difference of the recorded X, so X's noise ε enters both the
+    mass's column and the row (errors in variables). Least squares then reads the mass lighter by
+    m·K / (K + I), I the mass's information in the rows: at the noisy end of plant sensors (10 µm)
+    K/I was 0.14 on the reference plant's seed 4 (~800 kg of 6 t, 7σ of the mass's tolerance) and
+    0.006 on seed 1; at 1 µm 0.002. The fits subtract K·m² from their sum of squares (a corrected score,
+    :func:`transforms.discrepancy.calibration.corrected_lstsq`), whose expectation is then the
+    noise-free one. Monte Carlo: white noise of X's RMS as the records estimate it (pooled) through
+    the interval averages, the second difference, the rows and the load elimination; records whose
+    X is reconstructed (``settings.reconstruct_cylinder``) contribute none (their error is not
+    white). Cached on ``rows`` per weights."""
+    key = np.asarray(w_rows, float).tobytes()
+    if key in rows._mass_noise:
+        return rows._mass_noise[key]
+    ss, c = 0.0, 0
+    for p in prepared:
+        ss += p.rec.noise["X"][0]
+        c += p.rec.noise["X"][1]
+    sx = float(np.sqrt(ss / c)) if c else 0.0
+    rec_of = rows.block // RECORD_STRIDE
+    rng = np.random.default_rng(seed)
+    total = np.zeros(rows.eq.size)
+    for _ in range(draws):
+        y = np.zeros(rows.eq.size)
+        for i, p in enumerate(prepared):
+            if "X" in p.rec.pos or sx == 0.0:
+                continue
+            e = p.edges
+            L = int(e[1] - e[0])
+            T = L * p.rec.dt
+            Xs = box_at(rng.normal(0.0, sx, p.rec.n), e, settings.interval_smoothing)
+            im = np.flatnonzero((rec_of == i) & (rows.eq == 2))
+            at = (rows.sample[im] - e[1]) // L
+            y[im] = (Xs[at + 2] - 2.0 * Xs[at + 1] + Xs[at]) / (T * T)
+        y = _eliminate_load(y, rows)
+        total += np.where(np.isfinite(y), (w_rows * y) ** 2, 0.0)
+    rows._mass_noise[key] = total / draws
+    return rows._mass_noise[key]
 
 
 def _equation_sigmas(y: np.ndarray, rows: _Rows) -> np.ndarray:

@@ -80,12 +80,19 @@ class BlockStats:
         return int(self.s.shape[0])
 
 
-def block_stats(y: np.ndarray, Phi: np.ndarray, block: np.ndarray) -> BlockStats:
+def block_stats(y: np.ndarray, Phi: np.ndarray, block: np.ndarray, noise: tuple | None = None) -> BlockStats:
     """Sufficient statistics per block of the rows (y, Φ) (rows with a non-finite value are
-    dropped; columns are scaled to unit RMS)."""
+    dropped; columns are scaled to unit RMS).
+
+    ``noise`` = (j, e2, m0): column j is a regressor recorded with noise that enters the rows too,
+    as the mass's column of the motion rows (y ∋ m0 u, Φ_j ∋ −u with E u² = e2 per row,
+    ``transforms.discrepancy.rows.mass_term_noise``): each block's sums are corrected by the
+    noise's expectation (Φ_jᵀΦ_j − Σ e2, Φ_jᵀy + m0 Σ e2, yᵀy − m0² Σ e2), so that the
+    coefficients and the losses are those of the noise-free regressor (a corrected score)."""
     y = np.asarray(y, float)
     Phi = np.asarray(Phi, float).reshape(y.shape[0], -1)
     ok = np.isfinite(y) & np.all(np.isfinite(Phi), axis=1)
+    e2 = np.asarray(noise[1], float)[ok] if noise is not None else None
     y, Phi, block = y[ok], Phi[ok], np.asarray(block)[ok]
     scale = np.sqrt(np.mean(Phi * Phi, axis=0)) if y.size else np.ones(Phi.shape[1])
     scale = np.where(scale > 0, scale, 1.0)
@@ -104,6 +111,12 @@ def block_stats(y: np.ndarray, Phi: np.ndarray, block: np.ndarray) -> BlockStats
         G[b] = zb.T @ zb
         c[b] = zb.T @ yb
         s[b] = yb @ yb
+    if e2 is not None:
+        j, m0 = noise[0], noise[2]
+        eb = np.bincount(inv, weights=e2, minlength=B)
+        G[:, j, j] -= eb / scale[j] ** 2
+        c[:, j] += m0 * eb / scale[j]
+        s -= m0**2 * eb
     return BlockStats(G=G, c=c, s=s, n=n, scale=scale)
 
 

@@ -391,7 +391,7 @@ def _block_kappa(rw: np.ndarray, block: np.ndarray) -> float:
 
 def nuisance_scores(nm, fit, named_specs, specs, rows0, w_rows, settings, prepared) -> list[dict]:
     """ΔO, value and nuisance reading of every library candidate not named (module docstring)."""
-    from transforms.discrepancy.calibration import effect_jacobian, joint_fit
+    from transforms.discrepancy.calibration import corrected_lstsq, effect_jacobian, joint_fit, moving_mass
 
     others = [s for s in specs if s not in named_specs]
     Jc = effect_jacobian(prepared, nm, fit.z, fit.effects, others, rows0, settings, fit.r)
@@ -407,19 +407,18 @@ def nuisance_scores(nm, fit, named_specs, specs, rows0, w_rows, settings, prepar
     b = np.r_[-rw[ok] / sk, -fit.z]
     prior = np.hstack([np.eye(q), np.zeros((q, p))])
 
-    def solve(A):
-        sc = np.sqrt(np.mean(A * A, axis=0))
-        sc = np.where(sc > 0, sc, 1.0)
-        x, *_ = np.linalg.lstsq(A / sc, b, rcond=None)
-        x = x / sc
-        return x, float(np.sum((A @ x - b) ** 2))
+    g0 = fit.mass_gradient if fit.mass_gradient is not None else np.zeros(q + p)
+    m0 = moving_mass(nm, fit.z, fit.effects)
+
+    def solve(A, g):  # the fit's objective (its noise of the mass term too), over κ
+        return corrected_lstsq(A, b, g, fit.mass_noise / kappa, m0)
 
     A0 = np.vstack([np.hstack([N, E]), prior])
-    _, o0 = solve(A0)
+    _, o0 = solve(A0, g0)
     out = []
     for j, spec in enumerate(others):
         A = np.vstack([np.hstack([N, E, C[:, j:j + 1]]), np.hstack([prior, np.zeros((q, 1))])])
-        x, o = solve(A)
+        x, o = solve(A, np.r_[g0, 1.0 if spec.attribute == "delta_mass_kg" else 0.0])
         t = float(x[-1])
         d = o0 - o
         if spec.lower is not None and t < 0:
@@ -433,14 +432,14 @@ def nuisance_scores(nm, fit, named_specs, specs, rows0, w_rows, settings, prepar
                     "nuisance_reading": reading, "kappa": kappa, "refit": None})
     out.sort(key=lambda r: -r["delta_objective"])
     # the leading candidates again, by the exact (nonlinear) joint fit from the linear reading
-    o_without = fit.data_ss / kappa + fit.prior_ss
+    o_without = (fit.data_ss - fit.noise_ss) / kappa + fit.prior_ss
     for r in out[:REFIT_CANDIDATES]:
         if r["delta_objective"] < 0.5 * Z_AMBIGUOUS**2:
             break
         spec = r["spec"]
         start = replace(fit.effects, **{spec.attribute: r["value"] if spec.lower is None else max(r["value"], spec.lower)})
         jf = joint_fit(prepared, nm, fit.z, list(named_specs) + [spec], start, rows0, w_rows, settings)
-        d = o_without - (jf.data_ss / kappa + jf.prior_ss)
+        d = o_without - ((jf.data_ss - jf.noise_ss) / kappa + jf.prior_ss)
         dz = fit.z - jf.z
         order = np.argsort(-np.abs(dz))[:4]
         r.update(delta_objective=float(max(d, 0.0)), value=spec.value(jf.effects), refit=jf, nuisance_reading=", ".join(
