@@ -242,9 +242,9 @@ class JointFit:
     r: np.ndarray
     Jz: np.ndarray
     Je: np.ndarray
-    mass_noise: float = 0.0
-    noise_ss: float = 0.0
-    mass_gradient: np.ndarray | None = None
+    mass_noise: float
+    noise_ss: float
+    mass_gradient: np.ndarray
 
 
 def moving_mass(nm: NuisanceModel, z, effects: Effects) -> float:
@@ -252,14 +252,16 @@ def moving_mass(nm: NuisanceModel, z, effects: Effects) -> float:
     return float(nm.model(z)[0].cylinder.mass_kg + effects.delta_mass_kg)
 
 
-def mass_gradient(nm: NuisanceModel, specs: list[EffectSpec]) -> np.ndarray:
-    """dm/d(z, θ) over the active nuisances and the parameters of ``specs``. [kg per unit]"""
-    g = np.zeros(len(nm.active) + len(specs))
+def mass_gradient(nm: NuisanceModel | None, specs: list[EffectSpec]) -> np.ndarray:
+    """dm/d(z, θ) over the active nuisances (none with ``nm`` None: a model taken as exact) and
+    the parameters of ``specs`` (1 for a mass change, else 0). [kg per unit]"""
+    active = () if nm is None else nm.active
+    g = np.zeros(len(active) + len(specs))
     mass = NUISANCES.index("mass")
-    if mass in nm.active:
-        g[nm.active.index(mass)] = nm.sigma[mass]
+    if mass in active:
+        g[active.index(mass)] = nm.sigma[mass]
     for j, spec in enumerate(specs):
-        g[len(nm.active) + j] = 1.0 if spec.attribute == "delta_mass_kg" else 0.0
+        g[len(active) + j] = 1.0 if spec.attribute == "delta_mass_kg" else 0.0
     return g
 
 

@@ -177,12 +177,12 @@ class Diagnosis:
 def _refine(prepared, plant, condition, specs: list[EffectSpec], start: Effects, rows0: _Rows, w_rows: np.ndarray, settings) -> tuple[Effects, np.ndarray, np.ndarray]:
     """Gauss–Newton on the exact residuals for the parameters of ``specs`` from ``start``;
     returns the effects, the jackknife SEs and the final Jacobian."""
-    from transforms.discrepancy.calibration import capped_mass_noise, corrected_lstsq
+    from transforms.discrepancy.calibration import capped_mass_noise, corrected_lstsq, mass_gradient
 
     fx = start
     J = None
     r = None
-    g = np.array([1.0 if spec.attribute == "delta_mass_kg" else 0.0 for spec in specs])
+    g = mass_gradient(None, specs)
     e2 = mass_term_noise(prepared, rows0, w_rows, settings) if np.any(g) else None
     for _ in range(settings.gauss_newton_iterations):
         y_here = _rows(prepared, plant, condition, fx, settings).y
@@ -220,18 +220,16 @@ def _refine(prepared, plant, condition, specs: list[EffectSpec], start: Effects,
 def _mass_noise(specs: list[EffectSpec], e2: np.ndarray | None, Jw: np.ndarray, r: np.ndarray, m0: float) -> tuple | None:
     """``block_stats``' noise correction of a mass change's column (``rows.mass_term_noise``'s
     ``e2`` per row, scaled down as ``calibration.capped_mass_noise`` caps it), or None."""
-    from transforms.discrepancy.calibration import capped_mass_noise
+    from transforms.discrepancy.calibration import capped_mass_noise, mass_gradient
 
-    j = next((i for i, spec in enumerate(specs) if spec.attribute == "delta_mass_kg"), None)
-    if j is None or e2 is None:
+    g = mass_gradient(None, specs)
+    if e2 is None or not np.any(g):
         return None
     ok = np.isfinite(r) & np.all(np.isfinite(Jw), axis=1)
     k = float(np.sum(e2[ok]))
     if k <= 0.0:
         return None
-    g = np.zeros(Jw.shape[1])
-    g[j] = 1.0
-    return j, e2 * (capped_mass_noise(k, Jw[ok], g) / k), m0
+    return int(np.argmax(g)), e2 * (capped_mass_noise(k, Jw[ok], g) / k), m0
 
 
 def _project_out(Nw: np.ndarray, *cols: np.ndarray) -> list[np.ndarray]:
@@ -270,8 +268,10 @@ def _select(prepared, plant, condition, specs, settings, nuisance=None):
     J0 = _jacobian(prepared, plant, condition, base, specs, rows0, settings, rows0.y)
     yw, Jw = -r0 * w_rows, J0 * w_rows[:, None]
     cand = list(range(len(specs)))
+    from transforms.discrepancy.calibration import mass_gradient
+
     noise = None
-    if nuisance is None and any(spec.attribute == "delta_mass_kg" for spec in specs):
+    if nuisance is None and np.any(mass_gradient(None, specs)):
         noise = _mass_noise(specs, mass_term_noise(prepared, rows0, w_rows, settings), Jw, r0, plant.cylinder.mass_kg)
     if nuisance is not None:
         from transforms.discrepancy.calibration import jacobians

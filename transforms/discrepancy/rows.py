@@ -363,55 +363,6 @@ def _eliminate_load(values: np.ndarray, rows: _Rows) -> np.ndarray:
     return out
 
 
-MASS_NOISE_DRAWS = 16
-"""Draws of :func:`mass_term_noise` (its scatter over draws: ~9 % per draw, ~2 % over 16)."""
-
-
-def mass_term_noise(prepared, rows: _Rows, w_rows: np.ndarray, settings, draws: int = MASS_NOISE_DRAWS, seed: int = 2013) -> np.ndarray:
-    """E (w P ε)² per row [1/kg²]: what the recorded cylinder position's noise puts into each
-    weighted motion row per kg² of moving mass, with the load eliminated (P) as in the rows (0 on
-    the chamber rows); K below is their sum over the rows a fit uses.
-
-    A motion row is F̄ − m ΔΔX̄ / T² (:func:`transforms.discrepancy.residuals.residuals_of_integrals`):
-    the mass multiplies a second difference of the recorded X, so X's noise ε enters both the
-    mass's column and the row (errors in variables). Least squares then reads the mass lighter by
-    m·K / (K + I), I the mass's information in the rows: at the noisy end of plant sensors (10 µm)
-    K/I was 0.14 on the reference plant's seed 4 (~800 kg of 6 t, 7σ of the mass's tolerance) and
-    0.006 on seed 1; at 1 µm 0.002. The fits subtract K·m² from their sum of squares (a corrected score,
-    :func:`transforms.discrepancy.calibration.corrected_lstsq`), whose expectation is then the
-    noise-free one. Monte Carlo: white noise of X's RMS as the records estimate it (pooled) through
-    the interval averages, the second difference, the rows and the load elimination; records whose
-    X is reconstructed (``settings.reconstruct_cylinder``) contribute none (their error is not
-    white). Cached on ``rows`` per weights."""
-    key = np.asarray(w_rows, float).tobytes()
-    if key in rows._mass_noise:
-        return rows._mass_noise[key]
-    ss, c = 0.0, 0
-    for p in prepared:
-        ss += p.rec.noise["X"][0]
-        c += p.rec.noise["X"][1]
-    sx = float(np.sqrt(ss / c)) if c else 0.0
-    rec_of = rows.block // RECORD_STRIDE
-    rng = np.random.default_rng(seed)
-    total = np.zeros(rows.eq.size)
-    for _ in range(draws):
-        y = np.zeros(rows.eq.size)
-        for i, p in enumerate(prepared):
-            if "X" in p.rec.pos or sx == 0.0:
-                continue
-            e = p.edges
-            L = int(e[1] - e[0])
-            T = L * p.rec.dt
-            Xs = box_at(rng.normal(0.0, sx, p.rec.n), e, settings.interval_smoothing)
-            im = np.flatnonzero((rec_of == i) & (rows.eq == 2))
-            at = (rows.sample[im] - e[1]) // L
-            y[im] = (Xs[at + 2] - 2.0 * Xs[at + 1] + Xs[at]) / (T * T)
-        y = _eliminate_load(y, rows)
-        total += np.where(np.isfinite(y), (w_rows * y) ** 2, 0.0)
-    rows._mass_noise[key] = total / draws
-    return rows._mass_noise[key]
-
-
 def _equation_sigmas(y: np.ndarray, rows: _Rows) -> np.ndarray:
     """Robust scale (1.4826 MAD) of each equation's residual rows."""
     sig = np.ones(3)
@@ -582,6 +533,16 @@ NOISE_SEED = 2013
 """Seed of those draws (the floor is a deterministic function of the records and the model)."""
 
 
+def pooled_noise(prepared, keys) -> dict[str, float]:
+    """Each channel of ``keys``' noise RMS over all the records (:attr:`Record.noise`). [Pa or m]"""
+    out = {}
+    for key in keys:
+        ss = sum(p.rec.noise[key][0] for p in prepared)
+        c = sum(p.rec.noise[key][1] for p in prepared)
+        out[key] = float(np.sqrt(ss / c)) if c else 0.0
+    return out
+
+
 def noise_floors(prepared, plant, condition, effects, settings, draws: int = NOISE_DRAWS, seed: int = NOISE_SEED) -> dict[str, float]:
     """The split gaps (``gaps.SPLIT_GAPS``) the recorded sensor noise alone leaves through the
     replay, on the gap scales (each channel's noise as the records estimate it, :attr:`Record.noise`).
@@ -603,13 +564,7 @@ def noise_floors(prepared, plant, condition, effects, settings, draws: int = NOI
       (0.05 bar: ~30 N on Table 1's cylinder) leaves ~10 µm, ten times the X noise.
     """
     h = settings.savgol_window // 2
-    tot = {k: [0.0, 0] for k in ("p1", "p2", "X", "x", "ps", "pr")}
-    for p in prepared:
-        for k in tot:
-            ss, c = p.rec.noise[k]
-            tot[k][0] += ss
-            tot[k][1] += c
-    rms = {k: np.sqrt(ss / c) if c else 0.0 for k, (ss, c) in tot.items()}
+    rms = pooled_noise(prepared, ("p1", "p2", "X", "x", "ps", "pr"))
     mech, hyd = [0.0, 0], {"p1": [0.0, 0], "p2": [0.0, 0]}
     for i, p in enumerate(prepared):
         rec = p.rec
@@ -641,6 +596,51 @@ def noise_floors(prepared, plant, condition, effects, settings, draws: int = NOI
     chamber = {k: np.hypot(rms[k], np.sqrt(ss / n) if n else 0.0) / GAP_SCALES[k] for k, (ss, n) in hyd.items()}
     return {"hydraulic": float(np.sqrt((chamber["p1"] ** 2 + chamber["p2"] ** 2) / 2)),
             "mechanical": float(np.hypot(rms["X"], replayed) / GAP_SCALES["X_mechanical"])}
+
+
+MASS_NOISE_DRAWS = 16
+"""Draws of :func:`mass_term_noise` (its scatter over draws: ~9 % per draw, ~2 % over 16)."""
+
+
+def mass_term_noise(prepared, rows: _Rows, w_rows: np.ndarray, settings, draws: int = MASS_NOISE_DRAWS, seed: int = NOISE_SEED) -> np.ndarray:
+    """E (w P ε)² per row [1/kg²]: what the recorded cylinder position's noise puts into each
+    weighted motion row per kg² of moving mass, with the load eliminated (P) as in the rows (0 on
+    the chamber rows); K below is their sum over the rows a fit uses.
+
+    A motion row is F̄ − m ΔΔX̄ / T² (:func:`transforms.discrepancy.residuals.residuals_of_integrals`):
+    the mass multiplies a second difference of the recorded X, so X's noise ε enters both the
+    mass's column and the row (errors in variables). Least squares then reads the mass lighter by
+    m·K / (K + I), I the mass's information in the rows: at the noisy end of plant sensors (10 µm)
+    K/I was 0.14 on the reference plant's seed 4 (~800 kg of 6 t, 7σ of the mass's tolerance) and
+    0.006 on seed 1; at 1 µm 0.002. The fits subtract K·m² from their sum of squares (a corrected score,
+    :func:`transforms.discrepancy.calibration.corrected_lstsq`), whose expectation is then the
+    noise-free one. Monte Carlo: white noise of X's RMS as the records estimate it (pooled) through
+    the interval averages, the second difference, the rows and the load elimination; records whose
+    X is reconstructed (``settings.reconstruct_cylinder``) contribute none (their error is not
+    white). Cached on ``rows`` per weights."""
+    key = np.asarray(w_rows, float).tobytes()
+    if key in rows._mass_noise:
+        return rows._mass_noise[key]
+    sx = pooled_noise(prepared, ("X",))["X"]
+    rec_of = rows.block // RECORD_STRIDE
+    rng = np.random.default_rng(seed)
+    total = np.zeros(rows.eq.size)
+    for _ in range(draws):
+        y = np.zeros(rows.eq.size)
+        for i, p in enumerate(prepared):
+            if "X" in p.rec.pos or sx == 0.0:
+                continue
+            e = p.edges
+            L = int(e[1] - e[0])
+            T = L * p.rec.dt
+            Xs = box_at(rng.normal(0.0, sx, p.rec.n), e, settings.interval_smoothing)
+            im = np.flatnonzero((rec_of == i) & (rows.eq == 2))
+            at = (rows.sample[im] - e[1]) // L
+            y[im] = (Xs[at + 2] - 2.0 * Xs[at + 1] + Xs[at]) / (T * T)
+        y = _eliminate_load(y, rows)
+        total += np.where(np.isfinite(y), (w_rows * y) ** 2, 0.0)
+    rows._mass_noise[key] = total / draws
+    return rows._mass_noise[key]
 
 
 def _residual_summary(prepared, plant, condition, effects, settings) -> list[dict]:

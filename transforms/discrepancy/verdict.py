@@ -391,7 +391,7 @@ def _block_kappa(rw: np.ndarray, block: np.ndarray) -> float:
 
 def nuisance_scores(nm, fit, named_specs, specs, rows0, w_rows, settings, prepared) -> list[dict]:
     """ΔO, value and nuisance reading of every library candidate not named (module docstring)."""
-    from transforms.discrepancy.calibration import corrected_lstsq, effect_jacobian, joint_fit, moving_mass
+    from transforms.discrepancy.calibration import corrected_lstsq, effect_jacobian, joint_fit, mass_gradient, moving_mass
 
     others = [s for s in specs if s not in named_specs]
     Jc = effect_jacobian(prepared, nm, fit.z, fit.effects, others, rows0, settings, fit.r)
@@ -407,18 +407,17 @@ def nuisance_scores(nm, fit, named_specs, specs, rows0, w_rows, settings, prepar
     b = np.r_[-rw[ok] / sk, -fit.z]
     prior = np.hstack([np.eye(q), np.zeros((q, p))])
 
-    g0 = fit.mass_gradient if fit.mass_gradient is not None else np.zeros(q + p)
     m0 = moving_mass(nm, fit.z, fit.effects)
 
     def solve(A, g):  # the fit's objective (its noise of the mass term too), over κ
         return corrected_lstsq(A, b, g, fit.mass_noise / kappa, m0)
 
     A0 = np.vstack([np.hstack([N, E]), prior])
-    _, o0 = solve(A0, g0)
+    _, o0 = solve(A0, fit.mass_gradient)
     out = []
     for j, spec in enumerate(others):
         A = np.vstack([np.hstack([N, E, C[:, j:j + 1]]), np.hstack([prior, np.zeros((q, 1))])])
-        x, o = solve(A, np.r_[g0, 1.0 if spec.attribute == "delta_mass_kg" else 0.0])
+        x, o = solve(A, np.r_[fit.mass_gradient, mass_gradient(None, [spec])])
         t = float(x[-1])
         d = o0 - o
         if spec.lower is not None and t < 0:
