@@ -17,7 +17,8 @@ from model import TABLE1
 from model.effects import Effects, library_entry
 from model.params import GEOMETRY_FAMILIES
 from transforms.discrepancy import DiscrepancySettings, split_records
-from transforms.discrepancy.calibration import _split_gains, calibrate, corrected_lstsq
+from transforms.discrepancy.calibration import _split_gains, calibrate
+from transforms.discrepancy.corrected import corrected_lstsq
 from transforms.discrepancy.load import LoadEstimate
 from transforms.discrepancy.nuisance import NUISANCES, NuisancePriors, apply_nuisances, nuisance_sigmas, nuisance_values
 from transforms.discrepancy.pipeline import _project_out, diagnose

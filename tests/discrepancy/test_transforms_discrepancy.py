@@ -125,6 +125,51 @@ def test_triangular_force_balance_is_the_load_and_steps_are_found():
         assert np.min(np.abs(est.steps - k)) <= 3
 
 
+def test_force_balance_average_keeps_ramps_and_every_valid_sample():
+    """The force balance's average over shifts (:func:`box_within`) is exact on a load linear in
+    time, keeps every valid sample (narrower windows at a run's ends, nothing across a gap), leaves
+    the other samples as they are, and divides white noise's variance by the window."""
+    from transforms.discrepancy.load import box_within
+
+    n = 400
+    ok = np.ones(n, bool)
+    ok[:25] = ok[150:170] = ok[-25:] = False
+    ramp = 3.0 * np.arange(n) - 200.0
+    out = box_within(ramp, ok, 10)
+    np.testing.assert_allclose(out, ramp, atol=1e-9)
+    spike = np.where(np.arange(n) == 149, 1e6, 0.0)  # the last sample before a gap
+    out = box_within(spike, ok, 10)
+    assert out[149] == 1e6 and out[148] == pytest.approx(1e6 / 3) and out[139] == pytest.approx(1e6 / 21)
+    assert np.all(out[170:] == 0.0) and out[160] == 0.0 and out[138] == 0.0
+    rng = np.random.default_rng(0)
+    z = rng.normal(0.0, 1.0, 200_000)
+    inner = box_within(z, np.ones(z.size, bool), 10)[100:-100]
+    assert np.var(inner) == pytest.approx(1 / 21, rel=0.03)
+
+
+def test_mass_mismatch_is_not_read_light_from_a_noisy_position():
+    """The force balance holds −m ε where its acceleration holds +ε (the same second difference of
+    X's noise), so plain least squares reads the mass mismatch short by m·s²/(s² + Var a); the
+    corrected fit (:func:`motion_mismatch` with ``noise``) reads it within its scatter; the noise
+    power of a second difference over ±20 samples is 6 per unit, 118/441 averaged over 21 shifts."""
+    from transforms.discrepancy.load import motion_mismatch, second_difference_energy
+
+    assert second_difference_energy(20, 0) == pytest.approx(6.0)
+    assert second_difference_energy(20, 10) == pytest.approx(118 / 441)
+    rng = np.random.default_rng(7)
+    n, m, dm, dv = 200_000, 6000.0, 300.0, 2.0e4
+    v = 0.05 * np.sin(np.arange(n) / 300.0)
+    a = 0.2 * np.cos(np.arange(n) / 97.0)
+    s = 0.1  # the acceleration's noise [m/s²], a third of its RMS
+    eps = rng.normal(0.0, s, n)
+    f = 1500.0 + dv * v + dm * a - m * eps
+    ok = np.ones(n, bool)
+    plain = motion_mismatch(f, np.full(n, 1500.0), ok, (v, a + eps))
+    fixed = motion_mismatch(f, np.full(n, 1500.0), ok, (v, a + eps), (np.full(n, s * s), m))
+    assert plain[1] == pytest.approx(dm - (m + dm) * s * s / (s * s + 0.02), rel=0.02)  # ~ −1.5 t
+    assert fixed[1] == pytest.approx(dm, abs=60.0) and fixed[0] == pytest.approx(dv, rel=0.05)
+
+
 def test_load_follows_ramps_and_keeps_mass_and_friction_apart():
     """A rolling force (ramps to new levels, unseen by the step filter) is followed piecewise
     linearly, bending at the ramps' corners, where one constant per segment leaves it; a mass and a

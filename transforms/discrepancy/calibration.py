@@ -26,6 +26,7 @@ import numpy as np
 
 from model.effects import Effects, EffectSpec
 from model.params import PlantParams, ValveCondition
+from transforms.discrepancy.corrected import capped_mass_noise, corrected_lstsq
 from transforms.discrepancy.nuisance import NUISANCES, NuisancePriors, apply_nuisances, nuisance_sigmas, nuisance_values
 
 __all__ = ["Calibration", "NuisanceModel", "calibrate", "calibrate_best", "effect_jacobian", "jacobians", "joint_fit"]
@@ -263,36 +264,6 @@ def mass_gradient(nm: NuisanceModel | None, specs: list[EffectSpec]) -> np.ndarr
     for j, spec in enumerate(specs):
         g[len(active) + j] = 1.0 if spec.attribute == "delta_mass_kg" else 0.0
     return g
-
-
-CORRECTION_SHARE = 0.5
-"""The noise's correction of the normal equations takes at most this share of the data's
-information along the mass (beyond it the mass is not identifiable from the rows anyway)."""
-
-
-def capped_mass_noise(k: float, A: np.ndarray, g: np.ndarray) -> float:
-    """``k`` at most :data:`CORRECTION_SHARE` of the information along ``g`` of the rows ``A``."""
-    if k <= 0.0 or not np.any(g):
-        return 0.0
-    sc = np.sqrt(np.mean(A * A, axis=0))
-    sc = np.where(sc > 0, sc, 1.0)
-    gs = g / sc
-    return float(min(k, CORRECTION_SHARE / float(gs @ np.linalg.pinv((A / sc).T @ (A / sc)) @ gs)))
-
-
-def corrected_lstsq(A: np.ndarray, b: np.ndarray, g: np.ndarray, k: float, m0: float) -> tuple[np.ndarray, float]:
-    """(x, objective) minimising |A x − b|² − k (m0 + g·x)² (columns scaled to unit RMS): least
-    squares with the position noise's expected part of the mass term taken out (module docstring;
-    ``k`` as :func:`capped_mass_noise`, so that the quadratic stays convex)."""
-    sc = np.sqrt(np.mean(A * A, axis=0))
-    sc = np.where(sc > 0, sc, 1.0)
-    As, gs = A / sc, g / sc
-    if k <= 0.0 or not np.any(gs):
-        x, *_ = np.linalg.lstsq(As, b, rcond=None)
-    else:
-        x = np.linalg.pinv(As.T @ As - k * np.outer(gs, gs)) @ (As.T @ b + k * m0 * gs)
-    x = x / sc
-    return x, float(np.sum((A @ x - b) ** 2) - k * (m0 + g @ x) ** 2)
 
 
 def joint_fit(prepared, nm: NuisanceModel, z0, specs: list[EffectSpec], effects0: Effects, rows0, w_rows, settings, iterations: int = 8) -> JointFit:

@@ -63,10 +63,11 @@ from functools import lru_cache
 
 import numpy as np
 
+from transforms.discrepancy.corrected import capped_mass_noise, corrected_lstsq
 from transforms.discrepancy.settings import DiscrepancySettings
 
-__all__ = ["LoadEstimate", "away_from_steps", "corners_pay", "estimate_load", "follows_ramps", "friction_within", "interval_load", "load_projector", "missed_knot", "motion_mismatch", "project_out", "ramp_load",
-           "replay_load", "segment_knots", "segment_levels", "step_filter", "stuck_spans", "with_missed_knots"]
+__all__ = ["LoadEstimate", "away_from_steps", "box_half_widths", "box_within", "corners_pay", "estimate_load", "follows_ramps", "friction_within", "interval_load", "load_projector", "load_valid", "missed_knot", "motion_mismatch", "project_out", "ramp_load",
+           "replay_load", "second_difference_energy", "segment_knots", "segment_levels", "step_filter", "stuck_spans", "with_missed_knots"]
 
 
 @lru_cache(maxsize=8)
@@ -153,6 +154,9 @@ class LoadEstimate:
     """Per segment, the knots (sample positions) of its piecewise-linear load: its first and last
     valid sample, the ends of its standstills and the ramps' corners (:func:`ramp_load`); empty: the
     regular grid of ``knot_samples``."""
+    load_knots: tuple = ()
+    """Per segment, the knots the load itself is on: ``corners`` and the missed ones
+    (:func:`with_missed_knots`), which shape the load only; empty: ``corners``."""
     friction_mismatch: float = 0.0
     """The viscous friction the model lacks, by what the load leaves of the force balance along
     v_X (:func:`motion_mismatch`). [N s/m]"""
@@ -182,9 +186,20 @@ class LoadEstimate:
         corners = ()
         if self.knot_samples:
             knots, load = ramp_load(f_hat, self.valid, self.usable, segment, len(steps) + 1, self.knot_samples, settings, levels, motion)
-            load = with_missed_knots(f_hat, self.usable, segment, knots, load, levels, self.knot_samples, settings, motion)
+            load_knots, load = with_missed_knots(f_hat, self.usable, segment, knots, load, levels, self.knot_samples, settings, motion)
             corners = tuple(knots)
-        return LoadEstimate(segment, steps, levels, load, self.brackets, self.valid, self.usable, self.hold_until, self.knot_samples, corners)
+        return LoadEstimate(segment, steps, levels, load, self.brackets, self.valid, self.usable, self.hold_until, self.knot_samples, corners,
+                            load_knots=tuple(load_knots) if corners else ())
+
+    def refit(self, f_hat: np.ndarray, motion: tuple | None = None) -> "LoadEstimate":
+        """The same segments and knots, the levels and the load fitted on ``f_hat`` (jointly with the
+        ``motion`` columns where the load ramps, :func:`ramp_load`)."""
+        levels = segment_levels(f_hat, self.valid, self.segment, self.levels.size)
+        load = levels[self.segment]
+        if self.knot_samples:
+            knots = list(self.load_knots) if self.load_knots else [self.knots(s) for s in range(self.levels.size)]
+            load = _held(_ramp_fit(f_hat, self.usable, self.segment, knots, motion)[0], self.usable, self.segment, levels)
+        return replace(self, levels=levels, load=load)
 
     def with_added_step(self, k: int, guard: int) -> "LoadEstimate":
         """The same estimate with one more step at sample ``k`` (found while moving), the samples
@@ -494,8 +509,8 @@ def _held(load: np.ndarray, usable: np.ndarray, segment: np.ndarray, levels: np.
 
 
 def with_missed_knots(f_hat: np.ndarray, usable: np.ndarray, segment: np.ndarray, knots: list[np.ndarray], load: np.ndarray, levels: np.ndarray,
-                      knot_samples: int, settings: DiscrepancySettings, motion: tuple | None = None) -> np.ndarray:
-    """The load [N] of :func:`ramp_load` (its ``knots`` and ``load``) with up to
+                      knot_samples: int, settings: DiscrepancySettings, motion: tuple | None = None) -> tuple[list[np.ndarray], np.ndarray]:
+    """(knots, load [N]): the load of :func:`ramp_load` (its ``knots`` and ``load``) with up to
     ``settings.knot_insertions`` more knots, one at a time where the joint fit's residual holds most
     (:func:`missed_knot`; :func:`ramp_load`'s step 5). Made only where the ramps are followed: the
     decision and the regression keep the filters' knots."""
@@ -510,8 +525,8 @@ def with_missed_knots(f_hat: np.ndarray, usable: np.ndarray, segment: np.ndarray
         more[k[0]] = np.unique(np.r_[more[k[0]], float(k[1])])
         added = True
     if not added:
-        return load
-    return _held(_ramp_fit(f_hat, usable, segment, more, motion)[0], usable, segment, levels)
+        return list(knots), load
+    return more, _held(_ramp_fit(f_hat, usable, segment, more, motion)[0], usable, segment, levels)
 
 
 def _column_basis(X: np.ndarray) -> np.ndarray:
@@ -611,18 +626,29 @@ def corners_pay(f_hat: np.ndarray, usable: np.ndarray, segment: np.ndarray, n_se
     return rms_corner * settings.corner_ratio <= rms_const
 
 
-def motion_mismatch(f_hat: np.ndarray, load: np.ndarray, usable: np.ndarray, motion: tuple) -> tuple[float, float]:
+def motion_mismatch(f_hat: np.ndarray, load: np.ndarray, usable: np.ndarray, motion: tuple, noise: tuple | None = None) -> tuple[float, float]:
     """(Δd_v [N s/m], Δm [kg]): the least squares of what ``load`` leaves of the force balance
     ``f_hat`` on the ``motion`` columns (v_X, the acceleration) over the ``usable`` samples. The
     force balance is the load plus Δd_v v_X + Δm a where the model's viscous friction and mass are
     Δd_v and Δm short of the plant's (the weight Δm g a load cannot tell from its own level); where
     the load was fitted jointly with these columns (:func:`ramp_load`) these are the joint fit's
-    coefficients. (0, 0) with fewer than 10 samples."""
+    coefficients. (0, 0) with fewer than 10 samples.
+
+    ``noise`` (the acceleration's noise variance per sample [m²/s⁴], the model's mass [kg]): the
+    recorded position's noise enters the acceleration and, times the mass, the force balance, so
+    plain least squares reads Δm short (errors in variables; at 10 µm and unaveraged, 1–3 t of the
+    reference plant's 6 t); the fit then takes that noise's expected part out
+    (:func:`transforms.discrepancy.corrected.corrected_lstsq`)."""
     M = np.column_stack(motion)
     m = usable & np.isfinite(f_hat) & np.isfinite(load) & np.all(np.isfinite(M), axis=1)
     if m.sum() < 10:
         return 0.0, 0.0
-    dv, dm = np.linalg.lstsq(M[m], (f_hat - load)[m], rcond=None)[0]
+    A, b = M[m], (f_hat - load)[m]
+    if noise is None:
+        dv, dm = np.linalg.lstsq(A, b, rcond=None)[0]
+    else:
+        g = np.array([0.0, 1.0])
+        dv, dm = corrected_lstsq(A, b, g, capped_mass_noise(float(np.sum(noise[0][m])), A, g), noise[1])[0]
     return float(dv), float(dm)
 
 
@@ -671,6 +697,47 @@ def segment_levels(f_hat: np.ndarray, valid: np.ndarray, segment: np.ndarray, n_
         if np.isnan(levels[s]):
             levels[s] = levels[s - 1]
     return levels
+
+
+def load_valid(f: np.ndarray, v: np.ndarray, settings: DiscrepancySettings) -> np.ndarray:
+    """The samples where the force balance ``f`` [N] is the load: finite, and the cylinder's
+    velocity ``v`` [m/s] above ``v_load_m_s`` on every sample within ``interval_samples`` (a
+    sticking cylinder's friction is unknown)."""
+    finite = np.isfinite(f) & np.isfinite(v)
+    return finite & _window_all(finite & (np.abs(v) > settings.v_load_m_s), settings.interval_samples)
+
+
+def box_within(y: np.ndarray, ok: np.ndarray, half: int) -> np.ndarray:
+    """Centred moving average of ``y`` over up to 2·``half`` + 1 samples, the window shrunk at each
+    sample of ``ok`` to stay within its run of ``ok`` samples (so a record's ends and a standstill's
+    edges keep their samples, averaged over fewer); ``y`` itself where not ``ok``. An average of
+    exact load readings is an exact reading of the averaged load."""
+    y = np.asarray(y, float)
+    h = box_half_widths(ok, half)
+    k = np.flatnonzero(ok)
+    c = np.r_[0.0, np.cumsum(np.where(ok, y, 0.0))]
+    out = y.copy()
+    out[k] = (c[k + h[k] + 1] - c[k - h[k]]) / (2 * h[k] + 1)
+    return out
+
+
+def box_half_widths(ok: np.ndarray, half: int) -> np.ndarray:
+    """The half-widths :func:`box_within` averages over at each sample (0 where not ``ok``)."""
+    h = np.zeros(ok.size, dtype=np.int64)
+    for a, b in _runs(ok):
+        k = np.arange(a, b)
+        h[a:b] = np.minimum(max(int(half), 0), np.minimum(k - a, b - 1 - k))
+    return h
+
+
+@lru_cache(maxsize=64)
+def second_difference_energy(length: int, half: int) -> float:
+    """Σ c² of the weights c that take the second difference X₊ − 2X + X₋ over ±``length``
+    samples averaged over 2·``half`` + 1 shifts: its noise power per unit of white noise power
+    (6 unaveraged; 0.27 over 21 shifts of a 20-sample difference)."""
+    d = np.zeros(2 * length + 1)
+    d[[0, length, 2 * length]] = (1.0, -2.0, 1.0)
+    return float(np.sum(np.convolve(d, np.full(2 * half + 1, 1.0 / (2 * half + 1))) ** 2))
 
 
 def _window_all(mask: np.ndarray, half: int) -> np.ndarray:
@@ -789,9 +856,8 @@ def estimate_load(f_hat: np.ndarray, v: np.ndarray, settings: DiscrepancySetting
     n = f_hat.size
     w = settings.step_half_width
     L = settings.interval_samples
-    finite = np.isfinite(f_hat) & np.isfinite(v)
-    not_stuck = finite & (np.abs(v) > settings.v_load_m_s)
-    valid = finite & _window_all(not_stuck, L)
+    not_stuck = np.isfinite(f_hat) & np.isfinite(v) & (np.abs(v) > settings.v_load_m_s)
+    valid = load_valid(f_hat, v, settings)
     idx = np.flatnonzero(valid)
     steps: list[int] = []
     brackets: dict[int, tuple[int, int]] = {}
@@ -833,5 +899,5 @@ def estimate_load(f_hat: np.ndarray, v: np.ndarray, settings: DiscrepancySetting
     knots, load = ramp_load(f_hat, valid, usable, segment, n_seg, k, settings, levels, motion, grid)
     if not (ramps or corners_pay(f_hat, usable, segment, n_seg, knots, settings, motion)):
         return est
-    load = with_missed_knots(f_hat, usable, segment, knots, load, levels, k, settings, motion)
-    return replace(est, knot_samples=k, corners=tuple(knots), load=load)
+    load_knots, load = with_missed_knots(f_hat, usable, segment, knots, load, levels, k, settings, motion)
+    return replace(est, knot_samples=k, corners=tuple(knots), load_knots=tuple(load_knots), load=load)

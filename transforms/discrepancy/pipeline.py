@@ -31,6 +31,7 @@ import numpy as np
 from model.effects import EFFECT_LIBRARY, Effects, EffectSpec, true_signals
 from model.params import PlantParams, ValveCondition
 from model.simulate import DEFAULT_REG_BAND_PA
+from transforms.discrepancy.corrected import capped_mass_noise, corrected_lstsq
 from transforms.discrepancy.nuisance import NuisancePriors
 from transforms.discrepancy.records import Record
 from transforms.discrepancy.selection import SelectionResult, block_stats, cv_losses, forward_select
@@ -177,7 +178,7 @@ class Diagnosis:
 def _refine(prepared, plant, condition, specs: list[EffectSpec], start: Effects, rows0: _Rows, w_rows: np.ndarray, settings) -> tuple[Effects, np.ndarray, np.ndarray]:
     """Gauss–Newton on the exact residuals for the parameters of ``specs`` from ``start``;
     returns the effects, the jackknife SEs and the final Jacobian."""
-    from transforms.discrepancy.calibration import capped_mass_noise, corrected_lstsq, mass_gradient
+    from transforms.discrepancy.calibration import mass_gradient
 
     fx = start
     J = None
@@ -219,8 +220,8 @@ def _refine(prepared, plant, condition, specs: list[EffectSpec], start: Effects,
 
 def _mass_noise(specs: list[EffectSpec], e2: np.ndarray | None, Jw: np.ndarray, r: np.ndarray, m0: float) -> tuple | None:
     """``block_stats``' noise correction of a mass change's column (``rows.mass_term_noise``'s
-    ``e2`` per row, scaled down as ``calibration.capped_mass_noise`` caps it), or None."""
-    from transforms.discrepancy.calibration import capped_mass_noise, mass_gradient
+    ``e2`` per row, scaled down as ``corrected.capped_mass_noise`` caps it), or None."""
+    from transforms.discrepancy.calibration import mass_gradient
 
     g = mass_gradient(None, specs)
     if e2 is None or not np.any(g):

@@ -60,6 +60,7 @@ import numpy as np
 from scipy import stats
 
 from model.effects import EffectSpec
+from transforms.discrepancy.corrected import corrected_lstsq
 from transforms.discrepancy.gaps import GAP_SCALES, NOISE_GAP, SPLIT_GAPS
 from transforms.discrepancy.nuisance import NUISANCE_UNITS
 
@@ -391,7 +392,7 @@ def _block_kappa(rw: np.ndarray, block: np.ndarray) -> float:
 
 def nuisance_scores(nm, fit, named_specs, specs, rows0, w_rows, settings, prepared) -> list[dict]:
     """ΔO, value and nuisance reading of every library candidate not named (module docstring)."""
-    from transforms.discrepancy.calibration import corrected_lstsq, effect_jacobian, joint_fit, mass_gradient, moving_mass
+    from transforms.discrepancy.calibration import effect_jacobian, joint_fit, mass_gradient, moving_mass
 
     others = [s for s in specs if s not in named_specs]
     Jc = effect_jacobian(prepared, nm, fit.z, fit.effects, others, rows0, settings, fit.r)
