@@ -129,11 +129,11 @@ def _estimate_load(rec: Record, plant, condition, effects, settings) -> LoadEsti
     linear within segments where it ramps).
 
     Its steps, whether it ramps and its knots are decided on the force balance as it is (so the
-    regression's load elimination stays as it was); its values, and the
-    friction and mass its load leaves (:func:`motion_mismatch`), are fitted on the balance averaged
-    as the motion rows are (:func:`_averaged`): the second difference of X carries ~370 N of a 10 µm
-    position noise on the reference plant, the average ~80 N, and the acceleration's noise that
-    reads as a lighter mass falls 22× (:func:`second_difference_energy`), the rest corrected."""
+    regression's load elimination stays as it was). Its values, and the friction and mass its load
+    leaves (:func:`motion_mismatch`), are fitted on the balance averaged as the motion rows are
+    (:func:`_averaged`): the second difference of X carries ~370 N of a 10 µm position noise on the
+    reference plant, the average ~80 N, and the acceleration's noise that reads as a lighter mass
+    falls 22× (:func:`second_difference_energy`); the fit corrects for the rest."""
     f_hat = _force_balance(rec, plant, condition, effects, settings)
     t = _terms_sg(rec, plant, condition, effects)
     v, a = _load_motion(rec, settings)
