@@ -699,12 +699,16 @@ def segment_levels(f_hat: np.ndarray, valid: np.ndarray, segment: np.ndarray, n_
     return levels
 
 
+def _not_stuck(f: np.ndarray, v: np.ndarray, settings: DiscrepancySettings) -> np.ndarray:
+    """Samples with ``f`` and ``v`` finite and |v| above ``v_load_m_s``."""
+    return np.isfinite(f) & np.isfinite(v) & (np.abs(v) > settings.v_load_m_s)
+
+
 def load_valid(f: np.ndarray, v: np.ndarray, settings: DiscrepancySettings) -> np.ndarray:
     """The samples where the force balance ``f`` [N] is the load: finite, and the cylinder's
     velocity ``v`` [m/s] above ``v_load_m_s`` on every sample within ``interval_samples`` (a
     sticking cylinder's friction is unknown)."""
-    finite = np.isfinite(f) & np.isfinite(v)
-    return finite & _window_all(finite & (np.abs(v) > settings.v_load_m_s), settings.interval_samples)
+    return _window_all(_not_stuck(f, v, settings), settings.interval_samples)
 
 
 def box_within(y: np.ndarray, ok: np.ndarray, half: int) -> np.ndarray:
@@ -856,8 +860,8 @@ def estimate_load(f_hat: np.ndarray, v: np.ndarray, settings: DiscrepancySetting
     n = f_hat.size
     w = settings.step_half_width
     L = settings.interval_samples
-    not_stuck = np.isfinite(f_hat) & np.isfinite(v) & (np.abs(v) > settings.v_load_m_s)
-    valid = load_valid(f_hat, v, settings)
+    not_stuck = _not_stuck(f_hat, v, settings)
+    valid = _window_all(not_stuck, L)
     idx = np.flatnonzero(valid)
     steps: list[int] = []
     brackets: dict[int, tuple[int, int]] = {}

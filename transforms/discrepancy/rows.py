@@ -105,23 +105,16 @@ def _load_motion(rec: Record, settings) -> tuple[np.ndarray, np.ndarray]:
     return rec.sg["v"], a
 
 
-def _averaged(y: np.ndarray, v: np.ndarray, settings) -> np.ndarray:
-    """``y`` (the force balance or its acceleration) averaged over ``interval_smoothing`` shifts
-    as the motion rows are, within the samples where the balance is the load (:func:`box_within`)."""
-    return box_within(y, load_valid(y, v, settings), settings.interval_smoothing // 2)
-
-
-def _accel_noise(rec: Record, v: np.ndarray, a: np.ndarray, settings) -> np.ndarray:
+def _accel_noise(rec: Record, half_widths: np.ndarray, settings) -> np.ndarray:
     """The noise variance [m²/s⁴] the recorded X's noise (white, at the record's estimated RMS)
-    leaves in the acceleration ``a`` (:func:`_load_motion`, with ``v``) averaged by
-    :func:`_averaged`, at each sample (0 where X is reconstructed: its error is not white)."""
+    leaves in :func:`_load_motion`'s acceleration averaged over 2·``half_widths`` + 1 shifts at
+    each sample (:func:`box_within`; 0 where X is reconstructed: its error is not white)."""
     L = settings.interval_samples
     ss, count = rec.noise["X"]
     if "X" in rec.pos or not count:
         return np.zeros(rec.n)
-    h = box_half_widths(load_valid(a, v, settings), settings.interval_smoothing // 2)
-    energy = np.array([second_difference_energy(L, int(k)) for k in range(int(h.max()) + 1)])
-    return (ss / count) * energy[h] / (L * rec.dt) ** 4
+    energy = np.array([second_difference_energy(L, int(k)) for k in range(int(half_widths.max()) + 1)])
+    return (ss / count) * energy[half_widths] / (L * rec.dt) ** 4
 
 
 def _estimate_load(rec: Record, plant, condition, effects, settings) -> LoadEstimate:
@@ -131,7 +124,7 @@ def _estimate_load(rec: Record, plant, condition, effects, settings) -> LoadEsti
     Its steps, whether it ramps and its knots are decided on the force balance as it is (so the
     regression's load elimination stays as it was). Its values, and the friction and mass its load
     leaves (:func:`motion_mismatch`), are fitted on the balance averaged as the motion rows are
-    (:func:`_averaged`): the second difference of X carries ~370 N of a 10 µm position noise on the
+    (:func:`box_within`): the second difference of X carries ~370 N of a 10 µm position noise on the
     reference plant, the average ~80 N, and the acceleration's noise that reads as a lighter mass
     falls 22× (:func:`second_difference_energy`); the fit corrects for the rest."""
     f_hat = _force_balance(rec, plant, condition, effects, settings)
@@ -139,9 +132,13 @@ def _estimate_load(rec: Record, plant, condition, effects, settings) -> LoadEsti
     v, a = _load_motion(rec, settings)
     load = estimate_load(f_hat, v, settings, f_point=t["force"] - t["mass"] * rec.sg["a"], accel=a, dt=rec.dt)
     load = _refine_rest_steps(rec, load, f_hat, plant, condition, effects, settings)
-    f_avg, a_avg = _averaged(f_hat, v, settings), _averaged(a, v, settings)
+    # averaged over the motion rows' shifts, within the samples where the balance is the load
+    half = settings.interval_smoothing // 2
+    a_ok = load_valid(a, v, settings)
+    f_avg, a_avg = box_within(f_hat, load_valid(f_hat, v, settings), half), box_within(a, a_ok, half)
     load = load.refit(f_avg, (v, a_avg))
-    dv, dm = motion_mismatch(f_avg, load.load, load.usable, (v, a_avg), (_accel_noise(rec, v, a, settings), t["mass"]))
+    noise = _accel_noise(rec, box_half_widths(a_ok, half), settings)
+    dv, dm = motion_mismatch(f_avg, load.load, load.usable, (v, a_avg), (noise, t["mass"]))
     load = replace(load, friction_mismatch=dv, mass_mismatch=dm)
     d_v = plant.cylinder.d_v_n_s_m
     return friction_within(load, v, settings.mechanical_friction_rel * d_v, settings.load_friction_rel * d_v)
