@@ -15,18 +15,21 @@ import numpy as np
 
 
 @lru_cache(maxsize=4)
-def _simulated(seed: int, n_windows: int, load_interval_s: tuple[float, float] | None, quiet: bool = False) -> list:
+def _simulated(seed: int, n_windows: int, load_interval_s: tuple[float, float] | None, quiet: bool = False, noisy_end: bool = False) -> list:
     """The clean windows of valve ``seed``, the study's (``n_windows`` drawn from 100 + ``seed``;
     ``load_interval_s`` the range of the load's intervals between new levels [s], None: the plant's
-    1–4 s; ``quiet``: recorded without noise or quantisation); simulated once per process for every
+    1–4 s; ``quiet``: recorded without noise or quantisation; ``noisy_end``: positions as noisy as
+    plants record them, :func:`tests.refplant.noisy_end`); simulated once per process for every
     model diagnosed on them."""
-    from tests.refplant import NAMEPLATE, manufactured, simulate_windows, without_noise
+    from tests.refplant import NAMEPLATE, manufactured, noisy_end as noisier, simulate_windows, without_noise
 
     ref = manufactured(NAMEPLATE, seed=seed)
     if load_interval_s is not None:
         ref = replace(ref, operation=replace(ref.operation, load_interval_s=tuple(load_interval_s)))
     if quiet:
         ref = without_noise(ref)
+    if noisy_end:
+        ref = noisier(ref)
     return simulate_windows(ref, n_windows, 100 + seed)
 
 
@@ -43,7 +46,7 @@ def true_cylinder_model(seed: int, n_windows: int, load_interval_s: tuple[float,
 
 
 def window_figures(seed: int, n_windows: int, only: int | None = None, load_interval_s: tuple[float, float] | None = None,
-                   model: tuple | None = None, quiet: bool = False) -> list[dict]:
+                   model: tuple | None = None, quiet: bool = False, noisy_end: bool = False) -> list[dict]:
     """Per window of valve ``seed`` (``n_windows`` drawn from 100 + ``seed``, as the study's; only
     window ``only`` if given; ``load_interval_s`` the range of the load's intervals between new
     levels [s], None: the plant's 1–4 s): the load (``"ramps"`` or ``"constant"``), its RMS error at speed [N],
@@ -56,7 +59,8 @@ def window_figures(seed: int, n_windows: int, only: int | None = None, load_inte
 
     ``model``: (plant, condition) to diagnose with instead of Table 1's with the plant's true
     cylinder (e.g. a commissioning calibration's; its true-load gap then carries the model's own
-    force error). ``quiet``: the windows recorded without noise or quantisation."""
+    force error). ``quiet``: the windows recorded without noise or quantisation; ``noisy_end``: with
+    positions as noisy as plants record them."""
     from model.effects import Effects
     from tests.refplant import to_lake_frame
     from transforms.discrepancy import DiscrepancySettings, split_records
@@ -65,7 +69,7 @@ def window_figures(seed: int, n_windows: int, only: int | None = None, load_inte
     from transforms.discrepancy.rows import _force_balance, _load_motion, _mechanical_model, _replay_record, prepare_records
 
     s = DiscrepancySettings()
-    truth = _simulated(seed, n_windows, None if load_interval_s is None else tuple(load_interval_s), quiet)
+    truth = _simulated(seed, n_windows, None if load_interval_s is None else tuple(load_interval_s), quiet, noisy_end)
     plant, cond = true_cylinder_model(seed, n_windows, load_interval_s) if model is None else model
     lake = to_lake_frame(truth, "V1", datetime(2025, 3, 1, tzinfo=timezone.utc))
     recs, _ = align_records(split_records(lake, s), plant, cond, s)

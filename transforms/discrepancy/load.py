@@ -35,7 +35,12 @@ instants), so the estimate is made piecewise constant:
    the ramps' corners (below) leaves at most 1/``corner_ratio`` of one constant per segment's
    (:func:`corners_pay`: a single ramp at the start of a move hardly moves the grid's ratio, and
    one constant missed a 260 N ramp over 0.5 s on the reference plant, the replay 0.5 mm off over
-   that 0.5 s piece). The regression
+   that 0.5 s piece). The grid's test compares what the residuals hold above the white noise the
+   recorded X leaves in F̂_l (``noise_n2``, subtracted in quadrature): at 10 µm that is ~370 N,
+   which drowned a 670 N ramp in the plain ratio (one constant was kept, 318 N off at speed). The
+   corner test, which has no floor of its own, stays on the plain ratio: above the noise, a corner
+   fit that leaves the noise alone passes any excess, and on `model/`'s plant at 1 µm (~40 N) it
+   then followed the noise in segments whose constant left 44–96 N. The regression
    then eliminates the same piecewise-linear load from the motion rows
    (:func:`load_projector`) instead of one constant per segment: a mass acts on the
    acceleration and a friction on the velocity, which change within a move (0.3–0.6 s), faster
@@ -598,17 +603,24 @@ def missed_knot(f_hat: np.ndarray, usable: np.ndarray, segment: np.ndarray, knot
     return best[1]
 
 
+def _above_noise(rms: float, noise_n2: float) -> float:
+    """What a residual RMS [N] holds above white noise of variance ``noise_n2`` [N²]."""
+    return float(np.sqrt(max(rms * rms - noise_n2, 0.0)))
+
+
 def follows_ramps(f_hat: np.ndarray, valid: np.ndarray, segment: np.ndarray, n_segments: int, knot_samples: int, settings: DiscrepancySettings,
-                  motion: tuple | None = None, grid: tuple | None = None) -> bool:
+                  motion: tuple | None = None, grid: tuple | None = None, noise_n2: float = 0.0) -> bool:
     """Does the load vary within its segments? The piecewise-linear fit on the regular grid of
     ``knot_samples`` (jointly with the ``motion`` columns) leaves at most 1/``settings.ramp_ratio``
     of the residual RMS of one constant per segment (jointly with the same columns), and that is
-    above ``settings.ramp_min_n``. ``grid``: the grid's fit (:func:`_grid_fit`) where already made."""
+    above ``settings.ramp_min_n``; both RMS taken above white noise of variance ``noise_n2`` [N²]
+    (:func:`_above_noise`). ``grid``: the grid's fit (:func:`_grid_fit`) where already made."""
     if knot_samples <= 0:
         return False
     _, rms_const, _ = _ramp_fit(f_hat, valid, segment, _grid_knots(valid, segment, n_segments, 0), motion)
     _, rms_ramp, _ = _grid_fit(f_hat, valid, segment, n_segments, knot_samples, motion) if grid is None else grid
-    return rms_const > settings.ramp_min_n and rms_ramp * settings.ramp_ratio <= rms_const
+    const, ramp = _above_noise(rms_const, noise_n2), _above_noise(rms_ramp, noise_n2)
+    return const > settings.ramp_min_n and ramp * settings.ramp_ratio <= const
 
 
 def corners_pay(f_hat: np.ndarray, usable: np.ndarray, segment: np.ndarray, n_segments: int, knots: list[np.ndarray], settings: DiscrepancySettings,
@@ -845,7 +857,7 @@ def replay_load(levels_per_sample: np.ndarray, holding_force: np.ndarray, stuck:
 
 
 def estimate_load(f_hat: np.ndarray, v: np.ndarray, settings: DiscrepancySettings, f_point: np.ndarray | None = None,
-                  accel: np.ndarray | None = None, dt: float | None = None) -> LoadEstimate:
+                  accel: np.ndarray | None = None, dt: float | None = None, noise_n2: float = 0.0) -> LoadEstimate:
     """Piecewise-constant load of one record from the triangular force balance ``f_hat`` [N]
     (:func:`transforms.discrepancy.residuals.triangular_force_balance` with
     ``settings.interval_samples``) and the cylinder velocity ``v`` [m/s] (module docstring).
@@ -856,7 +868,8 @@ def estimate_load(f_hat: np.ndarray, v: np.ndarray, settings: DiscrepancySetting
     (a load step is often what makes a resting cylinder creep).
 
     ``accel`` [m/s²] (the acceleration averaged as in ``f_hat``) and ``dt`` [s]: with both, the
-    load is made piecewise linear within segments where it ramps (module docstring, step 3)."""
+    load is made piecewise linear within segments where it ramps (module docstring, step 3),
+    judged above white noise of variance ``noise_n2`` in ``f_hat`` [N²] (X's, 0 if unknown)."""
     n = f_hat.size
     w = settings.step_half_width
     L = settings.interval_samples
@@ -899,7 +912,7 @@ def estimate_load(f_hat: np.ndarray, v: np.ndarray, settings: DiscrepancySetting
     motion = (v, accel)
     n_seg = len(steps_arr) + 1
     grid = _grid_fit(f_hat, valid, segment, n_seg, k, motion)
-    ramps = follows_ramps(f_hat, valid, segment, n_seg, k, settings, motion, grid)
+    ramps = follows_ramps(f_hat, valid, segment, n_seg, k, settings, motion, grid, noise_n2)
     knots, load = ramp_load(f_hat, valid, usable, segment, n_seg, k, settings, levels, motion, grid)
     if not (ramps or corners_pay(f_hat, usable, segment, n_seg, knots, settings, motion)):
         return est

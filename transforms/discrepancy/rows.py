@@ -122,7 +122,8 @@ def _estimate_load(rec: Record, plant, condition, effects, settings) -> LoadEsti
     linear within segments where it ramps).
 
     Its steps, whether it ramps and its knots are decided on the force balance as it is (so the
-    regression's load elimination stays as it was). Its values, and the friction and mass its load
+    regression's load elimination stays as it was), whether it ramps on what the residuals hold
+    above the noise X's noise leaves in the balance (:func:`transforms.discrepancy.load.follows_ramps`). Its values, and the friction and mass its load
     leaves (:func:`motion_mismatch`), are fitted on the balance averaged as the motion rows are
     (:func:`box_within`): the second difference of X carries ~370 N of a 10 µm position noise on the
     reference plant, the average ~80 N, and the acceleration's noise that reads as a lighter mass
@@ -130,7 +131,8 @@ def _estimate_load(rec: Record, plant, condition, effects, settings) -> LoadEsti
     f_hat = _force_balance(rec, plant, condition, effects, settings)
     t = _terms_sg(rec, plant, condition, effects)
     v, a = _load_motion(rec, settings)
-    load = estimate_load(f_hat, v, settings, f_point=t["force"] - t["mass"] * rec.sg["a"], accel=a, dt=rec.dt)
+    noise_n2 = float(_accel_noise(rec, np.zeros(1, dtype=np.int64), settings)[0]) * float(np.mean(t["mass"])) ** 2  # X's in the balance
+    load = estimate_load(f_hat, v, settings, f_point=t["force"] - t["mass"] * rec.sg["a"], accel=a, dt=rec.dt, noise_n2=noise_n2)
     load = _refine_rest_steps(rec, load, f_hat, plant, condition, effects, settings)
     # averaged over the motion rows' shifts, within the samples where the balance is the load
     half = settings.interval_smoothing // 2

@@ -80,7 +80,8 @@ class DiscrepancySettings:
         The piecewise-linear load is used where it leaves at most 1/``ramp_ratio`` of the
         residual RMS of one constant per segment, and that RMS is above ``ramp_min_n`` (about 3×
         the force balance's noise, ~40 N at 0.05 bar: a rolling force that moves a few hundred
-        newtons within a segment leaves 145–220 N). [–], [N]
+        newtons within a segment leaves 145–220 N); both RMS taken above the noise the recorded
+        X's white noise leaves in the balance. [–], [N]
     corner_ratio : float
         Where the 0.1 s grid does not pass ``ramp_ratio``, the load on the ramps' corners is still
         used where it leaves at most 1/this of the residual RMS of one constant per segment
