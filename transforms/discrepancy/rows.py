@@ -122,16 +122,18 @@ def _estimate_load(rec: Record, plant, condition, effects, settings) -> LoadEsti
     linear within segments where it ramps).
 
     Its steps, whether it ramps and its knots are decided on the force balance as it is (so the
-    regression's load elimination stays as it was), whether it ramps on what the residuals hold
-    above the noise X's noise leaves in the balance (:func:`transforms.discrepancy.load.follows_ramps`). Its values, and the friction and mass its load
-    leaves (:func:`motion_mismatch`), are fitted on the balance averaged as the motion rows are
-    (:func:`box_within`): the second difference of X carries ~370 N of a 10 µm position noise on the
-    reference plant, the average ~80 N, and the acceleration's noise that reads as a lighter mass
-    falls 22× (:func:`second_difference_energy`); the fit corrects for the rest."""
+    regression's load elimination stays as it was; whether it ramps on what the residuals hold
+    above the white noise X leaves there, :func:`transforms.discrepancy.load.follows_ramps`). Its
+    values, and the friction and mass its load leaves (:func:`motion_mismatch`), are fitted on the
+    balance averaged as the motion rows are (:func:`box_within`): the second difference of X
+    carries ~370 N of a 10 µm position noise on the reference plant, the average ~80 N, and the
+    acceleration's noise that reads as a lighter mass falls 22× (:func:`second_difference_energy`);
+    the fit corrects for the rest."""
     f_hat = _force_balance(rec, plant, condition, effects, settings)
     t = _terms_sg(rec, plant, condition, effects)
     v, a = _load_motion(rec, settings)
-    noise_n2 = float(_accel_noise(rec, np.zeros(1, dtype=np.int64), settings)[0]) * float(np.mean(t["mass"])) ** 2  # X's in the balance
+    # the variance X's white noise leaves in f_hat, its second difference not averaged [N²]
+    noise_n2 = float(_accel_noise(rec, np.zeros(1, dtype=np.int64), settings)[0]) * float(np.mean(t["mass"])) ** 2
     load = estimate_load(f_hat, v, settings, f_point=t["force"] - t["mass"] * rec.sg["a"], accel=a, dt=rec.dt, noise_n2=noise_n2)
     load = _refine_rest_steps(rec, load, f_hat, plant, condition, effects, settings)
     # averaged over the motion rows' shifts, within the samples where the balance is the load
