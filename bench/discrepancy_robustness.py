@@ -322,10 +322,15 @@ def main(argv=None) -> None:
                   f"{r.get('got')} {r.get('got_value')} cpu {r.get('cpu_s', 0):.1f}s", flush=True)
     print(f"\n{len(rows)} runs, wall {time.time() - t0:.0f} s\n")
     print(table(rows))
-    typ = [r for r in rows if r["magnitude"] == "typical" and r["effect"] != "none"]
+    typ = [r for r in rows if r["magnitude"] == "typical" and r["effect"] not in ("none",) + REF_OUTSIDE]
     if typ:
-        ok = sum(r["outcome"] in ("named", "ambiguous") for r in typ)
-        print(f"\ntypical magnitude: right name or honest ambiguous {ok}/{len(typ)} = {ok / len(typ):.0%}")
+        first = sum(r["outcome"] in ("named", "ambiguous") and r["got"] == r["effect"] for r in typ)
+        other = sum(r["outcome"] == "ambiguous" and r["got"] != r["effect"] for r in typ)
+        print(f"\ntypical magnitude: the library effect named or `ambiguous` with it first {first}/{len(typ)} = {first / len(typ):.0%}; "
+              f"`ambiguous` with another reading first {other}")
+    outside = [r for r in rows if r["effect"] in REF_OUTSIDE]
+    if outside:
+        print(f"outside effects without a reading (`none` or `unexplained`): {sum(r['outcome'] in ('none', 'unexplained') for r in outside)}/{len(outside)}")
     eff = [r for r in rows if r["effect"] != "none"]
     wrong = sum(r["outcome"] == "wrong" for r in rows)
     clean_wrong = sum(r["outcome"] == "wrong" for r in rows if r["effect"] == "none")

@@ -382,6 +382,7 @@ def discrepancy(
     warehouse: Warehouse = None,
     max_records: Annotated[Optional[int], typer.Option("--max-records", help="Diagnose at most this many records (windows), evenly spaced over the span. [default: 48]")] = None,
     valve_condition: Annotated[str, typer.Option("--valve-condition", help="auto | design | commissioning: the valve's α and underlaps in the model; commissioning fits them on the configured baseline_window, auto does so when there is one.")] = "auto",
+    reconstruct_spool: Annotated[bool, typer.Option("--reconstruct-spool", help="Take the spool position as Eq. 1's response to the recorded x_ref plus the reading's offset, not the smoothed reading: for spool transducers as noisy as 0.2 % of stroke; at 1 µm it reads worse.")] = False,
 ) -> None:
     """The model-discrepancy workflow: replay, name the missing effect, add it, its effect on monitoring."""
     import flows.discrepancy.flow as discrepancy_flows
@@ -392,7 +393,7 @@ def discrepancy(
     with publishing(config, wh):
         report = run_flow(
             discrepancy_flows.discrepancy_flow, config_path=str(config), warehouse=str(wh), valve_id=valve, start=start, end=end,
-            max_records=max_records, condition_mode=valve_condition,
+            max_records=max_records, condition_mode=valve_condition, reconstruct_spool=reconstruct_spool,
         )
     for line in discrepancy_flows.summary_lines(report):
         typer.echo(line)

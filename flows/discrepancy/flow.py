@@ -54,6 +54,7 @@ from schemas.plant_config import ValveSpec
 from transforms.discrepancy.gaps import NOISE_GAP
 from transforms.discrepancy.nuisance import NuisancePriors
 from transforms.discrepancy.pipeline import ConditionFit, Diagnosis, diagnose
+from transforms.discrepancy.records import REFERENCE_COLUMN
 from transforms.discrepancy.settings import DiscrepancySettings
 
 DISCREPANCY_TABLES = {
@@ -337,6 +338,9 @@ def discrepancy_valve(config, valve_id: str, warehouse: Path, start: datetime | 
         raise ValvemonError(f"valve {valve.id}: no lake data in the span; ingest its exports first")
     if not records:
         raise ValvemonError(f"valve {valve.id}: no contiguous record of at least {settings.min_record_s:g} s in the span")
+    key, column = REFERENCE_COLUMN
+    if settings.reconstruct_spool and not any(key in r.raw for r in records):
+        raise ValvemonError(f"valve {valve.id}: --reconstruct-spool needs the spool reference ({column}) in the lake; none of the span's {len(records)} records holds it")
     plant = plant_params_for(valve, config.export)
     source, plant, cond, fit = valve_condition(valve, plant, warehouse, condition_mode, settings)
     d = diagnose(records, plant, cond, settings, priors=nuisance_priors(valve) if source == "design" else None)
@@ -380,10 +384,11 @@ def discrepancy_valve_task(config, valve_id: str, warehouse: Path, start, end, s
 
 
 @flow(name="valvemon-discrepancy", persist_result=False, validate_parameters=False)
-def discrepancy_flow(config_path: str, warehouse: str, valve_id: str, start: str | None = None, end: str | None = None, max_records: int | None = None, condition_mode: str = "auto") -> DiscrepancyReport:
-    """The Prefect flow behind ``valvemon discrepancy``."""
+def discrepancy_flow(config_path: str, warehouse: str, valve_id: str, start: str | None = None, end: str | None = None, max_records: int | None = None, condition_mode: str = "auto",
+                     reconstruct_spool: bool = False) -> DiscrepancyReport:
+    """The Prefect flow behind ``valvemon discrepancy`` (``reconstruct_spool``: ``DiscrepancySettings.reconstruct_spool``)."""
     check_arguments(config_path, valve_id, start, end, condition_mode, max_records)
-    settings = DiscrepancySettings() if max_records is None else DiscrepancySettings(max_records=max_records)
+    settings = DiscrepancySettings(reconstruct_spool=bool(reconstruct_spool), **({} if max_records is None else {"max_records": max_records}))
     return run_discrepancy(config_path, warehouse, valve_id, start, end, settings=settings, condition_mode=condition_mode, runner=discrepancy_valve_task)
 
 

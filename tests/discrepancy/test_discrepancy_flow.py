@@ -162,3 +162,48 @@ def test_findings_row_of_a_reading_decided_against_the_tolerances_has_its_acting
     assert (row["verdict"], row["gap_kind"], row["gap_kind_before"], row["gap_kind_after"], row["gap_kind_floor"]) == ("named", "mechanical", 0.2, 0.02, 0.001)
     none = verdict_columns(SimpleNamespace(verdict=Verdict("none", 0.9, None, float("nan")), named=[], gap_nominal=1.0, lag_finding=""), 1)
     assert none["gap_kind"] is None and none["gap_kind_before"] is None
+
+
+def test_reconstruct_spool_reaches_the_diagnosis_and_needs_the_reference(tmp_path, monkeypatch):
+    import flows.common.prefect_run as prefect_run
+    import flows.discrepancy.flow as flow_module
+
+    # the command line hands the option to the flow
+    seen = {}
+
+    def fake_run_flow(fn, **kwargs):
+        seen.update(kwargs)
+        return flow_module.DiscrepancyReport(VALVE, "r" * 32, 0, [], [], 0.0, 0.0, "design")
+
+    monkeypatch.setattr(prefect_run, "run_flow", fake_run_flow)
+    config = _config(tmp_path, False)
+    result = CliRunner().invoke(app, ["discrepancy", "--config", str(config), "--valve", VALVE, "--warehouse", str(tmp_path / "wh"), "--reconstruct-spool"])
+    assert result.exit_code == 0, result.output
+    assert seen["reconstruct_spool"] is True
+
+    # the flow diagnoses with it
+    warehouse = tmp_path / "wh"
+    lake = simulate_lake(None, n_windows=1, seed=63, valve_id=VALVE, start=START)
+    _write_lake(warehouse, lake)
+    settings = []
+
+    class Stop(Exception):
+        pass
+
+    def fake_diagnose(records, plant, condition, s, **kwargs):
+        settings.append(s)
+        raise Stop
+
+    monkeypatch.setattr(flow_module, "diagnose", fake_diagnose)
+    for flag in (False, True):
+        with pytest.raises(Stop):
+            discrepancy_flow.fn(str(config), str(warehouse), VALVE, reconstruct_spool=flag)
+    assert [s.reconstruct_spool for s in settings] == [False, True]
+
+    # without the spool reference in the lake it cannot: a clear error, not the reading in silence
+    bare = tmp_path / "bare"
+    _write_lake(bare, lake.with_columns(pl.lit(None, dtype=pl.Float64).alias("x_ref_m")))  # not recorded
+    with pytest.raises(ValvemonError, match=r"--reconstruct-spool needs the spool reference \(x_ref_m\) in the lake; none of the span's 1 records"):
+        discrepancy_flow.fn(str(config), str(bare), VALVE, reconstruct_spool=True)
+    with pytest.raises(Stop):
+        discrepancy_flow.fn(str(config), str(bare), VALVE)

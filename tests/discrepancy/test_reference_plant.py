@@ -197,6 +197,25 @@ def test_noisy_cylinder_positions_do_not_read_as_a_lighter_mass():
 
 
 @pytest.mark.slow
+def test_a_noisy_spool_reading_reconstructed_leaves_no_leakage_reading():
+    """Positions at the noisy end of plant sensors, no commissioning window, the study's seed 3:
+    the spool's 7 µm of noise alone (its Savitzky–Golay value) makes the clean valve read as
+    internal leakage, 3σ from the tolerances (``ambiguous``; 5.2σ with the cylinder at 1 µm,
+    0.2σ with the spool quiet and the cylinder noisy). Reconstructed from the recorded reference
+    (``reconstruct_spool``; ``valvemon discrepancy --reconstruct-spool``), it is ``none``, its
+    largest excess along an effect's pattern under 1.5σ, and its chambers replay within their floor."""
+    from tests.refplant import noisy_end
+    from transforms.discrepancy.verdict import Z_AMBIGUOUS
+
+    s = DiscrepancySettings(reconstruct_spool=True)
+    lake = to_lake_frame(simulate_windows(noisy_end(manufactured(NAMEPLATE, seed=3)), 2, 103), "V1", T0)
+    d = diagnose(split_records(lake, s), TABLE1, None, s, monitoring=False, priors=NuisancePriors())
+    assert d.verdict.verdict == "none", d.verdict.reason
+    assert max(r["delta_objective"] for r in d.verdict.scores) < (Z_AMBIGUOUS / 2) ** 2, d.verdict.scores
+    assert d.split_gaps[0]["hydraulic"] <= d.noise_floors["hydraulic"], (d.split_gaps, d.noise_floors)
+
+
+@pytest.mark.slow
 def test_noisy_end_with_commissioning_and_reconstructed_positions():
     """Positions as noisy as plants record them (spool 7 um, cylinder 10 um in 5 um steps), the
     positions reconstructed, the model calibrated on a clean commissioning window of the same

@@ -147,8 +147,9 @@ class DiscrepancySettings:
     reconstruct_spool, reconstruct_cylinder : bool
         Reconstruct the spool position from the recorded reference, the cylinder's X, v_X, a_X
         with a smoother, before anything else (:mod:`transforms.discrepancy.states`); off (the
-        default): their Savitzky–Golay values. On, the reference plant's valves at the noisy end
-        of plant sensors read better, and at 1 µm some clean valves worse
+        default): their Savitzky–Golay values. The spool alone (``valvemon discrepancy
+        --reconstruct-spool``) reads the reference plant's valves at the noisy end of plant
+        sensors better and at 1 µm worse; the cylinder as well reads worse at both
         (docs/discrepancy.md, "Positions as plants record them").
     spool_offset_s : float
         The recorded spool position's offset from Eq. 1's response to the reference is smoothed
