@@ -94,6 +94,12 @@ def test_flow_without_effect_writes_none(tmp_path):
     f = report.findings[0]
     assert f["rank"] == 1 and f["parameter_name"] is None and f["gap_before"] == f["gap_after"] < 0.2
     assert len(report.plots) == 1 and report.plots[0].name.endswith("_none.png")
+    # the positions' noise as the records estimate it: the simulator's 1 µm, the spool's ~0.03 % of x_max
+    assert 0.9e-6 < report.spool_noise_m < 1.2e-6 and 0.9e-6 < report.cylinder_noise_m < 1.3e-6, (report.spool_noise_m, report.cylinder_noise_m)
+    from flows.discrepancy.flow import summary_lines
+
+    line = next(x for x in summary_lines(report) if "positions as recorded" in x)
+    assert "(0.03% of x_max)" in line and line.endswith("the spool taken as the reading smoothed"), line
 
 
 def test_cli_checks_before_starting_prefect(tmp_path):

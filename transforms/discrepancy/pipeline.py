@@ -62,6 +62,7 @@ from transforms.discrepancy.rows import (  # noqa: F401 (ReplayTrace, prepare_re
     mass_term_noise,
     noise_floors,
     perturbed,
+    pooled_noise,
     prepare_records,
 )
 
@@ -161,6 +162,9 @@ class Diagnosis:
     """The delay each pressure channel (ps, pr, p1, p2) was aligned for (samples)."""
     lag_finding: str = ""
     """A chamber transmitter lagging the other pressures: which, how many ms (``PressureDelays.finding``); "" if none."""
+    position_noise: dict = field(default_factory=dict)
+    """The recorded positions' noise RMS over the records as they estimate it (``rows.pooled_noise``):
+    ``x`` the spool, ``X`` the cylinder. [m]"""
 
     @property
     def final_effects(self) -> Effects:
@@ -523,6 +527,7 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
         monitoring=mon, verdict=verdict, gap_nominal=gap_nominal, model=stage_model, noise_floors=floors,
         split_gaps=[{k: a.split_gap(k) for k in ("hydraulic", "mechanical")} for a in stage_acc], pressure_delay_samples=delays.shared,
         pressure_delays={c: delays.of(c) for c in PRESSURES}, lag_finding=lag,
+        position_noise=pooled_noise(prepared, ("x", "X")),
     )
 
 
