@@ -125,8 +125,8 @@ class DiscrepancyReport:
     """The spool's x_max (the configured valve's). [m]"""
     cylinder_noise_m: float = float("nan")
     """The recorded cylinder position's noise over the records. [m]"""
-    spool_reconstructed: bool = False
-    """Whether the spool was taken as Eq. 1's response to x_ref (``--reconstruct-spool``)."""
+    spool_reconstructed: int = 0
+    """Records whose spool was taken as Eq. 1's response to x_ref (``Diagnosis.spool_reconstructed``)."""
 
 
 def nuisance_priors(valve: ValveSpec) -> NuisancePriors:
@@ -359,7 +359,7 @@ def discrepancy_valve(config, valve_id: str, warehouse: Path, start: datetime | 
         valve_id=valve.id, run_id=run_id, n_records=d.n_records, findings=tables["discrepancy_findings"].to_dicts(),
         plots=[p for p in plots if p is not None], gap_before=d.gap_before, gap_after=d.gap_after, condition_source=source,
         model_note=fit.reason if fit is not None else "", spool_noise_m=d.position_noise.get("x", float("nan")),
-        spool_stroke_m=plant.geometry.x_max_m, cylinder_noise_m=d.position_noise.get("X", float("nan")), spool_reconstructed=settings.reconstruct_spool,
+        spool_stroke_m=plant.geometry.x_max_m, cylinder_noise_m=d.position_noise.get("X", float("nan")), spool_reconstructed=d.spool_reconstructed,
     )
 
 
@@ -409,7 +409,7 @@ def summary_lines(report: DiscrepancyReport) -> list[str]:
     if report.model_note:
         lines.append(f"    {report.model_note}")
     if math.isfinite(report.spool_noise_m):
-        spool = "Eq. 1's response to x_ref" if report.spool_reconstructed else "the reading smoothed"
+        spool = f"Eq. 1's response to x_ref in {report.spool_reconstructed} of {report.n_records} records" if report.spool_reconstructed else "the reading smoothed"
         lines.append(f"    positions as recorded: spool noise {report.spool_noise_m * 1e6:.2g} µm ({report.spool_noise_m / report.spool_stroke_m:.2%} of x_max), "
                      f"cylinder {report.cylinder_noise_m * 1e6:.2g} µm; the spool taken as {spool}")
     first = report.findings[0] if report.findings else {}

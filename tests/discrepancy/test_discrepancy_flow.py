@@ -205,6 +205,11 @@ def test_reconstruct_spool_reaches_the_diagnosis_and_needs_the_reference(tmp_pat
         with pytest.raises(Stop):
             discrepancy_flow.fn(str(config), str(warehouse), VALVE, reconstruct_spool=flag)
     assert [s.reconstruct_spool for s in settings] == [False, True]
+    # the command says in how many records the spool followed the reference (a reading that does not keeps its own)
+    report = flow_module.DiscrepancyReport(VALVE, "r" * 32, 4, [], [], 0.0, 0.0, "design", spool_noise_m=7e-6, spool_stroke_m=3.5e-3,
+                                           cylinder_noise_m=10e-6, spool_reconstructed=3)
+    assert ("    positions as recorded: spool noise 7 µm (0.20% of x_max), cylinder 10 µm; the spool taken as Eq. 1's response to x_ref "
+            "in 3 of 4 records") in flow_module.summary_lines(report)
 
     # without the spool reference in the lake it cannot: a clear error, not the reading in silence
     bare = tmp_path / "bare"

@@ -210,6 +210,7 @@ def test_a_noisy_spool_reading_reconstructed_leaves_no_leakage_reading():
     s = DiscrepancySettings(reconstruct_spool=True)
     lake = to_lake_frame(simulate_windows(noisy_end(manufactured(NAMEPLATE, seed=3)), 2, 103), "V1", T0)
     d = diagnose(split_records(lake, s), TABLE1, None, s, monitoring=False, priors=NuisancePriors())
+    assert d.spool_reconstructed == d.n_records == 2
     assert d.verdict.verdict == "none", d.verdict.reason
     assert max(r["delta_objective"] for r in d.verdict.scores) < (Z_AMBIGUOUS / 2) ** 2, d.verdict.scores
     assert d.split_gaps[0]["hydraulic"] <= d.noise_floors["hydraulic"], (d.split_gaps, d.noise_floors)

@@ -165,6 +165,9 @@ class Diagnosis:
     position_noise: dict = field(default_factory=dict)
     """The recorded positions' noise RMS over the records as they estimate it (``rows.pooled_noise``):
     ``x`` the spool, ``X`` the cylinder. [m]"""
+    spool_reconstructed: int = 0
+    """Records whose spool position was taken as Eq. 1's response to x_ref (``settings.reconstruct_spool``
+    and the reading follows it, :func:`transforms.discrepancy.states.spool_from_reference`)."""
 
     @property
     def final_effects(self) -> Effects:
@@ -527,7 +530,7 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
         monitoring=mon, verdict=verdict, gap_nominal=gap_nominal, model=stage_model, noise_floors=floors,
         split_gaps=[{k: a.split_gap(k) for k in ("hydraulic", "mechanical")} for a in stage_acc], pressure_delay_samples=delays.shared,
         pressure_delays={c: delays.of(c) for c in PRESSURES}, lag_finding=lag,
-        position_noise=pooled_noise(prepared, ("x", "X")),
+        position_noise=pooled_noise(prepared, ("x", "X")), spool_reconstructed=sum("x" in p.rec.pos for p in prepared),
     )
 
 
