@@ -32,7 +32,10 @@ Outcome per run: ``named`` (the right effect named first), ``ambiguous`` (the ri
 verdict's readings), ``none``, ``unexplained`` (the equations pointed at an effect whose replay did
 not close its gap: no name given), ``wrong`` (another effect named first, or an ambiguous verdict without
 the right one); on clean data ``none`` is right, ``ambiguous`` is reported as such and ``named`` is
-wrong. Parameter error: |θ̂ − θ| / |θ − neutral| where the right effect is the first reading.
+wrong. Parameter error: |θ̂ − θ| / |θ − neutral| where the right effect is the first reading. Every
+run also keeps what the equations alone read of the hidden effect (``equations_read``: its value, z,
+t and cross-validated gain in the selection's first step); the summary lists, for each library
+effect missed (``none`` or ``unexplained``), that reading: whether the rows saw it at all.
 
     taskset -c 0,1 .venv/bin/python bench/discrepancy_robustness.py --seeds 5 --magnitudes typical --jobs 2
 
@@ -224,6 +227,11 @@ def run_cell(key: str, magnitude: str, commissioning: bool, seed: int, n_windows
     above = [np.sqrt(max(g**2 - d.noise_floors[acting] ** 2, 0.0)) for g in before_after] if before_after else None
     shrink_above = above[0] / above[1] if above and above[1] > 0 else None
     over_floor = {k: d.split_gaps[0][k] / f for k, f in d.noise_floors.items()} if key == "none" else None
+    # what the equations alone read of the hidden effect (its first-step selection score): where it
+    # is missed, whether the rows saw it at all
+    seen = next(({"value": c["linear_value"], "z": c["z"], "t_stat": c["t_stat"], "relative_gain": c["relative_gain"],
+                  "significant": c["significant"]} for c in d.candidates
+                 if spec is not None and (c["effect"], c["variant"]) == (spec.name, spec.variant)), None)
     rel_err = None
     if spec is not None and got == key and got_value is not None and np.isfinite(got_value):
         rel_err = abs(got_value - value) / abs(value - spec.neutral)
@@ -235,6 +243,7 @@ def run_cell(key: str, magnitude: str, commissioning: bool, seed: int, n_windows
         "rel_err": rel_err, "gap_nominal": d.gap_nominal, "gap_before": d.stage_gaps[0], "gap_after": d.stage_gaps[-1],
         "split_before": d.split_gaps[0], "split_after": d.split_gaps[-1], "floors": d.noise_floors,
         "acting_gap": acting, "acting_before_after": before_after, "shrink": shrink, "shrink_above_noise": shrink_above, "over_floor": over_floor,
+        "equations_read": seen,
         "cpu_s": time.process_time() - t0,
     }
 
@@ -328,6 +337,11 @@ def main(argv=None) -> None:
         other = sum(r["outcome"] == "ambiguous" and r["got"] != r["effect"] for r in typ)
         print(f"\ntypical magnitude: the library effect named or `ambiguous` with it first {first}/{len(typ)} = {first / len(typ):.0%}; "
               f"`ambiguous` with another reading first {other}")
+        missed = [r for r in typ if r["outcome"] in ("none", "unexplained") and r.get("equations_read")]
+        for r in missed:
+            e = r["equations_read"]
+            print(f"  missed: {r['effect']} comm={r['commissioning']} seed={r['seed']} ({r['outcome']}); the equations read "
+                  f"{e['value']:.4g} (true {r['value']:.4g}) at z = {e['z']:.2g}, t = {e['t_stat']:.2g}, gain {e['relative_gain']:.1%}")
     outside = [r for r in rows if r["effect"] in REF_OUTSIDE]
     if outside:
         print(f"outside effects without a reading (`none` or `unexplained`): {sum(r['outcome'] in ('none', 'unexplained') for r in outside)}/{len(outside)}")

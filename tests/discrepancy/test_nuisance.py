@@ -415,3 +415,23 @@ def test_commissioned_effect_is_named_and_shrinks_the_gap(commissioned, key, val
     # estimate's shape: air 0.142 -> 0.048 (2.9x) with a 0.1 s grid where the constant left 144 N above X's noise
     n = d.named[0]
     assert n.acting_after * 3.0 <= n.acting_before, (n.gap_kind, n.acting_before, n.acting_after, n.gap_before, n.gap_after)
+
+
+def test_each_equation_keeps_its_own_correlation_within_a_block():
+    """The cylinder's noise enters chamber 1 as +A1 ΔX and chamber 2 as −A2 ΔX: pooled over the
+    equations the block sums cancel and the rows looked independent (κ ~1) while each equation's
+    rows were correlated; the verdict's κ is taken per equation. Rows constant within a block of
+    n are correlated n-fold; white rows are κ = 1 (never below)."""
+    from transforms.discrepancy.verdict import _equation_kappa
+
+    rng = np.random.default_rng(7)
+    n, blocks = 8, 50
+    block = np.repeat(np.arange(blocks), n)
+    u = np.repeat(rng.normal(size=blocks), n)  # the same error over a block's rows
+    rw = np.r_[u, -u, rng.normal(size=blocks * n)]
+    eq = np.repeat([0, 1, 2], blocks * n)
+    kap = _equation_kappa(rw, np.r_[block, block, block], eq)
+    assert np.allclose(kap[eq == 0], n) and np.allclose(kap[eq == 1], n)
+    assert np.all(kap[eq == 2] == 1.0)
+    pooled = np.bincount(block, weights=rw[:blocks * n] + rw[blocks * n:2 * blocks * n])
+    assert not pooled.any()  # what the pooled ratio saw of the two chambers: nothing

@@ -217,6 +217,24 @@ def test_a_noisy_spool_reading_reconstructed_leaves_no_leakage_reading():
 
 
 @pytest.mark.slow
+def test_a_p1_gain_at_the_noisy_end_is_not_read_as_the_supply_line():
+    """Noisy end (spool 7 µm reconstructed, cylinder 10 µm in 5 µm steps), seed 1, a p1 gain of
+    0.97, no commissioning: with κ pooled over the equations (~1: the cylinder's noise enters the
+    two chambers with opposite signs) the supply line read 3.6σ, ``ambiguous`` with it first and
+    the gain not listed; each equation's own κ (1.85, 1.14, 2.35) leaves every reading under 3σ:
+    ``none``, which is not a wrong name (the gain's evidence is in chamber 1 alone, 2.8σ)."""
+    from tests.refplant import noisy_end
+    from transforms.discrepancy.verdict import Z_AMBIGUOUS
+
+    s = DiscrepancySettings(reconstruct_spool=True)
+    lake = to_lake_frame(simulate_windows(noisy_end(manufactured(NAMEPLATE, seed=1)), 2, 101, effects=effect("pressure_sensor_gain", 0.97)), "V1", T0)
+    v = diagnose(split_records(lake, s), TABLE1, None, s, monitoring=False, priors=NuisancePriors()).verdict
+    assert v.verdict == "none", v.reason
+    top = max(v.scores, key=lambda r: r["delta_objective"])
+    assert top["delta_objective"] < Z_AMBIGUOUS**2 and top["kappa"] > 1.5, top
+
+
+@pytest.mark.slow
 def test_noisy_end_with_commissioning_and_reconstructed_positions():
     """Positions as noisy as plants record them (spool 7 um, cylinder 10 um in 5 um steps), the
     positions reconstructed, the model calibrated on a clean commissioning window of the same

@@ -15,8 +15,9 @@ Two kinds of evidence (docs/discrepancy.md, "Verdicts"):
 
        O = Σ (w r)² / κ + |z|²,      ΔO_j = O(without j) − O(with j)
 
-   (κ ≥ 1: the correlation of neighbouring residual rows, the ratio of the block sums' variance
-   to the rows'; z the standardised nuisances). For an exact nuisance pattern ΔO_j = (a·z)², the
+   (κ ≥ 1 per equation: the correlation of neighbouring residual rows, the ratio of each
+   equation's block sums' variance to its rows', :func:`_equation_kappa`; z the standardised
+   nuisances). For an exact nuisance pattern ΔO_j = (a·z)², the
    squared number of prior σ the nuisances had to move along the effect's pattern. ΔO_j ≥
    ``Z_AMBIGUOUS``² is reported: ``ambiguous`` with both readings (the effect's value, and the
    nuisances' values that would explain the same data) and what data would separate them;
@@ -382,12 +383,28 @@ def _logistic(d: float) -> float:
     return float(min(MAX_CONFIDENCE, 1.0 / (1.0 + np.exp(-(d - Z_AMBIGUOUS**2) / 2.0))))
 
 
-def _block_kappa(rw: np.ndarray, block: np.ndarray) -> float:
-    ok = np.isfinite(rw)
-    uniq, inv = np.unique(block[ok], return_inverse=True)
-    sums = np.bincount(inv, weights=rw[ok], minlength=uniq.size)
-    den = float(np.sum(rw[ok] ** 2))
-    return max(1.0, float(np.sum(sums**2)) / den) if den > 0 else 1.0
+def _equation_kappa(rw: np.ndarray, block: np.ndarray, eq: np.ndarray) -> np.ndarray:
+    """κ per row: for each equation, the ratio of its block sums' variance to its rows' (≥ 1).
+    Per equation, because the cylinder's noise enters chamber 1 as +A1 ΔX and chamber 2 as
+    −A2 ΔX: pooled over the equations the block sums cancel, and κ read ~1 where each equation's
+    rows are correlated 1.1–2.4× (10 µm) or 7–16× (1 µm; the reference plant, seed 1)."""
+    out = np.ones(rw.size)
+    for e in np.unique(eq):
+        m = (eq == e) & np.isfinite(rw)
+        if not m.any():
+            continue
+        uniq, inv = np.unique(block[m], return_inverse=True)
+        sums = np.bincount(inv, weights=rw[m], minlength=uniq.size)
+        den = float(np.sum(rw[m] ** 2))
+        out[eq == e] = max(1.0, float(np.sum(sums**2)) / den) if den > 0 else 1.0
+    return out
+
+
+def _objective(jf, w_rows: np.ndarray, kap: np.ndarray, k_motion: float) -> float:
+    """A joint fit's objective with each row's κ: Σ (w r)² / κ − K m² / κ_motion + |z|²."""
+    rw = jf.r * w_rows
+    ok = np.isfinite(rw) & np.all(np.isfinite(jf.Jz), axis=1) & np.all(np.isfinite(jf.Je), axis=1)
+    return float(np.sum(rw[ok] ** 2 / kap[ok])) - jf.noise_ss / k_motion + jf.prior_ss
 
 
 def nuisance_scores(nm, fit, named_specs, specs, rows0, w_rows, settings, prepared) -> list[dict]:
@@ -401,17 +418,19 @@ def nuisance_scores(nm, fit, named_specs, specs, rows0, w_rows, settings, prepar
     ok = np.isfinite(rw)
     for c in cols:
         ok &= np.all(np.isfinite(c), axis=1)
-    kappa = _block_kappa(np.where(ok, rw, np.nan), rows0.block)
+    kap = _equation_kappa(np.where(ok, rw, np.nan), rows0.block, rows0.eq)
+    k_motion = float(kap[rows0.eq == 2][0]) if np.any(rows0.eq == 2) else 1.0
+    kappa = float(np.max(kap))
     q, p = fit.Jz.shape[1], fit.Je.shape[1]
-    sk = np.sqrt(kappa)
+    sk = np.sqrt(kap[ok])[:, None]
     N, E, C = (c[ok] / sk for c in cols)
-    b = np.r_[-rw[ok] / sk, -fit.z]
+    b = np.r_[-rw[ok] / sk[:, 0], -fit.z]
     prior = np.hstack([np.eye(q), np.zeros((q, p))])
 
     m0 = moving_mass(nm, fit.z, fit.effects)
 
     def solve(A, g):  # the fit's objective (its noise of the mass term too), over κ
-        return corrected_lstsq(A, b, g, fit.mass_noise / kappa, m0)
+        return corrected_lstsq(A, b, g, fit.mass_noise / k_motion, m0)
 
     A0 = np.vstack([np.hstack([N, E]), prior])
     _, o0 = solve(A0, fit.mass_gradient)
@@ -432,14 +451,14 @@ def nuisance_scores(nm, fit, named_specs, specs, rows0, w_rows, settings, prepar
                     "nuisance_reading": reading, "kappa": kappa, "refit": None})
     out.sort(key=lambda r: -r["delta_objective"])
     # the leading candidates again, by the exact (nonlinear) joint fit from the linear reading
-    o_without = (fit.data_ss - fit.noise_ss) / kappa + fit.prior_ss
+    o_without = _objective(fit, w_rows, kap, k_motion)
     for r in out[:REFIT_CANDIDATES]:
         if r["delta_objective"] < 0.5 * Z_AMBIGUOUS**2:
             break
         spec = r["spec"]
         start = replace(fit.effects, **{spec.attribute: r["value"] if spec.lower is None else max(r["value"], spec.lower)})
         jf = joint_fit(prepared, nm, fit.z, list(named_specs) + [spec], start, rows0, w_rows, settings)
-        d = o_without - ((jf.data_ss - jf.noise_ss) / kappa + jf.prior_ss)
+        d = o_without - _objective(jf, w_rows, kap, k_motion)
         dz = fit.z - jf.z
         order = np.argsort(-np.abs(dz))[:4]
         r.update(delta_objective=float(max(d, 0.0)), value=spec.value(jf.effects), refit=jf, nuisance_reading=", ".join(
