@@ -229,9 +229,9 @@ def run_cell(key: str, magnitude: str, commissioning: bool, seed: int, n_windows
     over_floor = {k: d.split_gaps[0][k] / f for k, f in d.noise_floors.items()} if key == "none" else None
     # what the equations alone read of the hidden effect (its first-step selection score): where it
     # is missed, whether the rows saw it at all
-    seen = next(({"value": c["linear_value"], "z": c["z"], "t_stat": c["t_stat"], "relative_gain": c["relative_gain"],
-                  "significant": c["significant"]} for c in d.candidates
-                 if spec is not None and (c["effect"], c["variant"]) == (spec.name, spec.variant)), None)
+    seen = None if spec is None else next(({"value": c["linear_value"], "z": c["z"], "t_stat": c["t_stat"], "relative_gain": c["relative_gain"],
+                                            "significant": c["significant"]} for c in d.candidates
+                                           if (c["effect"], c["variant"]) == (spec.name, spec.variant)), None)
     rel_err = None
     if spec is not None and got == key and got_value is not None and np.isfinite(got_value):
         rel_err = abs(got_value - value) / abs(value - spec.neutral)

@@ -347,7 +347,8 @@ class Verdict:
     nuisances : list of dict
         The calibrated nuisances (:meth:`transforms.discrepancy.calibration.Calibration.table` rows).
     scores : list of dict
-        Every candidate's ΔO (evidence beyond the nuisance tolerances), its value and the nuisance reading.
+        Every candidate's ΔO (evidence beyond the nuisance tolerances), its value, the nuisance reading
+        and ``kappa``, the largest equation's κ.
     """
 
     verdict: str
@@ -423,9 +424,9 @@ def nuisance_scores(nm, fit, named_specs, specs, rows0, w_rows, settings, prepar
     k_motion = float(kap[rows0.eq == 2][0]) if np.any(rows0.eq == 2) else 1.0
     kappa = float(np.max(kap))
     q, p = fit.Jz.shape[1], fit.Je.shape[1]
-    sk = np.sqrt(kap[ok])[:, None]
-    N, E, C = (c[ok] / sk for c in cols)
-    b = np.r_[-rw[ok] / sk[:, 0], -fit.z]
+    sk = np.sqrt(kap[ok])
+    N, E, C = (c[ok] / sk[:, None] for c in cols)
+    b = np.r_[-rw[ok] / sk, -fit.z]
     prior = np.hstack([np.eye(q), np.zeros((q, p))])
 
     m0 = moving_mass(nm, fit.z, fit.effects)
