@@ -161,7 +161,7 @@ def run_cell(key: str, magnitude: str, commissioning: bool, seed: int, n_windows
     from transforms.discrepancy import split_records
     from transforms.discrepancy.nuisance import NuisancePriors
     from transforms.discrepancy.pipeline import diagnose
-    from transforms.discrepancy.verdict import acting_gap
+    from transforms.discrepancy.verdict import above_floor, acting_gap
 
     t0 = time.process_time()
     design = design_plant(family, declared)
@@ -224,7 +224,7 @@ def run_cell(key: str, magnitude: str, commissioning: bool, seed: int, n_windows
     elif acting:  # the selection's stages
         before_after = (d.split_gaps[0][acting], d.split_gaps[-1][acting])
     shrink = before_after[0] / before_after[1] if before_after else None
-    above = [np.sqrt(max(g**2 - d.noise_floors[acting] ** 2, 0.0)) for g in before_after] if before_after else None
+    above = [above_floor(g, d.noise_floors[acting]) for g in before_after] if before_after else None
     shrink_above = above[0] / above[1] if above and above[1] > 0 else None
     over_floor = {k: d.split_gaps[0][k] / f for k, f in d.noise_floors.items()} if key == "none" else None
     # what the equations alone read of the hidden effect (its first-step selection score): where it
