@@ -122,8 +122,8 @@ REPLAY_CLOSES = 3.0
 """... and it is ``ambiguous`` with that candidate where, fitted, it shrinks what the gap holds
 above the floor (:func:`above_floor`) at least this many times: at ``CANDIDATE_REPLAY_FLOOR`` ×
 the floor that is a gap of ≤ 2.15× the floor, where the base model is farther off a larger
-remainder. The clean valve leaves more than the noise floor where the load estimate's shape is
-off (2.86× on the reference plant's seed 5 with commissioning at the noisy end), and there a
+remainder. The clean valve leaves more than the noise floor where the load estimate is off
+(2.86× on the reference plant's seed 5 with commissioning at the noisy end), and there a
 typical friction change fitted left 2.08× of 53× (29× less above the floor), which closing to
 ``FLOOR_FACTOR`` × the floor refused. The true mass and friction readings that closed shrank it
 5–350× (reference plant, seeds 0–5, both sensor classes); the wrong candidates that a gap ≥
