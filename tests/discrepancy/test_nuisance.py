@@ -261,7 +261,7 @@ def test_a_gap_far_beyond_its_floor_that_the_strongest_candidate_closes_is_ambig
 
 def test_a_gap_far_off_that_the_candidate_all_but_closes_is_ambiguous_though_above_twice_the_floor():
     # the reference plant at the noisy end (spool reconstructed), seed 5 with commissioning: the
-    # clean valve's mechanical gap is 2.86x its floor there (the load estimate's shape); a typical
+    # clean valve's mechanical gap is 2.86x its floor there (the load estimate at 10 um); a typical
     # friction change left 2.85 mm, 53x its floor 0.0534, and the friction candidate the equations
     # did not name (t = 3.0), fitted at 16,250 N s/m, replays it at 0.111 mm: 2.08x the floor, but
     # 29x less above it. Closing to twice the floor refused it (`unexplained`)
