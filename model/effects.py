@@ -385,8 +385,11 @@ def true_signals(x_m, p1_pa, p2_pa, effects: Effects | None):
     if effects is None:
         return x, p1, p2
     e = effects
-    return (x - e.spool_sensor_offset_m, (p1 - e.p1_sensor_offset_pa) / e.p1_sensor_gain,
-            (p2 - e.p2_sensor_offset_pa) / e.p2_sensor_gain)
+    return (x - e.spool_sensor_offset_m if e.spool_sensor_offset_m != 0.0 else x,
+            (p1 - e.p1_sensor_offset_pa) / e.p1_sensor_gain
+            if (e.p1_sensor_gain != 1.0 or e.p1_sensor_offset_pa != 0.0) else p1,
+            (p2 - e.p2_sensor_offset_pa) / e.p2_sensor_gain
+            if (e.p2_sensor_gain != 1.0 or e.p2_sensor_offset_pa != 0.0) else p2)
 
 
 def effective_bulk_modulus(p_pa, bulk_modulus_pa: float, air_fraction: float):

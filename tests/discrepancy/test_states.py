@@ -55,6 +55,39 @@ def test_smoother_beats_savitzky_golay_on_a_smooth_move(seed):
     assert rms(Xs - X) < 4e-6
 
 
+@pytest.mark.parametrize("noise, q", [(1e-6, 0.1), (10e-6, 1e4)])
+def test_the_smoother_is_the_rauch_tung_striebel_recursion(noise, q):
+    """The compiled smoother (scalars; the backward pass a Cholesky solve) against the textbook
+    recursion in matrices: Kalman filter forward, then xs_k = xf_k + Pf_k Aᵀ Pp_{k+1}⁻¹ (xs_{k+1} −
+    A xf_k), with np.linalg.solve; a noisy move of 400 samples, the jerk's intensities at both ends
+    of the grid."""
+    from transforms.discrepancy.states import _smooth
+
+    t = np.arange(400) * DT
+    y = 0.02 * np.sin(2 * np.pi * 1.5 * t) + np.random.default_rng(7).normal(0, noise, t.size)
+    r = noise**2
+    A = np.array([[1.0, DT, DT * DT / 2], [0.0, 1.0, DT], [0.0, 0.0, 1.0]])
+    Q = q * np.array([[DT**5 / 20, DT**4 / 8, DT**3 / 6], [DT**4 / 8, DT**3 / 3, DT**2 / 2], [DT**3 / 6, DT**2 / 2, DT]])
+    H = np.array([1.0, 0.0, 0.0])
+    x, P = np.array([y[0], 0.0, 0.0]), np.diag([r, 1.0, 1.0e4])
+    xf, Pf, Pp = [], [], []
+    for k in range(y.size):
+        if k:
+            x, P = A @ x, A @ P @ A.T + Q
+        Pp.append(P)
+        K = P @ H / (H @ P @ H + r)
+        x, P = x + K * (y[k] - H @ x), P - np.outer(K, H @ P)
+        xf.append(x)
+        Pf.append(P)
+    xs = list(xf)
+    for k in range(y.size - 2, -1, -1):
+        xs[k] = xf[k] + Pf[k] @ A.T @ np.linalg.solve(Pp[k + 1], xs[k + 1] - A @ xf[k])
+    expected = np.array(xs)
+    got = _smooth(y, DT, r, q)
+    for j in range(3):  # X, v_X, a_X, each to 1e-9 of its range
+        np.testing.assert_allclose(got[:, j], expected[:, j], rtol=0, atol=1e-9 * np.abs(expected[:, j]).max())
+
+
 def test_reference_plant_positions_at_the_noisy_end():
     """Spool 0.2 % of x_max (7 µm), cylinder 10 µm in 5 µm steps, valve seed 1: the spool within
     0.6 µm of the truth (Savitzky–Golay 2.3–2.4 µm), the cylinder's velocity within 0.45 mm/s (0.9)."""

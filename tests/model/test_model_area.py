@@ -111,6 +111,20 @@ def test_valve_areas_order_and_edges():
     assert A[1, -1] < 0.1 * MM2 and A[2, -1] < 0.1 * MM2
 
 
+def test_edge_constants_are_those_of_each_condition_and_a_fresh_array_each_call():
+    """valve_edge_constants is computed once per (geometry, condition): a changed underlap gives
+    its own constants, and what a caller does to the array it got does not reach the next one."""
+    from model.area import valve_edge_constants
+
+    cond = ValveCondition(underlap_m=(3e-5, 5e-5, 7e-5, 9e-5))
+    a = valve_edge_constants(G, cond)
+    a[:] = np.nan
+    b = valve_edge_constants(G, cond)
+    assert np.all(np.isfinite(b)) and b is not valve_edge_constants(G, cond)
+    c = valve_edge_constants(G, dataclasses.replace(cond, underlap_m=(3e-5, 5e-5, 7e-5, 1e-4)))
+    assert np.array_equal(b[:3], c[:3]) and not np.array_equal(b[3], c[3])
+
+
 # --- the valve families: sharp-edged law and worn lands (model.area docstring) ---------------
 
 @pytest.mark.parametrize("port", [1, 2])
