@@ -127,6 +127,14 @@ class DiscrepancyReport:
     """The recorded cylinder position's noise over the records. [m]"""
     spool_reconstructed: int = 0
     """Records whose spool was taken as Eq. 1's response to x_ref (``Diagnosis.spool_reconstructed``)."""
+    spool_reference_records: int = 0
+    """Records that hold the spool reference x_ref, which ``--reconstruct-spool`` needs."""
+
+
+PLANT_GRADE_SPOOL_NOISE = 0.001
+"""A spool reading this noisy (a fraction of x_max: the low end of plant LVDTs, 0.1–0.3 %) with
+x_ref recorded gets the hint to reconstruct it (:func:`summary_lines`): on the reference plant
+the reconstruction read better at 0.2 % and worse at 0.03 % (docs/discrepancy.md)."""
 
 
 def nuisance_priors(valve: ValveSpec) -> NuisancePriors:
@@ -360,6 +368,7 @@ def discrepancy_valve(config, valve_id: str, warehouse: Path, start: datetime | 
         plots=[p for p in plots if p is not None], gap_before=d.gap_before, gap_after=d.gap_after, condition_source=source,
         model_note=fit.reason if fit is not None else "", spool_noise_m=d.position_noise.get("x", float("nan")),
         spool_stroke_m=plant.geometry.x_max_m, cylinder_noise_m=d.position_noise.get("X", float("nan")), spool_reconstructed=d.spool_reconstructed,
+        spool_reference_records=sum(key in r.raw for r in records),
     )
 
 
@@ -412,6 +421,9 @@ def summary_lines(report: DiscrepancyReport) -> list[str]:
         spool = f"Eq. 1's response to x_ref in {report.spool_reconstructed} of {report.n_records} records" if report.spool_reconstructed else "the reading smoothed"
         lines.append(f"    positions as recorded: spool noise {report.spool_noise_m * 1e6:.2g} µm ({report.spool_noise_m / report.spool_stroke_m:.2%} of x_max), "
                      f"cylinder {report.cylinder_noise_m * 1e6:.2g} µm; the spool taken as {spool}")
+        if not report.spool_reconstructed and report.spool_reference_records and report.spool_noise_m >= PLANT_GRADE_SPOOL_NOISE * report.spool_stroke_m:
+            lines.append("    the spool reading is as noisy as a plant LVDT and x_ref is recorded: --reconstruct-spool takes the spool as "
+                         "Eq. 1's response to x_ref, which reads such valves better (docs/discrepancy.md, \"Positions as plants record them\")")
     first = report.findings[0] if report.findings else {}
     if first.get("verdict"):
         conf = f", confidence {first['confidence']:.0%}" if first.get("confidence") is not None else ""

@@ -100,6 +100,9 @@ def test_flow_without_effect_writes_none(tmp_path):
 
     line = next(x for x in summary_lines(report) if "positions as recorded" in x)
     assert "(0.03% of x_max)" in line and line.endswith("the spool taken as the reading smoothed"), line
+    # x_ref is recorded, but a spool this quiet reads better smoothed: no hint to reconstruct it
+    assert report.spool_reference_records == report.n_records == 2
+    assert not any("--reconstruct-spool" in x for x in summary_lines(report))
 
 
 def test_cli_checks_before_starting_prefect(tmp_path):
@@ -168,6 +171,18 @@ def test_findings_row_of_a_reading_decided_against_the_tolerances_has_its_acting
     assert (row["verdict"], row["gap_kind"], row["gap_kind_before"], row["gap_kind_after"], row["gap_kind_floor"]) == ("named", "mechanical", 0.2, 0.02, 0.001)
     none = verdict_columns(SimpleNamespace(verdict=Verdict("none", 0.9, None, float("nan")), named=[], gap_nominal=1.0, lag_finding=""), 1)
     assert none["gap_kind"] is None and none["gap_kind_before"] is None
+
+
+def test_a_plant_grade_spool_reading_with_its_reference_gets_the_hint_to_reconstruct_it():
+    from flows.discrepancy.flow import DiscrepancyReport, summary_lines
+
+    def hint(noise_m, reference, reconstructed):
+        r = DiscrepancyReport(VALVE, "r" * 32, 2, [], [], 0.0, 0.0, spool_noise_m=noise_m, spool_stroke_m=3.5e-3, cylinder_noise_m=10e-6,
+                              spool_reconstructed=reconstructed, spool_reference_records=reference)
+        return [x for x in summary_lines(r) if "--reconstruct-spool" in x]
+
+    assert len(hint(7e-6, 2, 0)) == 1  # 0.2 % of x_max, x_ref recorded
+    assert hint(7e-6, 2, 2) == [] and hint(7e-6, 0, 0) == [] and hint(1e-6, 2, 0) == []  # reconstructed; no x_ref; 0.03 %
 
 
 def test_reconstruct_spool_reaches_the_diagnosis_and_needs_the_reference(tmp_path, monkeypatch):
