@@ -280,11 +280,27 @@ def _initial_hold(rec: Record, load: LoadEstimate, plant, condition, effects, se
         if out is None:
             errs.append(np.inf)
             continue
-        p1r, p2r, Xr = out
-        errs.append((np.sum((p1r - rec.raw["p1"][a:b]) ** 2) + np.sum((p2r - rec.raw["p2"][a:b]) ** 2)) / 1e10 + np.sum((Xr - rec.raw["X"][a:b]) ** 2) / 1e-6)
+        errs.append(_span_error(rec, a, b, *out))
     if errs[1] < errs[0]:
         return replace(load, hold_until=first_move)
     return load
+
+
+def _span_error(rec: Record, a: int, b: int, p1r: np.ndarray, p2r: np.ndarray, Xr: np.ndarray) -> float:
+    """How far a replay of samples [a, b) lies from the recorded p1, p2 [per 1e5 Pa] and X [per mm],
+    in squares (:func:`_refine_rest_steps`)."""
+    return (np.sum((p1r - rec.raw["p1"][a:b]) ** 2) + np.sum((p2r - rec.raw["p2"][a:b]) ** 2)) / 1e10 + np.sum((Xr - rec.raw["X"][a:b]) ** 2) / 1e-6
+
+
+def _prefix_errors(rec: Record, effects, a: int, b: int, prefix: np.ndarray | None) -> np.ndarray:
+    """The terms of :func:`_span_error` of the replay ``prefix`` (its states, :func:`_replay_span_states`)
+    summed over samples [a, a + k), for k = 0 … b − a (all 0 without a prefix)."""
+    out = np.zeros(b - a + 1)
+    if prefix is not None:
+        _, p1r, p2r = sensor_readings(np.zeros(1), prefix[2], prefix[3], effects)
+        terms = ((p1r - rec.raw["p1"][a:b]) ** 2 + (p2r - rec.raw["p2"][a:b]) ** 2) / 1e10 + (prefix[0] - rec.raw["X"][a:b]) ** 2 / 1e-6
+        out[1:] = np.cumsum(terms)
+    return out
 
 
 def _refine_rest_steps(rec: Record, load: LoadEstimate, f_hat: np.ndarray, plant, condition, effects, settings) -> LoadEstimate:
@@ -314,13 +330,17 @@ def _refine_rest_steps(rec: Record, load: LoadEstimate, f_hat: np.ndarray, plant
         # every candidate's load is the old level's up to the step: replay that once and continue
         # each candidate from its state at the step (the same numbers as replaying each whole)
         prefix = _replay_span_states(rec, plant, condition, effects, a, b, replay_load(np.full(b - a, old), hold[a:b], stuck[a:b]))
+        # a candidate's error sums non-negative terms, those before its step the prefix's: where
+        # they alone exceed the best error (beyond rounding), it and every later one cannot win
+        before = _prefix_errors(rec, effects, a, b, prefix)
         for c in cands:
+            if before[min(max(int(c) - a, 0), b - a)] > best_err * (1.0 + 1.0e-9):
+                break
             F = replay_load(np.where(np.arange(a, b) < c, old, new), hold[a:b], stuck[a:b])
             out = _replay_span(rec, plant, condition, effects, a, b, F, prefix, int(c) - a)
             if out is None:
                 continue
-            p1r, p2r, Xr = out
-            err = (np.sum((p1r - rec.raw["p1"][a:b]) ** 2) + np.sum((p2r - rec.raw["p2"][a:b]) ** 2)) / 1e10 + np.sum((Xr - rec.raw["X"][a:b]) ** 2) / 1e-6
+            err = _span_error(rec, a, b, *out)
             if err < best_err:
                 best, best_err = int(c), err
         steps[i] = best
