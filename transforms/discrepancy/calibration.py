@@ -247,6 +247,16 @@ class JointFit:
     noise_ss: float
     mass_gradient: np.ndarray
 
+    @property
+    def usable(self) -> np.ndarray:
+        """The rows the fit used: its residual and every derivative finite."""
+        return _usable_rows(self.r, self.Jz, self.Je)
+
+
+def _usable_rows(r: np.ndarray, Jz: np.ndarray, Je: np.ndarray) -> np.ndarray:
+    """Rows whose residual ``r`` and derivatives (``Jz``, ``Je``: one column per parameter) are all finite."""
+    return np.isfinite(r) & np.all(np.isfinite(Jz), axis=1) & np.all(np.isfinite(Je), axis=1)
+
 
 def moving_mass(nm: NuisanceModel, z, effects: Effects) -> float:
     """The model's moving mass at nuisances ``z`` with ``effects``' mass change. [kg]"""
@@ -277,7 +287,7 @@ def joint_fit(prepared, nm: NuisanceModel, z0, specs: list[EffectSpec], effects0
     r, Jz, Je = jacobians(prepared, nm, z, fx, specs, rows0, settings)
     k = 0.0
     if np.any(g):
-        ok = np.isfinite(r) & np.all(np.isfinite(Jz), axis=1) & np.all(np.isfinite(Je), axis=1)
+        ok = _usable_rows(r, Jz, Je)
         k = capped_mass_noise(float(np.sum(mass_term_noise(prepared, rows0, w_rows, settings)[ok])), np.column_stack([Jz[ok], Je[ok]]) * w_rows[ok, None], g)
 
     def objective(rr, zz, ff):
@@ -286,7 +296,7 @@ def joint_fit(prepared, nm: NuisanceModel, z0, specs: list[EffectSpec], effects0
 
     obj = objective(r, z, fx)
     for _ in range(iterations):
-        ok = np.isfinite(r) & np.all(np.isfinite(Jz), axis=1) & np.all(np.isfinite(Je), axis=1)
+        ok = _usable_rows(r, Jz, Je)
         A = np.vstack([np.column_stack([Jz[ok], Je[ok]]) * w_rows[ok, None], np.hstack([np.eye(q), np.zeros((q, p))])])
         b = np.r_[-r[ok] * w_rows[ok], -z]
         step, _ = corrected_lstsq(A, b, g, k, moving_mass(nm, z, fx))
@@ -308,7 +318,7 @@ def joint_fit(prepared, nm: NuisanceModel, z0, specs: list[EffectSpec], effects0
         r, Jz, Je = jacobians(prepared, nm, z, fx, specs, rows0, settings, r_new)
         if small:
             break
-    ok = np.isfinite(r) & np.all(np.isfinite(Jz), axis=1) & np.all(np.isfinite(Je), axis=1)
+    ok = _usable_rows(r, Jz, Je)
     A = np.column_stack([Jz[ok], Je[ok]]) * w_rows[ok, None]
     H = A.T @ A
     H[:q, :q] += np.eye(q)

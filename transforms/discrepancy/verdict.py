@@ -426,7 +426,7 @@ def _objective(jf, w_rows: np.ndarray, kap: np.ndarray, k_motion: float) -> floa
     """A joint fit's objective with each row's κ: Σ (w r)² / κ − K m² / κ_motion + |z|², at the
     fit's own optimum (the calibration weighs the rows without κ; both sides of a ΔO are taken so)."""
     rw = jf.r * w_rows
-    ok = np.isfinite(rw) & np.all(np.isfinite(jf.Jz), axis=1) & np.all(np.isfinite(jf.Je), axis=1)
+    ok = np.isfinite(rw) & jf.usable
     return float(np.sum(rw[ok] ** 2 / kap[ok])) - jf.noise_ss / k_motion + jf.prior_ss
 
 
