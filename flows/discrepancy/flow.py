@@ -355,7 +355,8 @@ def discrepancy_valve(config, valve_id: str, warehouse: Path, start: datetime | 
     if not records:
         raise ValvemonError(f"valve {valve.id}: no contiguous record of at least {settings.min_record_s:g} s in the span")
     key, column = REFERENCE_COLUMN
-    if settings.reconstruct_spool and not any(key in r.raw for r in records):
+    with_reference = sum(key in r.raw for r in records)
+    if settings.reconstruct_spool and not with_reference:
         raise ValvemonError(f"valve {valve.id}: --reconstruct-spool needs the spool reference ({column}) in the lake; none of the span's {len(records)} records holds it")
     plant = plant_params_for(valve, config.export)
     source, plant, cond, fit = valve_condition(valve, plant, warehouse, condition_mode, settings)
@@ -368,7 +369,7 @@ def discrepancy_valve(config, valve_id: str, warehouse: Path, start: datetime | 
         plots=[p for p in plots if p is not None], gap_before=d.gap_before, gap_after=d.gap_after, condition_source=source,
         model_note=fit.reason if fit is not None else "", spool_noise_m=d.position_noise.get("x", float("nan")),
         spool_stroke_m=plant.geometry.x_max_m, cylinder_noise_m=d.position_noise.get("X", float("nan")), spool_reconstructed=d.spool_reconstructed,
-        spool_reference_records=sum(key in r.raw for r in records),
+        spool_reference_records=with_reference,
     )
 
 

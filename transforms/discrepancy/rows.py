@@ -286,10 +286,16 @@ def _initial_hold(rec: Record, load: LoadEstimate, plant, condition, effects, se
     return load
 
 
+def _squared_misses(rec: Record, a: int, b: int, p1r: np.ndarray, p2r: np.ndarray, Xr: np.ndarray) -> tuple:
+    """Per sample of [a, b), a replay's squared misses of the recorded p1, p2 [Pa²] and X [m²]."""
+    return (p1r - rec.raw["p1"][a:b]) ** 2, (p2r - rec.raw["p2"][a:b]) ** 2, (Xr - rec.raw["X"][a:b]) ** 2
+
+
 def _span_error(rec: Record, a: int, b: int, p1r: np.ndarray, p2r: np.ndarray, Xr: np.ndarray) -> float:
     """How far a replay of samples [a, b) lies from the recorded p1, p2 [per 1e5 Pa] and X [per mm],
     in squares (:func:`_refine_rest_steps`)."""
-    return (np.sum((p1r - rec.raw["p1"][a:b]) ** 2) + np.sum((p2r - rec.raw["p2"][a:b]) ** 2)) / 1e10 + np.sum((Xr - rec.raw["X"][a:b]) ** 2) / 1e-6
+    m1, m2, mX = _squared_misses(rec, a, b, p1r, p2r, Xr)
+    return (np.sum(m1) + np.sum(m2)) / 1e10 + np.sum(mX) / 1e-6
 
 
 def _prefix_errors(rec: Record, effects, a: int, b: int, prefix: np.ndarray | None) -> np.ndarray:
@@ -298,8 +304,8 @@ def _prefix_errors(rec: Record, effects, a: int, b: int, prefix: np.ndarray | No
     out = np.zeros(b - a + 1)
     if prefix is not None:
         _, p1r, p2r = sensor_readings(np.zeros(1), prefix[2], prefix[3], effects)
-        terms = ((p1r - rec.raw["p1"][a:b]) ** 2 + (p2r - rec.raw["p2"][a:b]) ** 2) / 1e10 + (prefix[0] - rec.raw["X"][a:b]) ** 2 / 1e-6
-        out[1:] = np.cumsum(terms)
+        m1, m2, mX = _squared_misses(rec, a, b, p1r, p2r, prefix[0])
+        out[1:] = np.cumsum((m1 + m2) / 1e10 + mX / 1e-6)
     return out
 
 
