@@ -356,6 +356,25 @@ def _friction_dir_array(v, d_v, d_c, d_s, v0):
 # --- array functions -------------------------------------------------------------------------
 
 
+def pressure_readings(p1_pa, p2_pa, effects: Effects | None):
+    """What the pressure transducers record of the true chamber pressures.
+
+    Returns
+    -------
+    (p1, p2) : ndarrays
+        gain_p1 p1 + delta_p1, gain_p2 p2 + delta_p2. [Pa]
+    """
+    p1 = np.asarray(p1_pa, float)
+    p2 = np.asarray(p2_pa, float)
+    if effects is None:
+        return p1, p2
+    e = effects
+    return (e.p1_sensor_gain * p1 + e.p1_sensor_offset_pa
+            if (e.p1_sensor_gain != 1.0 or e.p1_sensor_offset_pa != 0.0) else p1,
+            e.p2_sensor_gain * p2 + e.p2_sensor_offset_pa
+            if (e.p2_sensor_gain != 1.0 or e.p2_sensor_offset_pa != 0.0) else p2)
+
+
 def sensor_readings(x_m, p1_pa, p2_pa, effects: Effects | None):
     """What the transducers record of the true spool position and chamber pressures.
 
@@ -365,16 +384,9 @@ def sensor_readings(x_m, p1_pa, p2_pa, effects: Effects | None):
         x + delta_x [m], gain_p1 p1 + delta_p1 [Pa], gain_p2 p2 + delta_p2 [Pa].
     """
     x = np.asarray(x_m, float)
-    p1 = np.asarray(p1_pa, float)
-    p2 = np.asarray(p2_pa, float)
-    if effects is None:
-        return x, p1, p2
-    e = effects
-    return (x + e.spool_sensor_offset_m if e.spool_sensor_offset_m != 0.0 else x,
-            e.p1_sensor_gain * p1 + e.p1_sensor_offset_pa
-            if (e.p1_sensor_gain != 1.0 or e.p1_sensor_offset_pa != 0.0) else p1,
-            e.p2_sensor_gain * p2 + e.p2_sensor_offset_pa
-            if (e.p2_sensor_gain != 1.0 or e.p2_sensor_offset_pa != 0.0) else p2)
+    if effects is not None and effects.spool_sensor_offset_m != 0.0:
+        x = x + effects.spool_sensor_offset_m
+    return (x, *pressure_readings(p1_pa, p2_pa, effects))
 
 
 def true_signals(x_m, p1_pa, p2_pa, effects: Effects | None):

@@ -17,6 +17,7 @@ from model.effects import (
     effective_bulk_modulus,
     equation_terms,
     library_entry,
+    pressure_readings,
     sensor_readings,
     supply_valve_pressure_kernel,
     true_signals,
@@ -88,6 +89,8 @@ def test_sensor_maps_are_inverse_and_measure_applies_them():
     back = true_signals(*sensor_readings(x, p1, p2, fx), fx)
     for a, b in zip(back, (x, p1, p2)):
         np.testing.assert_allclose(a, b, rtol=1e-12)
+    np.testing.assert_array_equal(np.array(pressure_readings(p1, p2, fx)), np.array(sensor_readings(x, p1, p2, fx)[1:]))
+    np.testing.assert_allclose(pressure_readings(p1, p2, fx)[0], p1 + 1e5, rtol=1e-15)
     res = simulate_windows(TABLE1, [TABLE1.nominal_condition], 1.0, seed=2, effects=fx)
     sensors = TABLE1.sensors.__class__(
         **{f: (getattr(TABLE1.sensors, f).__class__(0.0, 0.0, -1e9, 1e9) if f != "sample_rate_hz" else 1000.0) for f in TABLE1.sensors.__dataclass_fields__}

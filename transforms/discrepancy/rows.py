@@ -8,7 +8,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from model.effects import Effects, EffectSpec, equation_terms, sensor_readings, true_signals
+from model.effects import Effects, EffectSpec, equation_terms, pressure_readings, true_signals
 from model.params import PlantParams, ValveCondition
 from model.replay import DRIVE_HYDRAULIC, DRIVE_MECHANICAL, replay
 from model.simulate import DEFAULT_REG_BAND_PA
@@ -227,7 +227,7 @@ def _replay_span(rec: Record, plant, condition, effects, a: int, b: int, load: n
         except FloatingPointError:
             return None
         prefix = np.concatenate([prefix[:, :k], np.vstack([r.X_m, r.vX_m_s, r.p1_pa, r.p2_pa])[:, k:]], axis=1)
-    _, p1r, p2r = sensor_readings(np.zeros(1), prefix[2], prefix[3], effects)
+    p1r, p2r = pressure_readings(prefix[2], prefix[3], effects)
     return p1r, p2r, prefix[0]
 
 
@@ -303,7 +303,7 @@ def _prefix_errors(rec: Record, effects, a: int, b: int, prefix: np.ndarray | No
     summed over samples [a, a + k), for k = 0 … b − a (all 0 without a prefix)."""
     out = np.zeros(b - a + 1)
     if prefix is not None:
-        _, p1r, p2r = sensor_readings(np.zeros(1), prefix[2], prefix[3], effects)
+        p1r, p2r = pressure_readings(prefix[2], prefix[3], effects)
         m1, m2, mX = _squared_misses(rec, a, b, p1r, p2r, prefix[0])
         out[1:] = np.cumsum((m1 + m2) / 1e10 + mX / 1e-6)
     return out
@@ -478,7 +478,7 @@ def _hydraulic_replay(p: _Prepared, plant, condition, effects, start: tuple, loa
     _, x_true, _, _, _, starts, states = start
     hyd = replay(plant, x_true, rec.raw["ps"], rec.raw["pr"], load, starts, states, condition=condition, effects=effects,
                  drive=DRIVE_HYDRAULIC, given=_smoothed(rec, "X"))
-    _, p1h, p2h = sensor_readings(np.zeros(1), hyd.p1_pa, hyd.p2_pa, effects)
+    p1h, p2h = pressure_readings(hyd.p1_pa, hyd.p2_pa, effects)
     return np.asarray(p1h, float).copy(), np.asarray(p2h, float).copy()
 
 
@@ -551,7 +551,7 @@ def _replay_record(p: _Prepared, plant, condition, effects, settings, split: boo
     _, x_true, _, _, _, starts, states = start
     load = _replay_load_for(p, plant, condition, effects, settings)
     res = replay(plant, x_true, rec.raw["ps"], rec.raw["pr"], load, starts, states, condition=condition, effects=effects)
-    _, p1r, p2r = sensor_readings(np.zeros(1), res.p1_pa, res.p2_pa, effects)
+    p1r, p2r = pressure_readings(res.p1_pa, res.p2_pa, effects)
     out = {"p1": np.asarray(p1r, float).copy(), "p2": np.asarray(p2r, float).copy(), "X": res.X_m.copy()}
     if split:
         p1h, p2h = _hydraulic_replay(p, plant, condition, effects, start, load)
