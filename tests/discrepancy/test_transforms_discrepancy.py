@@ -588,3 +588,22 @@ def test_each_pressure_channel_is_aligned_for_its_own_delay_and_a_lagging_one_is
     assert d1.samples == d.samples and aligned[0].n == rec.n - 3
     again = pressure_delays(prepare_records(aligned, TABLE1, cond, s), TABLE1, cond, s)
     assert again.samples == {"p1": 0, "p2": 0} and again.finding() == ""
+
+
+def test_tent_products_from_prefix_sums_are_those_of_the_tent_matrix():
+    """load.missed_knot scores every candidate knot c between knots a and b by products with its
+    tent (0 at a and b, 1 at c, zero outside the segment); _TentProducts makes them from one prefix
+    and one suffix sum: the same as the dense tent matrix's products to rounding."""
+    from transforms.discrepancy.load import _TentProducts
+
+    rng = np.random.default_rng(3)
+    sub = np.sort(rng.choice(np.arange(100, 900), 400, replace=False)).astype(float)
+    inside = rng.random(sub.size) > 0.2
+    a, b = 90.0, 905.0
+    cands = sub[20:-20:7]
+    T = np.where(sub[:, None] <= cands[None, :], (sub[:, None] - a) / (cands - a), (b - sub[:, None]) / (b - cands)) * inside[:, None]
+    tent = _TentProducts(sub, inside, a, b, cands)
+    y, Y = rng.normal(size=sub.size), rng.normal(size=(sub.size, 5))
+    assert np.all(np.abs(tent.dot(y) - y @ T) <= 1e-12 * (np.abs(y) @ np.abs(T)))  # to rounding of the sums' size
+    assert np.all(np.abs(tent.dot(Y) - (Y.T @ T).T) <= 1e-12 * (np.abs(Y.T) @ np.abs(T)).T)
+    np.testing.assert_allclose(tent.dot_self(), np.einsum("ij,ij->j", T, T), rtol=1e-12)

@@ -542,6 +542,36 @@ def _column_basis(X: np.ndarray) -> np.ndarray:
     return Q[:, d > 1e-9 * d.max()]
 
 
+class _TentProducts:
+    """Products with the tent functions of knots (a, c, b), c each of ``cands``: 0 at a and b, 1
+    at c, linear between, on the samples ``sub`` (sorted) and 0 where ``inside`` is False. A
+    tent's products are its rising part's prefix sum over the samples up to c and its falling
+    part's suffix sum after it, so every candidate costs O(1) once the sums are made."""
+
+    def __init__(self, sub: np.ndarray, inside: np.ndarray, a: float, b: float, cands: np.ndarray):
+        self.up, self.down = np.where(inside, sub - a, 0.0), np.where(inside, b - sub, 0.0)
+        self.split = np.searchsorted(sub, cands, side="right")  # the samples at or before c rise
+        self.rise, self.fall = 1.0 / (cands - a), 1.0 / (b - cands)
+
+    def _sums(self, terms_up: np.ndarray, terms_down: np.ndarray, power: int = 1) -> np.ndarray:
+        """Σ terms_up over each tent's rising samples × its rise**power, plus the same of
+        terms_down over its falling samples and its fall."""
+        z = np.zeros((1,) + terms_up.shape[1:])
+        before = np.concatenate([z, np.cumsum(terms_up, axis=0)])
+        after = np.concatenate([np.cumsum(terms_down[::-1], axis=0)[::-1], z])
+        w = (slice(None),) + (None,) * (terms_up.ndim - 1)
+        return before[self.split] * (self.rise ** power)[w] + after[self.split] * (self.fall ** power)[w]
+
+    def dot(self, y: np.ndarray) -> np.ndarray:
+        """yᵀ t for every tent t: (candidates,) for y (samples,), (candidates, k) for y (samples, k)."""
+        w = (slice(None),) + (None,) * (y.ndim - 1)
+        return self._sums(y * self.up[w], y * self.down[w])
+
+    def dot_self(self) -> np.ndarray:
+        """tᵀ t for every tent t."""
+        return self._sums(self.up * self.up, self.down * self.down, 2)
+
+
 def missed_knot(f_hat: np.ndarray, usable: np.ndarray, segment: np.ndarray, knots: list[np.ndarray], motion: tuple | None, W: int,
                 share: float, lowpass: int, max_corr2: float, stride: int = 5) -> tuple[int, float] | None:
     """(segment, sample) of the one knot that, added to ``knots``, takes the most of the residual
@@ -577,24 +607,23 @@ def missed_knot(f_hat: np.ndarray, usable: np.ndarray, segment: np.ndarray, knot
             lo, hi = np.searchsorted(idx, a), np.searchsorted(idx, b, side="right")
             if hi - lo < 10:
                 continue
-            sub = idx[lo:hi].astype(float)[:, None]
-            inside = (segment[idx[lo:hi]] == s)[:, None]
-            cands = sub[W:sub.size - W:stride, 0]  # with W usable samples on either side
+            sub = idx[lo:hi].astype(float)
+            cands = sub[W:sub.size - W:stride]  # with W usable samples on either side
             cands = cands[(cands > a + W) & (cands < b - W)]
-            for k0 in range(0, cands.size, 256):  # the tents of 256 candidates at a time
-                c = cands[None, k0:k0 + 256]
-                T = np.where(sub <= c, (sub - a) / (c - a), (b - sub) / (b - c)) * inside
-                tt = np.einsum("ij,ij->j", T, T)
-                qt = Q[lo:hi].T @ T
-                den = tt - np.einsum("ij,ij->j", qt, qt)
-                ok = den > 1e-9 * tt
-                score = np.where(ok, (r[lo:hi] @ T) ** 2 / np.where(ok, den, 1.0), 0.0)
-                if v0 is not None:
-                    q0 = Q0[lo:hi].T @ T
-                    score[(v0[lo:hi] @ T) ** 2 > max_corr2 * (tt - np.einsum("ij,ij->j", q0, q0)) * vv] = 0.0
-                j = int(np.argmax(score))
-                if score[j] > best[0]:
-                    best = (float(score[j]), (s, float(c[0, j])))
+            if not cands.size:
+                continue
+            tent = _TentProducts(sub, segment[idx[lo:hi]] == s, a, b, cands)
+            tt = tent.dot_self()
+            qt = tent.dot(Q[lo:hi])
+            den = tt - np.einsum("jk,jk->j", qt, qt)
+            ok = den > 1e-9 * tt
+            score = np.where(ok, tent.dot(r[lo:hi]) ** 2 / np.where(ok, den, 1.0), 0.0)
+            if v0 is not None:
+                q0 = tent.dot(Q0[lo:hi])
+                score[tent.dot(v0[lo:hi]) ** 2 > max_corr2 * (tt - np.einsum("jk,jk->j", q0, q0)) * vv] = 0.0
+            j = int(np.argmax(score))
+            if score[j] > best[0]:
+                best = (float(score[j]), (s, float(cands[j])))
     full = np.zeros(f_hat.size)
     full[idx] = r
     slow = np.convolve(full, np.ones(lowpass) / lowpass, mode="same")[idx]
