@@ -26,9 +26,17 @@ $(VENV)/.synced: $(UV) uv.lock pyproject.toml
 	$(VENV)/bin/python -m compileall -q -j 0 -x '/tests/' "$$($(VENV)/bin/python -c 'import sysconfig; print(sysconfig.get_path("purelib"))')"
 	touch $@
 
+# numba compiles each kernel on its first call in a process (~90 s of CPU in all) and caches it
+# beside its source: paid here, on a tiny plant through the pipeline, not by the first command
+# (flows/common/kernel_cache.py; its two parts side by side under -j)
+KERNEL_PARTS := $(VENV)/.kernels-snapshot $(VENV)/.kernels-continuous
+$(VENV)/.kernels-%: $(VENV)/.numba-cache-checked
+	OPENBLAS_NUM_THREADS=1 $(VENV)/bin/python -m flows.common.kernel_cache $*
+	touch $@
+
 # our own packages are installed editable (uv compiles only site-packages): compile them too,
 # on every setup (compileall skips what is up to date)
-setup: $(VENV)/.synced $(VENV)/.numba-cache-checked
+setup: $(VENV)/.synced $(VENV)/.numba-cache-checked $(KERNEL_PARTS)
 	$(VENV)/bin/python -m compileall -q flows transforms model schemas
 
 # numba's on-disk cache (__pycache__/*.nbi, *.nbc) checks only the kernel's own file: a kernel that
@@ -39,7 +47,8 @@ $(VENV)/.numba-cache-checked: $(SOURCES) | $(VENV)/.synced
 	find flows transforms model schemas -name '*.nb[ic]' -delete
 	touch $@
 
-demo: setup
+demo:
+	$(MAKE) --no-print-directory -j2 setup
 	$(VENV)/bin/valvemon demo
 
 # the report's HTML is checked in headless Chromium (tests/report): install Debian's package when
@@ -50,12 +59,12 @@ chromium:
 		apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null; \
 	fi
 
-# the set-up and Chromium's install side by side (-j2): on a fresh machine the install waits on
-# the network and dpkg for ~26 s, as long as the set-up
+# the set-up (its two kernel parts side by side) and Chromium's install, which on a fresh machine
+# waits ~26 s on the network and dpkg, all at once (-j3)
 # OPENBLAS_NUM_THREADS=1: two xdist workers on two cores, each with its own BLAS threads, spun
 # against each other (the discrepancy tests' least squares: 41 s of CPU for 39 s of wall, 16 for 19 without)
 test:
-	$(MAKE) --no-print-directory -j2 setup chromium
+	$(MAKE) --no-print-directory -j3 setup chromium
 	OPENBLAS_NUM_THREADS=1 $(VENV)/bin/python -m pytest -n 2 --dist loadgroup --durations=15
 
 bench: setup
