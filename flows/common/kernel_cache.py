@@ -2,8 +2,8 @@
 
 numba compiles a kernel on its first call in a process and keeps the machine code in the
 ``__pycache__`` beside its source (``cache=True``); later processes load it in milliseconds. On a
-fresh install the first calls cost ~90 s of CPU in all: the first ``valvemon`` command would pay
-them, and a test run on two workers pays them twice. ``make setup`` pays them here instead, on a
+fresh install the first calls cost ~90 s of CPU in all: the first ``valvemon`` commands would pay
+them, and each worker of a test run the kernels it calls. ``make setup`` pays them here instead, on a
 tiny simulated plant run through the pipeline's own functions in a temporary directory, so that
 every kernel is compiled for the argument types the pipeline passes it:
 
@@ -13,7 +13,7 @@ every kernel is compiled for the argument types the pipeline passes it:
   on it, with both positions reconstructed.
 
 The two parts run side by side (``make -j2``). Nothing outside the temporary directory is written
-except numba's cache.
+but numba's cache (and matplotlib's font cache, on its first use).
 """
 
 from __future__ import annotations
