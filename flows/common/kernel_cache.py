@@ -23,9 +23,6 @@ import tempfile
 from datetime import datetime, timezone
 from pathlib import Path
 
-PARTS = ("snapshot", "continuous")
-
-
 def _archive(out: Path, **kw):
     from flows.simulate.archive import SimulateRequest, run_simulate
 
@@ -65,6 +62,10 @@ def continuous(root: Path) -> None:
     discrepancy_valve(config, config.valves[0].id, root / "wh", None, None, settings, "design")
 
 
+PARTS = {"snapshot": snapshot, "continuous": continuous}
+"""The parts by name, in the order ``make setup`` names them."""
+
+
 def main(argv: list[str]) -> int:
     parts = argv or list(PARTS)
     unknown = [p for p in parts if p not in PARTS]
@@ -73,7 +74,7 @@ def main(argv: list[str]) -> int:
         return 2
     with tempfile.TemporaryDirectory(prefix="valvemon-kernels-") as tmp:
         for part in parts:
-            globals()[part](Path(tmp) / part)
+            PARTS[part](Path(tmp) / part)
     return 0
 
 
