@@ -244,6 +244,9 @@ def run_cell(key: str, magnitude: str, commissioning: bool, seed: int, n_windows
         "split_before": d.split_gaps[0], "split_after": d.split_gaps[-1], "floors": d.noise_floors,
         "acting_gap": acting, "acting_before_after": before_after, "shrink": shrink, "shrink_above_noise": shrink_above, "over_floor": over_floor,
         "equations_read": seen,
+        # every candidate's first-step score: how far the false ones reach, to weigh a selection rule against
+        "first_step": [{"effect": c["effect"] + (f"[{c['variant']}]" if c["variant"] else ""), "z": c["z"], "t_stat": c["t_stat"],
+                        "relative_gain": c["relative_gain"]} for c in d.candidates],
         "cpu_s": time.process_time() - t0,
     }
 
