@@ -23,6 +23,7 @@ import tempfile
 from datetime import datetime, timezone
 from pathlib import Path
 
+
 def _archive(out: Path, **kw):
     from flows.simulate.archive import SimulateRequest, run_simulate
 
