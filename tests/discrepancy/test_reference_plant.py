@@ -171,12 +171,14 @@ def test_an_effect_outside_the_library_is_never_named(name, value):
     d = _diagnose(effect(name, value, channel="p1"))
     assert d.verdict.verdict != "named", (d.verdict.verdict, d.verdict.effect, d.verdict.reason)
     if name == "transmitter_lag":
-        # p1 aligned for its own delay and the lag reported with the verdict (with one delay for all
-        # pressures this was `none`, and on two windows a -0.65 bar p1 offset was named); the verdict
-        # is `unexplained` with the lag as where, or `ambiguous` when a reading at the noise floor
-        # (a p1 gain within 3-4 sigma of the tolerances) competes, the lag then in its reason
-        assert d.pressure_delays == {"ps": 2, "pr": 2, "p1": 4, "p2": 2}, d.pressure_delays
+        # p1's extra first-order lag taken out as a lag, on the other pressures' delay, and reported
+        # with the verdict (with one delay for all pressures this was `none`, and on two windows a
+        # -0.65 bar p1 offset was named); the verdict is `unexplained` with the lag as where, or
+        # `ambiguous` when a reading at the noise floor (a p1 gain within 3-4 sigma of the
+        # tolerances) competes, the lag then in its reason
+        assert d.pressure_delays == {"ps": 2, "pr": 2, "p1": 2, "p2": 2}, d.pressure_delays
         assert d.lag_finding.startswith("the p1 transmitter lags the other pressures by"), d.lag_finding
+        assert re.search(r"a first-order lag of (1\.[89]|2|2\.[01]) ms taken out", d.lag_finding), d.lag_finding
         assert d.verdict.verdict in ("unexplained", "ambiguous"), d.verdict.reason
         assert d.lag_finding in (d.verdict.where if d.verdict.verdict == "unexplained" else d.verdict.reason), d.verdict.reason
 

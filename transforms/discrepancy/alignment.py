@@ -29,17 +29,26 @@ aligned for it, the other effects are judged as on a healthy transmitter, and th
 as a finding of its own (:meth:`PressureDelays.finding`) rather than left for a p1 offset or gain
 to absorb (with one delay for all pressures, a 2 ms lag on the reference plant's p1 transmitter
 was named a −0.65 bar p1 offset).
+
+A lagging channel is aligned by whichever of two models of its extra delay fits its high-passed
+difference better: whole samples more (a dead time), or the shared shift and a first-order lag τ
+taken out, p = p_m + τ ṗ_m (ṗ_m the Savitzky–Golay derivative; τ by least squares, the
+difference linear in it). A slow transmitter is a lag, not a dead time: it passes the slow parts a
+little late and damps the fast ones, so whole samples leave a residual in ṗ that reads as a
+compressibility change (on the reference plant's 2 ms p1 lag, entrained air). The others' own lag
+is still aligned as whole samples: bringing p1 to it by a lag filter also smooths p1's noise,
+which then fits better for that alone.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from transforms.discrepancy.records import Record
+from transforms.discrepancy.records import Record, savgol
 
-__all__ = ["MAX_DELAY_S", "PressureDelays", "align_prepared", "align_records", "pressure_delays", "shifted"]
+__all__ = ["MAX_DELAY_S", "PressureDelays", "align_prepared", "align_records", "pressure_delays", "shifted", "unlagged"]
 
 MAX_DELAY_S = 5.0e-3
 """Largest pressure delay looked for. [s]"""
@@ -69,12 +78,19 @@ class PressureDelays:
         Per chamber channel, the squared high-passed difference for every shift 0 … kmax.
     dt : float
         Sample period. [s]
+    lag_s : dict
+        A lagging channel's first-order lag taken out (module docstring), its ``samples`` then the
+        shared shift; absent where whole samples fit better. [s]
+    lag_sse : dict
+        The lagging channel's squared high-passed difference with that lag taken out.
     """
 
     samples: dict
     fine: dict
     sse: dict
     dt: float
+    lag_s: dict = field(default_factory=dict)
+    lag_sse: dict = field(default_factory=dict)
 
     @property
     def shared(self) -> int:
@@ -87,8 +103,8 @@ class PressureDelays:
 
     @property
     def lagging(self) -> list[str]:
-        """The chamber channels lagging the others (their delay above the shared one)."""
-        return [c for c in CHAMBERS if self.samples.get(c, 0) > self.shared]
+        """The chamber channels lagging the others (their delay above the shared one, or a lag taken out)."""
+        return [c for c in CHAMBERS if self.samples.get(c, 0) > self.shared or c in self.lag_s]
 
     def finding(self) -> str:
         """The lagging transmitters, how much, and how much aligning for it changed ("" if none)."""
@@ -96,11 +112,16 @@ class PressureDelays:
         for c in self.lagging:
             other = [o for o in CHAMBERS if o != c][0]
             k, k0 = self.samples[c], self.shared
-            drop = 1.0 - self.sse[c][k] / self.sse[c][k0]
+            if c in self.lag_s:
+                how = f"a first-order lag of {self.lag_s[c] * 1e3:.2g} ms taken out"
+                drop = 1.0 - self.lag_sse[c] / self.sse[c][k0]
+            else:
+                how = f"taken {k - k0} samples later than the others"
+                drop = 1.0 - self.sse[c][k] / self.sse[c][k0]
             parts.append(
                 f"the {c} transmitter lags the other pressures by {(self.fine[c] - self.fine[other]) * self.dt * 1e3:.2g} ms "
                 f"(its delay against the model's replay {self.fine[c] * self.dt * 1e3:.2g} ms, {other}'s {self.fine[other] * self.dt * 1e3:.2g} ms; "
-                f"taken {k - k0} samples later than the others, its high-passed disagreement is {drop:.0%} smaller): a slow transmitter "
+                f"{how}, its high-passed disagreement is {drop:.0%} smaller): a slow transmitter "
                 f"or sensing line, which no library effect describes")
         return "; ".join(parts)
 
@@ -115,6 +136,19 @@ def shifted(rec: Record, k: int | dict) -> Record:
     n = rec.n
     raw = {c: (v[ks[c]:n - kmax + ks[c]] if c in PRESSURES else v[:n - kmax]).copy() for c, v in rec.raw.items()}
     return replace(rec, end_us=rec.end_us - int(round(kmax * rec.dt * 1e6)), raw=raw, sg={}, pos={}, noise={})
+
+
+def unlagged(rec: Record, lag_s: dict, settings) -> Record:
+    """``rec`` with each channel of ``lag_s`` (channel → first-order lag [s]) taken out of its lag,
+    p = p_m + τ ṗ_m (ṗ_m the Savitzky–Golay derivative of ``settings``), and every channel cut by
+    half a stencil at both ends, where that derivative is not defined."""
+    if not lag_s:
+        return rec
+    h = settings.savgol_window // 2
+    raw = {c: (v + lag_s[c] * savgol(v, settings.savgol_window, settings.savgol_order, 1, rec.dt) if c in lag_s else v)[h:rec.n - h].copy()
+           for c, v in rec.raw.items()}
+    cut = int(round(h * rec.dt * 1e6))
+    return replace(rec, start_us=rec.start_us + cut, end_us=rec.end_us - cut, raw=raw, sg={}, pos={}, noise={})
 
 
 def _vertex(s: np.ndarray, k: int) -> float:
@@ -133,25 +167,57 @@ def pressure_delays(prepared, plant, condition, settings) -> PressureDelays:
     dt = prepared[0].rec.dt if prepared else 1.0
     kmax = int(round(MAX_DELAY_S / dt)) if prepared else 0
     sse = {ch: np.zeros(kmax + 1) for ch in CHAMBERS}
-    box = np.ones(HIGHPASS_SAMPLES) / HIGHPASS_SAMPLES
+    replays = []
     for p in prepared:
         rr = dict(zip(CHAMBERS, hydraulic_readings(p, plant, condition, Effects(), settings)))
-        n = p.rec.n
+        replays.append(rr)
         for ch in CHAMBERS:
-            rep, rec = rr[ch], p.rec.raw[ch]
             for k in range(kmax + 1):
-                e = rec[k + kmax:] - rep[kmax:n - k]  # the same replayed samples for every k
-                ok = np.isfinite(e)
-                e = e - np.convolve(np.where(ok, e, 0.0), box, "same")
+                e, ok = _difference(p, rr[ch], ch, k, kmax)
                 sse[ch][k] += float(np.sum(e[ok] ** 2))
     own = {ch: int(np.argmin(s)) for ch, s in sse.items()}
     lo, hi = sorted(CHAMBERS, key=lambda ch: own[ch])
+    lag_s, lag_sse = {}, {}
     if own[hi] > own[lo] and min(sse[hi][own[lo]] / sse[hi][own[hi]], sse[lo][own[hi]] / sse[lo][own[lo]]) >= 1.0 + LAG_EVIDENCE:
-        samples = own  # each channel clearly prefers its own delay to the other's: one lags
+        samples = dict(own)  # each channel clearly prefers its own delay to the other's: one lags
+        tau, s_lag, s_dead = _first_order_lag(prepared, replays, hi, own[lo], own[hi], kmax)
+        if tau > 0.0 and s_lag < s_dead:  # a lag fits better than whole samples more
+            # its squared difference on the scale of ``sse`` (both were summed where the derivative is defined)
+            samples[hi], lag_s[hi], lag_sse[hi] = own[lo], tau, s_lag * sse[hi][own[hi]] / s_dead
     else:
         joint = int(np.argmin(sse["p1"] + sse["p2"]))
         samples = {ch: joint for ch in CHAMBERS}
-    return PressureDelays(samples=samples, fine={ch: _vertex(sse[ch], own[ch]) for ch in CHAMBERS}, sse=sse, dt=dt)
+    return PressureDelays(samples=samples, fine={ch: _vertex(sse[ch], own[ch]) for ch in CHAMBERS}, sse=sse, dt=dt, lag_s=lag_s, lag_sse=lag_sse)
+
+
+def _highpassed(e: np.ndarray, ok: np.ndarray) -> np.ndarray:
+    return e - np.convolve(np.where(ok, e, 0.0), np.ones(HIGHPASS_SAMPLES) / HIGHPASS_SAMPLES, "same")
+
+
+def _difference(p, rep: np.ndarray, ch: str, k: int, kmax: int) -> tuple[np.ndarray, np.ndarray]:
+    """(the high-passed difference of channel ``ch`` recorded ``k`` samples late from its replay
+    ``rep``, where it is defined)."""
+    e = p.rec.raw[ch][k + kmax:] - rep[kmax:p.rec.n - k]
+    ok = np.isfinite(e)
+    return _highpassed(e, ok), ok
+
+
+def _first_order_lag(prepared, replays, ch: str, k0: int, k: int, kmax: int) -> tuple[float, float, float]:
+    """(τ [s], the squared high-passed difference of channel ``ch`` shifted ``k0`` samples with the
+    lag τ taken out, that of ``ch`` shifted ``k`` > ``k0`` samples) over the replayed samples where
+    both are defined: τ least squares, the difference e + τ ṗ linear in τ."""
+    ee = ed = dd = s_dead = 0.0
+    for p, rr in zip(prepared, replays):
+        n, rep, rec = p.rec.n, rr[ch], p.rec.raw[ch]
+        m = n - kmax - k
+        e0 = (rec[k0 + kmax:] - rep[kmax:n - k0])[:m]
+        dp = p.rec.sg["d" + ch][k0 + kmax:][:m]
+        e1 = rec[k + kmax:] - rep[kmax:n - k]
+        ok = np.isfinite(e0) & np.isfinite(dp) & np.isfinite(e1)
+        e0, d, e1 = (_highpassed(v, ok)[ok] for v in (e0, dp, e1))
+        ee, ed, dd, s_dead = ee + float(e0 @ e0), ed + float(e0 @ d), dd + float(d @ d), s_dead + float(e1 @ e1)
+    tau = -ed / dd if dd > 0 else 0.0
+    return tau, ee + 2.0 * tau * ed + tau * tau * dd, s_dead
 
 
 def align_records(records: list[Record], plant, condition, settings) -> tuple[list[Record], PressureDelays]:
@@ -168,7 +234,7 @@ def align_prepared(records: list[Record], plant, condition, settings) -> tuple[l
     prepared = prepare_records(records, plant, condition, settings)
     d = pressure_delays(prepared, plant, condition, settings)
     ks = {c: d.of(c) for c in PRESSURES}
-    if not any(ks.values()):
+    if not any(ks.values()) and not d.lag_s:
         return records, d, prepared
-    records = [shifted(r, ks) for r in records]
+    records = [unlagged(shifted(r, ks), d.lag_s, settings) for r in records]
     return records, d, prepare_records(records, plant, condition, settings)
