@@ -157,7 +157,7 @@ def commissioning_model(seed: int, n_windows: int, family: str = "eq3", declared
 def run_cell(key: str, magnitude: str, commissioning: bool, seed: int, n_windows: int, method: str = "nuisance", family: str = "eq3",
              declared: str = "nameplate", plant_source: str = "model", load_interval_s: tuple[float, float] | None = None,
              sensors: str = "quiet", reconstruct: str = "") -> dict:
-    from model.effects import library_entry
+    from model.effects import effect_key, library_entry
     from transforms.discrepancy import split_records
     from transforms.discrepancy.nuisance import NuisancePriors
     from transforms.discrepancy.pipeline import diagnose
@@ -245,7 +245,7 @@ def run_cell(key: str, magnitude: str, commissioning: bool, seed: int, n_windows
         "acting_gap": acting, "acting_before_after": before_after, "shrink": shrink, "shrink_above_noise": shrink_above, "over_floor": over_floor,
         "equations_read": seen,
         # every candidate's first-step score: how far the false ones reach, to weigh a selection rule against
-        "first_step": [{"effect": c["effect"] + (f"[{c['variant']}]" if c["variant"] else ""), "z": c["z"], "t_stat": c["t_stat"],
+        "first_step": [{"effect": effect_key(c["effect"], c["variant"]), "z": c["z"], "t_stat": c["t_stat"],
                         "relative_gain": c["relative_gain"]} for c in d.candidates],
         "cpu_s": time.process_time() - t0,
     }

@@ -146,6 +146,11 @@ class Effects:
         return Effects(**kw)
 
 
+def effect_key(name: str, variant: str | None) -> str:
+    """An effect's key (:attr:`EffectSpec.key`) from its name and variant (p1, p2, or none)."""
+    return f"{name}[{variant}]" if variant else name
+
+
 @dataclass(frozen=True)
 class EffectSpec:
     """One candidate of the library: an effect name, a variant and its parameter.
@@ -186,7 +191,7 @@ class EffectSpec:
     @property
     def key(self) -> str:
         """``name`` or ``name[variant]``: unique within the library."""
-        return f"{self.name}[{self.variant}]" if self.variant else self.name
+        return effect_key(self.name, self.variant)
 
     def effects(self, value: float) -> Effects:
         """Effects with only this one switched on at ``value``."""

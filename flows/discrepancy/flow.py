@@ -40,6 +40,7 @@ from flows.common.instants import utc_instant
 from flows.common.prefect_run import flow, task
 from flows.common.warehouse_db import add_missing_columns, connect, ensure_tables, insert_frame, transaction
 from flows.discrepancy.lake_records import lake_records
+from model.effects import effect_key
 from model.params import PlantParams, ValveCondition
 from schemas.fields import (
     DISCREPANCY_CANDIDATE_FIELDS,
@@ -449,13 +450,11 @@ def summary_lines(report: DiscrepancyReport) -> list[str]:
         if f["effect"] == "none":
             lines.append(f"{report.valve_id}: no library effect named; gap {f['gap_before']:.3g}")
         elif f.get("parameter_ci_low") is None:
-            var = f"[{f['variant']}]" if f["variant"] else ""
-            lines.append(f"{report.valve_id}: #{f['rank']} {f['effect']}{var} {f['parameter_name']} = {_fmt(f['parameter_value'])} {f['parameter_unit']}, "
+            lines.append(f"{report.valve_id}: #{f['rank']} {effect_key(f['effect'], f['variant'])} {f['parameter_name']} = {_fmt(f['parameter_value'])} {f['parameter_unit']}, "
                          f"gap {f['gap_before']:.3g} → {f['gap_after']:.3g}")
         else:
-            var = f"[{f['variant']}]" if f["variant"] else ""
             lines.append(
-                f"{report.valve_id}: #{f['rank']} {f['effect']}{var} {f['parameter_name']} = {_fmt(f['parameter_value'])} {f['parameter_unit']} "
+                f"{report.valve_id}: #{f['rank']} {effect_key(f['effect'], f['variant'])} {f['parameter_name']} = {_fmt(f['parameter_value'])} {f['parameter_unit']} "
                 f"[{_fmt(f['parameter_ci_low'])}, {_fmt(f['parameter_ci_high'])}], gap {f['gap_before']:.3g} → {f['gap_after']:.3g} "
                 f"({f['gap_explained']:.0%} of the squared gap)"
             )

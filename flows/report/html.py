@@ -14,6 +14,7 @@ from flows.notify.message import CHANGE_WORDS
 from flows.report.figures import STATE_COLOURS
 from flows.report.quality import DataQuality, quality_section
 from flows.report.remaining import remaining_text
+from model.effects import effect_key
 
 CSS = """
 body { font-family: -apple-system, 'Segoe UI', Helvetica, Arial, sans-serif; margin: 24px; color: #212121; background: #fff; }
@@ -66,7 +67,7 @@ def _eq9(ok) -> str:
 
 
 def _effect(r: dict) -> str:
-    return r["effect"] + (f"[{r['variant']}]" if r.get("variant") else "")
+    return effect_key(r["effect"], r.get("variant"))
 
 
 def _discrepancy_section(discrepancy: dict[str, list[dict]]) -> list[str]:

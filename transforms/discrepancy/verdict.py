@@ -60,7 +60,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy import stats
 
-from model.effects import EffectSpec
+from model.effects import EffectSpec, effect_key
 from transforms.discrepancy.corrected import corrected_lstsq
 from transforms.discrepancy.gaps import GAP_SCALES, NOISE_GAP, SPLIT_GAPS
 from transforms.discrepancy.nuisance import NUISANCE_UNITS
@@ -253,7 +253,7 @@ def strongest_candidate(candidates: list[dict], min_t_stat: float) -> str:
     if not candidates or candidates[0]["relative_gain"] <= 0.0:
         return ""
     top = candidates[0]
-    key = top["effect"] + (f"[{top['variant']}]" if top["variant"] else "")
+    key = effect_key(top["effect"], top["variant"])
     return f"the equations' strongest candidate, {key}, takes {top['relative_gain']:.0%} of their residual at t = {top['t_stat']:.2g} (a name needs t ≥ {min_t_stat:g})"
 
 
