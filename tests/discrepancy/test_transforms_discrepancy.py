@@ -590,11 +590,13 @@ def test_each_pressure_channel_is_aligned_for_its_own_delay_and_a_lagging_one_is
     assert again.samples == {"p1": 0, "p2": 0} and again.finding() == ""
 
 
-def test_a_first_order_lag_on_one_transmitter_is_taken_out_as_a_lag_not_as_whole_samples():
-    """p1 through a first-order lag of 2 ms (Tustin, whose delay at low frequency is exactly τ),
-    every pressure one sample late (exact model, Table 1): p1 prefers 3 samples to p2's 1, but a
-    lag of 2 ms taken out on the shared sample fits its difference better than two samples more;
-    the records aligned so show neither lag nor delay left, and the finding names the lag."""
+@pytest.mark.parametrize("others_s", [0.0, 1e-3])
+def test_a_first_order_lag_on_one_transmitter_is_taken_out_as_a_lag_not_as_whole_samples(others_s):
+    """p1's transmitter 2 ms slower than the others' (first-order lags, Tustin: their delay at low
+    frequency is exactly τ; the others' 0 or 1 ms), every pressure one sample late (exact model,
+    Table 1): p1 prefers whole samples more than p2, but its lag taken out on p2's shift fits
+    better than any; τ reads 2 ms and the others' lag (from the second-order term) theirs; the
+    records aligned so show neither lag nor delay left, and the finding names the lag."""
     from scipy.signal import lfilter
 
     from transforms.discrepancy.alignment import align_records, pressure_delays
@@ -602,22 +604,28 @@ def test_a_first_order_lag_on_one_transmitter_is_taken_out_as_a_lag_not_as_whole
 
     res = simulate_windows(TABLE1, [TABLE1.nominal_condition], 4.0, seed=3)
     m = measure(res, TABLE1.sensors, np.random.default_rng(3))
-    dt, tau = 1e-3, 2e-3
-    k = dt / (2.0 * tau + dt)
-    p1 = m.p1[0] - m.p1[0][0]
-    lagged = {"p1": lfilter([k, k], [1.0, (dt - 2.0 * tau) / (dt + 2.0 * tau)], p1) + m.p1[0][0],
-              **{c: getattr(m, c)[0] for c in ("ps", "pr", "p2")}}
+    dt, extra = 1e-3, 2e-3
+
+    def lag(u, tau):
+        if tau == 0.0:
+            return u
+        k = dt / (2.0 * tau + dt)
+        return lfilter([k, k], [1.0, (dt - 2.0 * tau) / (dt + 2.0 * tau)], u - u[0]) + u[0]
+
+    lagged = {c: lag(getattr(m, c)[0], others_s + (extra if c == "p1" else 0.0)) for c in ("ps", "pr", "p1", "p2")}
     raw = {c: np.r_[v[0], v[:-1]] for c, v in lagged.items()}
     rec = Record("V", 0, 3_999_000, dt, {**raw, "x": m.x_spool[0], "X": m.x_cyl[0]})
     s, cond = DiscrepancySettings(), TABLE1.nominal_condition
     d = pressure_delays(prepare_records([rec], TABLE1, cond, s), TABLE1, cond, s)
-    assert d.samples == {"p1": 1, "p2": 1} and d.lagging == ["p1"], (d.samples, d.lag_s)
-    assert abs(d.lag_s["p1"] - tau) < 0.15 * tau, d.lag_s
+    shared = 1 + int(round(others_s / dt))
+    assert d.samples == {"p1": shared, "p2": shared} and d.lagging == ["p1"], (d.samples, d.lag_s)
+    assert abs(d.lag_s["p1"] - extra) < 0.1 * extra, d.lag_s
+    assert abs(-d.second_s2["p1"] / d.lag_s["p1"] - others_s) < 0.25e-3, d.second_s2
     assert d.lag_sse["p1"] < d.sse["p1"][int(np.argmin(d.sse["p1"]))]  # better than any whole samples
     assert f"a first-order lag of {d.lag_s['p1'] * 1e3:.2g} ms taken out" in d.finding(), d.finding()
     aligned, _ = align_records([rec], TABLE1, cond, s)
     h = s.savgol_window // 2
-    assert aligned[0].n == rec.n - 1 - 2 * h and aligned[0].start_us == h * 1000
+    assert aligned[0].n == rec.n - shared - 2 * h and aligned[0].start_us == h * 1000
     again = pressure_delays(prepare_records(aligned, TABLE1, cond, s), TABLE1, cond, s)
     assert again.samples == {"p1": 0, "p2": 0} and again.finding() == "", (again.samples, again.lag_s)
 

@@ -31,13 +31,14 @@ to absorb (with one delay for all pressures, a 2 ms lag on the reference plant's
 was named a −0.65 bar p1 offset).
 
 A lagging channel is aligned by whichever of two models of its extra delay fits its high-passed
-difference better: whole samples more (a dead time), or the shared shift and a first-order lag τ
-taken out, p = p_m + τ ṗ_m (ṗ_m the Savitzky–Golay derivative; τ by least squares, the
-difference linear in it). A slow transmitter is a lag, not a dead time: it passes the slow parts a
-little late and damps the fast ones, so whole samples leave a residual in ṗ that reads as a
-compressibility change (on the reference plant's 2 ms p1 lag, entrained air). The others' own lag
-is still aligned as whole samples: bringing p1 to it by a lag filter also smooths p1's noise,
-which then fits better for that alone.
+difference better: whole samples more (a dead time), or the shared shift and its lag above the
+others' taken out. A slow transmitter is a lag, not a dead time: it passes the slow parts a little
+late and damps the fast ones, so whole samples leave a residual in ṗ that reads as a
+compressibility change (on the reference plant's 2 ms p1 lag, entrained air). Bringing a
+first-order lag τ₁ to the others' τₒ is (1 + τ₁s)/(1 + τₒs) ≈ 1 + τs − τ τₒ s², τ = τ₁ − τₒ:
+p = p_m + τ ṗ_m + c p̈_m (Savitzky–Golay derivatives), τ and c ≤ 0 by least squares (the
+difference is linear in them), τₒ = −c/τ. The others' lag itself stays whole samples: against a
+dead time it is not told apart at the recorded noise.
 """
 
 from __future__ import annotations
@@ -79,10 +80,12 @@ class PressureDelays:
     dt : float
         Sample period. [s]
     lag_s : dict
-        A lagging channel's first-order lag taken out (module docstring), its ``samples`` then the
-        shared shift; absent where whole samples fit better. [s]
+        A lagging channel's lag above the others' taken out (τ, module docstring), its ``samples``
+        then the shared shift; absent where whole samples fit better. [s]
     lag_sse : dict
         The lagging channel's squared high-passed difference with that lag taken out.
+    second_s2 : dict
+        The lagging channel's second-order term c = −τ τₒ (module docstring). [s²]
     """
 
     samples: dict
@@ -91,6 +94,7 @@ class PressureDelays:
     dt: float
     lag_s: dict = field(default_factory=dict)
     lag_sse: dict = field(default_factory=dict)
+    second_s2: dict = field(default_factory=dict)
 
     @property
     def shared(self) -> int:
@@ -113,7 +117,8 @@ class PressureDelays:
             other = [o for o in CHAMBERS if o != c][0]
             k, k0 = self.samples[c], self.shared
             if c in self.lag_s:
-                how = f"a first-order lag of {self.lag_s[c] * 1e3:.2g} ms taken out"
+                how = f"a first-order lag of {self.lag_s[c] * 1e3:.2g} ms taken out" + (
+                    f" (on the others' {-self.second_s2[c] / self.lag_s[c] * 1e3:.2g} ms)" if self.second_s2[c] < 0.0 else "")
                 drop = 1.0 - self.lag_sse[c] / self.sse[c][k0]
             else:
                 how = f"taken {k - k0} samples later than the others"
@@ -138,14 +143,15 @@ def shifted(rec: Record, k: int | dict) -> Record:
     return replace(rec, end_us=rec.end_us - int(round(kmax * rec.dt * 1e6)), raw=raw, sg={}, pos={}, noise={})
 
 
-def unlagged(rec: Record, lag_s: dict, settings) -> Record:
+def unlagged(rec: Record, lag_s: dict, second_s2: dict, settings) -> Record:
     """``rec`` with each channel of ``lag_s`` (channel → first-order lag [s]) taken out of its lag,
-    p = p_m + τ ṗ_m (ṗ_m the Savitzky–Golay derivative of ``settings``), and every channel cut by
-    half a stencil at both ends, where that derivative is not defined."""
+    p = p_m + τ ṗ_m + c p̈_m (``second_s2``: channel → c [s²]; Savitzky–Golay derivatives of ``settings``),
+    and every channel cut by half a stencil at both ends, where those derivatives are not defined."""
     if not lag_s:
         return rec
     h = settings.savgol_window // 2
-    raw = {c: (v + lag_s[c] * savgol(v, settings.savgol_window, settings.savgol_order, 1, rec.dt) if c in lag_s else v)[h:rec.n - h].copy()
+    L, o = settings.savgol_window, settings.savgol_order
+    raw = {c: (v + lag_s[c] * savgol(v, L, o, 1, rec.dt) + second_s2.get(c, 0.0) * savgol(v, L, o, 2, rec.dt) if c in lag_s else v)[h:rec.n - h].copy()
            for c, v in rec.raw.items()}
     cut = int(round(h * rec.dt * 1e6))
     return replace(rec, start_us=rec.start_us + cut, end_us=rec.end_us - cut, raw=raw, sg={}, pos={}, noise={})
@@ -177,17 +183,17 @@ def pressure_delays(prepared, plant, condition, settings) -> PressureDelays:
                 sse[ch][k] += float(np.sum(e[ok] ** 2))
     own = {ch: int(np.argmin(s)) for ch, s in sse.items()}
     lo, hi = sorted(CHAMBERS, key=lambda ch: own[ch])
-    lag_s, lag_sse = {}, {}
+    lag_s, lag_sse, second = {}, {}, {}
     if own[hi] > own[lo] and min(sse[hi][own[lo]] / sse[hi][own[hi]], sse[lo][own[hi]] / sse[lo][own[lo]]) >= 1.0 + LAG_EVIDENCE:
         samples = dict(own)  # each channel clearly prefers its own delay to the other's: one lags
-        tau, s_lag, s_dead = _first_order_lag(prepared, replays, hi, own[lo], own[hi], kmax)
+        tau, c2, s_lag, s_dead = _lag_terms(prepared, replays, hi, own[lo], own[hi], kmax, settings)
         if tau > 0.0 and s_lag < s_dead:  # a lag fits better than whole samples more
             # its squared difference on the scale of ``sse`` (both were summed where the derivative is defined)
-            samples[hi], lag_s[hi], lag_sse[hi] = own[lo], tau, s_lag * sse[hi][own[hi]] / s_dead
+            samples[hi], lag_s[hi], lag_sse[hi], second[hi] = own[lo], tau, s_lag * sse[hi][own[hi]] / s_dead, c2
     else:
         joint = int(np.argmin(sse["p1"] + sse["p2"]))
         samples = {ch: joint for ch in CHAMBERS}
-    return PressureDelays(samples=samples, fine={ch: _vertex(sse[ch], own[ch]) for ch in CHAMBERS}, sse=sse, dt=dt, lag_s=lag_s, lag_sse=lag_sse)
+    return PressureDelays(samples=samples, fine={ch: _vertex(sse[ch], own[ch]) for ch in CHAMBERS}, sse=sse, dt=dt, lag_s=lag_s, lag_sse=lag_sse, second_s2=second)
 
 
 def _highpassed(e: np.ndarray, ok: np.ndarray) -> np.ndarray:
@@ -202,22 +208,31 @@ def _difference(p, rep: np.ndarray, ch: str, k: int, kmax: int) -> tuple[np.ndar
     return _highpassed(e, ok), ok
 
 
-def _first_order_lag(prepared, replays, ch: str, k0: int, k: int, kmax: int) -> tuple[float, float, float]:
-    """(τ [s], the squared high-passed difference of channel ``ch`` shifted ``k0`` samples with the
-    lag τ taken out, that of ``ch`` shifted ``k`` > ``k0`` samples) over the replayed samples where
-    both are defined: τ least squares, the difference e + τ ṗ linear in τ."""
-    ee = ed = dd = s_dead = 0.0
+def _lag_terms(prepared, replays, ch: str, k0: int, k: int, kmax: int, settings) -> tuple[float, float, float, float]:
+    """(τ [s], c [s²], the squared high-passed difference of channel ``ch`` shifted ``k0`` samples
+    with p_m + τ ṗ_m + c p̈_m, that of ``ch`` shifted ``k`` > ``k0`` samples) over the replayed
+    samples where both are defined: τ and c ≤ 0 by least squares (the difference linear in them)."""
+    G = np.zeros((2, 2))
+    b = np.zeros(2)
+    ee = s_dead = 0.0
     for p, rr in zip(prepared, replays):
         n, rep, rec = p.rec.n, rr[ch], p.rec.raw[ch]
         m = n - kmax - k
         e0 = (rec[k0 + kmax:] - rep[kmax:n - k0])[:m]
         dp = p.rec.sg["d" + ch][k0 + kmax:][:m]
+        ddp = savgol(rec, settings.savgol_window, settings.savgol_order, 2, p.rec.dt)[k0 + kmax:][:m]
         e1 = rec[k + kmax:] - rep[kmax:n - k]
-        ok = np.isfinite(e0) & np.isfinite(dp) & np.isfinite(e1)
-        e0, d, e1 = (_highpassed(v, ok)[ok] for v in (e0, dp, e1))
-        ee, ed, dd, s_dead = ee + float(e0 @ e0), ed + float(e0 @ d), dd + float(d @ d), s_dead + float(e1 @ e1)
-    tau = -ed / dd if dd > 0 else 0.0
-    return tau, ee + 2.0 * tau * ed + tau * tau * dd, s_dead
+        ok = np.isfinite(e0) & np.isfinite(dp) & np.isfinite(ddp) & np.isfinite(e1)
+        e0, d, dd, e1 = (_highpassed(v, ok)[ok] for v in (e0, dp, ddp, e1))
+        X = np.column_stack([d, dd])
+        G += X.T @ X
+        b += X.T @ e0
+        ee, s_dead = ee + float(e0 @ e0), s_dead + float(e1 @ e1)
+    theta = -np.linalg.solve(G, b) if np.linalg.det(G) > 0 else np.zeros(2)
+    if theta[1] > 0.0:  # a lag's second-order term is ≤ 0 (module docstring): τ alone
+        theta = np.array([-b[0] / G[0, 0] if G[0, 0] > 0 else 0.0, 0.0])
+    s_lag = ee + 2.0 * float(theta @ b) + float(theta @ G @ theta)
+    return float(theta[0]), float(theta[1]), s_lag, s_dead
 
 
 def align_records(records: list[Record], plant, condition, settings) -> tuple[list[Record], PressureDelays]:
@@ -236,5 +251,5 @@ def align_prepared(records: list[Record], plant, condition, settings) -> tuple[l
     ks = {c: d.of(c) for c in PRESSURES}
     if not any(ks.values()) and not d.lag_s:
         return records, d, prepared
-    records = [unlagged(shifted(r, ks), d.lag_s, settings) for r in records]
+    records = [unlagged(shifted(r, ks), d.lag_s, d.second_s2, settings) for r in records]
     return records, d, prepare_records(records, plant, condition, settings)
