@@ -179,8 +179,9 @@ def pressure_delays(prepared, plant, condition, settings) -> PressureDelays:
         replays.append(rr)
         for ch in CHAMBERS:
             for k in range(kmax + 1):
-                e, ok = _difference(p, rr[ch], ch, k, kmax)
-                sse[ch][k] += float(np.sum(e[ok] ** 2))
+                e = _difference(p, rr[ch], ch, k, kmax)
+                ok = np.isfinite(e)
+                sse[ch][k] += float(np.sum(_highpassed(e, ok)[ok] ** 2))
     own = {ch: int(np.argmin(s)) for ch, s in sse.items()}
     lo, hi = sorted(CHAMBERS, key=lambda ch: own[ch])
     lag_s, lag_sse, second = {}, {}, {}
@@ -200,12 +201,10 @@ def _highpassed(e: np.ndarray, ok: np.ndarray) -> np.ndarray:
     return e - np.convolve(np.where(ok, e, 0.0), np.ones(HIGHPASS_SAMPLES) / HIGHPASS_SAMPLES, "same")
 
 
-def _difference(p, rep: np.ndarray, ch: str, k: int, kmax: int) -> tuple[np.ndarray, np.ndarray]:
-    """(the high-passed difference of channel ``ch`` recorded ``k`` samples late from its replay
-    ``rep``, where it is defined)."""
-    e = p.rec.raw[ch][k + kmax:] - rep[kmax:p.rec.n - k]
-    ok = np.isfinite(e)
-    return _highpassed(e, ok), ok
+def _difference(p, rep: np.ndarray, ch: str, k: int, kmax: int) -> np.ndarray:
+    """Channel ``ch`` of ``p``'s record taken ``k`` samples late, minus its replay ``rep`` (from the
+    replay's sample ``kmax`` on)."""
+    return p.rec.raw[ch][k + kmax:] - rep[kmax:p.rec.n - k]
 
 
 def _lag_terms(prepared, replays, ch: str, k0: int, k: int, kmax: int, settings) -> tuple[float, float, float, float]:
@@ -216,12 +215,11 @@ def _lag_terms(prepared, replays, ch: str, k0: int, k: int, kmax: int, settings)
     b = np.zeros(2)
     ee = s_dead = 0.0
     for p, rr in zip(prepared, replays):
-        n, rep, rec = p.rec.n, rr[ch], p.rec.raw[ch]
-        m = n - kmax - k
-        e0 = (rec[k0 + kmax:] - rep[kmax:n - k0])[:m]
+        m = p.rec.n - kmax - k
+        e0 = _difference(p, rr[ch], ch, k0, kmax)[:m]
         dp = p.rec.sg["d" + ch][k0 + kmax:][:m]
-        ddp = savgol(rec, settings.savgol_window, settings.savgol_order, 2, p.rec.dt)[k0 + kmax:][:m]
-        e1 = rec[k + kmax:] - rep[kmax:n - k]
+        ddp = savgol(p.rec.raw[ch], settings.savgol_window, settings.savgol_order, 2, p.rec.dt)[k0 + kmax:][:m]
+        e1 = _difference(p, rr[ch], ch, k, kmax)
         ok = np.isfinite(e0) & np.isfinite(dp) & np.isfinite(ddp) & np.isfinite(e1)
         e0, d, dd, e1 = (_highpassed(v, ok)[ok] for v in (e0, dp, ddp, e1))
         X = np.column_stack([d, dd])
