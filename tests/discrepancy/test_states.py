@@ -4,11 +4,14 @@ the noisy end of plant sensors, against its true spool and cylinder."""
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.signal import savgol_filter
 
 from model.params import SpoolParams
 from tests.refplant import NAMEPLATE, manufactured, noisy_end, simulate_windows
 from transforms.discrepancy.records import savgol
-from transforms.discrepancy.states import cylinder_states, spool_from_reference, spool_response
+from transforms.discrepancy.states import cylinder_states, spool_from_reference, spool_response, straight_lines
 
 DT = 1.0e-3
 
@@ -22,6 +25,18 @@ def test_spool_response_is_the_critically_damped_step_response():
     exact = 10e-6 * (1 - (1 + t / sp.T_s) * np.exp(-t / sp.T_s))
     np.testing.assert_allclose(x[5:], exact, atol=0.35e-6)  # explicit steps of 0.1 ms: 0.31 µm at the first sample
     assert np.all(x[:5] == 0.0)
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(2, 400), st.integers(0, 1200), st.integers(0, 2**32 - 1))
+def test_straight_lines_are_savitzky_golay_of_order_one(half, extra, seed):
+    """The spool offset's smoothing in O(n) gives scipy's savgol_filter(y, w, 1) (interp ends) to
+    rounding, on any length from one window up, for an offset, a slope and noise."""
+    w = 2 * half + 1
+    rng = np.random.default_rng(seed)
+    n = w + extra
+    y = 1e-4 + 3e-6 * np.arange(n) / n + rng.normal(0.0, 7e-6, n)
+    np.testing.assert_allclose(straight_lines(y, w), savgol_filter(y, w, 1), rtol=0, atol=1e-15)
 
 
 def test_spool_speed_is_limited_to_v_max():
