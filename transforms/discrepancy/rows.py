@@ -117,26 +117,20 @@ def _accel_noise(rec: Record, half_widths: np.ndarray, settings) -> np.ndarray:
     return (ss / count) * energy[half_widths] / (L * rec.dt) ** 4
 
 
-def _estimate_load(rec: Record, plant, condition, effects, settings) -> LoadEstimate:
-    """The load of one record under the model with ``effects`` (piecewise constant, or piecewise
-    linear within segments where it ramps).
+def _load_inputs(rec: Record, plant, condition, effects, settings) -> tuple:
+    """(the force balance F̂_l [N], the equation terms (Savitzky–Golay), v_X [m/s], the
+    acceleration [m/s²], :func:`_load_motion`) a record's load is estimated from."""
+    return (_force_balance(rec, plant, condition, effects, settings), _terms_sg(rec, plant, condition, effects)) + _load_motion(rec, settings)
 
-    Its steps, whether it ramps and its knots are decided on the force balance as it is (so the
-    regression's load elimination stays as it was; whether it ramps on what the residuals hold
-    above the white noise X leaves there, :func:`transforms.discrepancy.load.follows_ramps`). Its
-    values, and the friction and mass its load leaves (:func:`motion_mismatch`), are fitted on the
-    balance averaged as the motion rows are (:func:`box_within`): the second difference of X
-    carries ~370 N of a 10 µm position noise on the reference plant, the average ~80 N, and the
-    acceleration's noise that reads as a lighter mass falls 22× (:func:`second_difference_energy`);
-    the fit corrects for the rest."""
-    f_hat = _force_balance(rec, plant, condition, effects, settings)
-    t = _terms_sg(rec, plant, condition, effects)
-    v, a = _load_motion(rec, settings)
-    # the variance X's white noise leaves in f_hat, its second difference not averaged [N²]
-    noise_n2 = float(_accel_noise(rec, np.zeros(1, dtype=np.int64), settings)[0]) * float(np.mean(t["mass"])) ** 2
-    load = estimate_load(f_hat, v, settings, f_point=t["force"] - t["mass"] * rec.sg["a"], accel=a, dt=rec.dt, noise_n2=noise_n2)
-    load = _refine_rest_steps(rec, load, f_hat, plant, condition, effects, settings)
-    # averaged over the motion rows' shifts, within the samples where the balance is the load
+
+def _fit_load(rec: Record, load: LoadEstimate, inputs: tuple, plant, settings) -> LoadEstimate:
+    """``load`` (its steps and knots) with its values, and the friction and mass it leaves
+    (:func:`motion_mismatch`), fitted on the force balance of ``inputs`` (:func:`_load_inputs`)
+    averaged as the motion rows are (:func:`box_within`): the second difference of X carries ~370 N
+    of a 10 µm position noise on the reference plant, the average ~80 N, and the acceleration's
+    noise that reads as a lighter mass falls 22× (:func:`second_difference_energy`); the fit
+    corrects for the rest."""
+    f_hat, t, v, a = inputs
     half = settings.interval_smoothing // 2
     a_ok = load_valid(a, v, settings)
     f_avg, a_avg = box_within(f_hat, load_valid(f_hat, v, settings), half), box_within(a, a_ok, half)
@@ -146,6 +140,22 @@ def _estimate_load(rec: Record, plant, condition, effects, settings) -> LoadEsti
     load = replace(load, friction_mismatch=dv, mass_mismatch=dm)
     d_v = plant.cylinder.d_v_n_s_m
     return friction_within(load, v, settings.mechanical_friction_rel * d_v, settings.load_friction_rel * d_v)
+
+
+def _estimate_load(rec: Record, plant, condition, effects, settings) -> LoadEstimate:
+    """The load of one record under the model with ``effects`` (piecewise constant, or piecewise
+    linear within segments where it ramps).
+
+    Its steps, whether it ramps and its knots are decided on the force balance as it is (so the
+    regression's load elimination stays as it was; whether it ramps on what the residuals hold
+    above the white noise X leaves there, :func:`transforms.discrepancy.load.follows_ramps`); its
+    values on the averaged balance (:func:`_fit_load`)."""
+    inputs = _load_inputs(rec, plant, condition, effects, settings)
+    f_hat, t, v, a = inputs
+    # the variance X's white noise leaves in f_hat, its second difference not averaged [N²]
+    noise_n2 = float(_accel_noise(rec, np.zeros(1, dtype=np.int64), settings)[0]) * float(np.mean(t["mass"])) ** 2
+    load = estimate_load(f_hat, v, settings, f_point=t["force"] - t["mass"] * rec.sg["a"], accel=a, dt=rec.dt, noise_n2=noise_n2)
+    return _fit_load(rec, _refine_rest_steps(rec, load, f_hat, plant, condition, effects, settings), inputs, plant, settings)
 
 
 def _load_estimate_for(p: _Prepared, plant, condition, effects, settings) -> LoadEstimate:
@@ -612,18 +622,28 @@ def noise_floors(prepared, plant, condition, effects, settings, draws: int = NOI
       through the chamber volumes' rate (β/V1 · A1 · 10 µm is ~0.4 bar on Table 1's cylinder),
       the pressures' through the restarts;
     * mechanical: sqrt((X noise / 1 mm)² + (e / 1 mm)²), e the RMS over the judged samples of the
-      mechanical replay (:func:`_mechanical_replay`, the model ``plant`` with its
-      :func:`_mechanical_model` friction and mass, ``condition``, ``effects`` and its load) with
-      the noise added to p1, p2 and X (X enters through the restarts: the position and its
-      Savitzky–Golay velocity). The replay integrates the force twice, so the pressures' noise
-      (0.05 bar: ~30 N on Table 1's cylinder) leaves ~10 µm, ten times the X noise.
+      mechanical replay (:func:`_mechanical_replay`, the model ``plant``, ``condition``,
+      ``effects``) with the noise added to p1, p2 and X and the load's values fitted again on
+      them (:func:`_fit_load`: its levels, ramps and the friction and mass it leaves, its steps
+      and knots kept). X enters through the restarts (the position and its Savitzky–Golay
+      velocity) and through the load's values. The replay integrates the force twice, so the
+      pressures' noise (0.05 bar: ~30 N on Table 1's cylinder) leaves ~10 µm, ten times the X
+      noise. At the noisy end of plant sensors (cylinder 10 µm in 5 µm steps) the load's values
+      take a share: on the reference plant's clean valve (seeds 0–5, the spool reconstructed)
+      the floor is 0.059–0.084 mm, 0.052–0.055 with the load kept, and the gap over it 0.66–2.06×
+      instead of 0.94–2.85×. Where the rest lies: the load's decisions (seed 1 replays 0.018 mm
+      on the load estimated from the same pressures and a 1 µm X, 0.15 mm on the 10 µm X's).
+      Deciding the steps and ramps again in every draw took the gap under 1.43× its floor but
+      doubled a diagnosis's CPU, and under a mechanical effect the base model's floor rose to
+      2.0 mm (a 20 % friction change): not taken.
     """
     h = settings.savgol_window // 2
     rms = pooled_noise(prepared, ("p1", "p2", "X", "x", "ps", "pr"))
     mech, hyd = [0.0, 0], {"p1": [0.0, 0], "p2": [0.0, 0]}
     for i, p in enumerate(prepared):
         rec = p.rec
-        judged, mstarts = _mechanical_restarts(rec, settings, _load_estimate_for(p, plant, condition, effects, settings))
+        key, est = (plant, condition, effects), _load_estimate_for(p, plant, condition, effects, settings)
+        judged, mstarts = _mechanical_restarts(rec, settings, est)
         judged[rec.n - h:] = False
         mplant, load = _mechanical_model(p, plant, condition, effects, settings, _replay_load_for(p, plant, condition, effects, settings))
         nominal = _mechanical_replay(rec, mplant, condition, effects, load, mstarts)
@@ -635,7 +655,10 @@ def noise_floors(prepared, plant, condition, effects, settings, draws: int = NOI
             for k in ("p1", "p2", "X"):
                 raw[k] = raw[k] + rng.normal(0.0, rms[k], rec.n)
             noisy = prepare_record(Record(rec.valve_id, rec.start_us, rec.end_us, rec.dt, raw), settings, plant.spool)
-            d = (_mechanical_replay(noisy, mplant, condition, effects, load, mstarts) - nominal)[judged]
+            # the load's values estimated again on the noisy record, its steps and knots kept
+            again = replace(p, rec=noisy, loads={key: _fit_load(noisy, est, _load_inputs(noisy, plant, condition, effects, settings), plant, settings)})
+            mplant_n, load_n = _mechanical_model(again, plant, condition, effects, settings, _replay_load_for(again, plant, condition, effects, settings))
+            d = (_mechanical_replay(noisy, mplant_n, condition, effects, load_n, mstarts) - nominal)[judged]
             ok = np.isfinite(d)
             mech[0] += float(np.sum(d[ok] ** 2))
             mech[1] += int(ok.sum())
