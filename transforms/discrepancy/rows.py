@@ -222,8 +222,8 @@ REST_STEP_TAIL = 300
 
 
 def _replay_span(rec: Record, plant, condition, effects, a: int, b: int, load: np.ndarray, prefix=None, k: int = 0):
-    """Replay samples [a, b) of a record from its measured state at a; returns the readings
-    (p1, p2, X) or None if the replay diverged. ``prefix``: the states (X, v_X, p1, p2) of a
+    """Replay samples [a, b) of a record from its measured state at a; returns its states
+    (X, v_X, p1, p2) or None if the replay diverged. ``prefix``: the states of a
     replay of the span with a load that equals ``load`` before a + ``k`` (its :func:`_replay_span_states`):
     the replay is then continued from its state at a + k, the same numbers as replaying all."""
     if prefix is None or k <= 0:
@@ -237,8 +237,7 @@ def _replay_span(rec: Record, plant, condition, effects, a: int, b: int, load: n
         except FloatingPointError:
             return None
         prefix = np.concatenate([prefix[:, :k], np.vstack([r.X_m, r.vX_m_s, r.p1_pa, r.p2_pa])[:, k:]], axis=1)
-    p1r, p2r = pressure_readings(prefix[2], prefix[3], effects)
-    return p1r, p2r, prefix[0]
+    return prefix
 
 
 def _smoothed(rec: Record, key: str) -> np.ndarray:
@@ -290,7 +289,7 @@ def _initial_hold(rec: Record, load: LoadEstimate, plant, condition, effects, se
         if out is None:
             errs.append(np.inf)
             continue
-        errs.append(_span_error(rec, a, b, *out))
+        errs.append(_span_error(rec, a, b, out, effects))
     if errs[1] < errs[0]:
         return replace(load, hold_until=first_move)
     return load
@@ -301,10 +300,11 @@ def _squared_misses(rec: Record, a: int, b: int, p1r: np.ndarray, p2r: np.ndarra
     return (p1r - rec.raw["p1"][a:b]) ** 2, (p2r - rec.raw["p2"][a:b]) ** 2, (Xr - rec.raw["X"][a:b]) ** 2
 
 
-def _span_error(rec: Record, a: int, b: int, p1r: np.ndarray, p2r: np.ndarray, Xr: np.ndarray) -> float:
-    """How far a replay of samples [a, b) lies from the recorded p1, p2 [per 1e5 Pa] and X [per mm],
-    in squares (:func:`_refine_rest_steps`)."""
-    m1, m2, mX = _squared_misses(rec, a, b, p1r, p2r, Xr)
+def _span_error(rec: Record, a: int, b: int, states: np.ndarray, effects) -> float:
+    """How far a replay of samples [a, b) (its ``states``, :func:`_replay_span`) lies from the
+    recorded p1, p2 [per 1e5 Pa] and X [per mm], in squares (:func:`_refine_rest_steps`)."""
+    p1r, p2r = pressure_readings(states[2], states[3], effects)
+    m1, m2, mX = _squared_misses(rec, a, b, p1r, p2r, states[0])
     return (np.sum(m1) + np.sum(m2)) / 1e10 + np.sum(mX) / 1e-6
 
 
@@ -317,6 +317,17 @@ def _prefix_errors(rec: Record, effects, a: int, b: int, prefix: np.ndarray | No
         m1, m2, mX = _squared_misses(rec, a, b, p1r, p2r, prefix[0])
         out[1:] = np.cumsum((m1 + m2) / 1e10 + mX / 1e-6)
     return out
+
+
+def _replays_alike(last: np.ndarray | None, prefix: np.ndarray | None, j_last: int, j: int) -> bool:
+    """Would a candidate step at index ``j`` of the span replay as the last candidate replayed
+    (``last``, its step at ``j_last``)? Yes where ``last`` equals the old load's replay
+    (``prefix``) from ``j_last`` to ``j``, ``j`` included: before ``j`` both are then the old
+    load's, and from ``j`` on both replay the new load from the same state, the same numbers.
+    A load step while the replayed cylinder sticks under both levels changes nothing (the
+    chambers' flows do not depend on the load), so across a long standstill most candidates
+    replay alike."""
+    return last is not None and prefix is not None and j < last.shape[1] and np.array_equal(last[:, j_last:j + 1], prefix[:, j_last:j + 1])
 
 
 def _refine_rest_steps(rec: Record, load: LoadEstimate, f_hat: np.ndarray, plant, condition, effects, settings) -> LoadEstimate:
@@ -349,14 +360,19 @@ def _refine_rest_steps(rec: Record, load: LoadEstimate, f_hat: np.ndarray, plant
         # a candidate's error sums non-negative terms, those before its step the prefix's: where
         # they alone exceed the best error (beyond rounding), it and every later one cannot win
         before = _prefix_errors(rec, effects, a, b, prefix)
+        last, j_last = None, 0  # the states of the last candidate replayed, its step's index
         for c in cands:
-            if before[min(max(int(c) - a, 0), b - a)] > best_err * (1.0 + 1.0e-9):
+            j = min(max(int(c) - a, 0), b - a)
+            if before[j] > best_err * (1.0 + 1.0e-9):
                 break
+            if _replays_alike(last, prefix, j_last, j):
+                continue
             F = replay_load(np.where(np.arange(a, b) < c, old, new), hold[a:b], stuck[a:b])
             out = _replay_span(rec, plant, condition, effects, a, b, F, prefix, int(c) - a)
+            last, j_last = out, j
             if out is None:
                 continue
-            err = _span_error(rec, a, b, *out)
+            err = _span_error(rec, a, b, out, effects)
             if err < best_err:
                 best, best_err = int(c), err
         steps[i] = best
