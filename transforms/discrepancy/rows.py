@@ -649,6 +649,8 @@ def noise_floors(prepared, plant, condition, effects, settings, draws: int = NOI
       the floor is 0.059–0.084 mm, 0.052–0.055 with the load kept, and the gap over it 0.66–2.06×
       instead of 0.94–2.85×. Where the rest lies: the load's decisions (seed 1 replays 0.018 mm
       on the load estimated from the same pressures and a 1 µm X, 0.15 mm on the 10 µm X's).
+      At 1 µm the refitted load takes up part of the pressures' noise, as the record's own load
+      does: the floor is ~20 % lower, the clean valve 0.93–1.65× it (0.76–1.36× with the load kept).
       Deciding the steps and ramps again in every draw took the gap under 1.43× its floor but
       doubled a diagnosis's CPU, and under a mechanical effect the base model's floor rose to
       2.0 mm (a 20 % friction change): not taken.
