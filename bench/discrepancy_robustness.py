@@ -73,15 +73,16 @@ REF_OUTSIDE = ("pressure_dependent_friction", "transmitter_lag")
 
 
 def ref_lake(key: str | None, value, valve_seed: int, window_seed: int, n_windows: int, load_interval_s: tuple[float, float] | None = None,
-             sensors: str = "quiet"):
+             sensors: str = "quiet", operation: str = "busy"):
     """Lake rows of the reference plant's valve ``valve_seed`` (``manufactured``) over windows drawn
     from ``window_seed``, with effect ``key`` (a library key or one of ``REF_OUTSIDE``) at ``value``
     (None: its typical magnitude); ``load_interval_s`` the range of the load's intervals between
     new levels [s] (None: the plant's 1–4 s); ``sensors``: ``quiet`` (positions at 1 µm) or
-    ``noisy_end`` (spool 0.2 % of x_max, cylinder 10 µm in 5 µm steps)."""
+    ``noisy_end`` (spool 0.2 % of x_max, cylinder 10 µm in 5 µm steps); ``operation``: ``busy`` (dwells
+    0.2–0.8 s) or ``sparse`` (dwells 2–10 s, ``tests.refplant.sparse``)."""
     from datetime import datetime, timezone
 
-    from tests.refplant import NAMEPLATE, effect, manufactured, noisy_end, simulate_windows, to_lake_frame
+    from tests.refplant import NAMEPLATE, effect, manufactured, noisy_end, simulate_windows, sparse, to_lake_frame
 
     fx = None
     if key is not None:
@@ -90,6 +91,8 @@ def ref_lake(key: str | None, value, valve_seed: int, window_seed: int, n_window
     plant = manufactured(NAMEPLATE, seed=valve_seed)
     if sensors == "noisy_end":
         plant = noisy_end(plant)
+    if operation == "sparse":
+        plant = sparse(plant)
     if load_interval_s is not None:
         plant = replace(plant, operation=replace(plant.operation, load_interval_s=tuple(load_interval_s)))
     recs = simulate_windows(plant, n_windows, window_seed, effects=fx)
@@ -156,7 +159,7 @@ def commissioning_model(seed: int, n_windows: int, family: str = "eq3", declared
 
 def run_cell(key: str, magnitude: str, commissioning: bool, seed: int, n_windows: int, method: str = "nuisance", family: str = "eq3",
              declared: str = "nameplate", plant_source: str = "model", load_interval_s: tuple[float, float] | None = None,
-             sensors: str = "quiet", reconstruct: str = "") -> dict:
+             sensors: str = "quiet", reconstruct: str = "", operation: str = "busy") -> dict:
     from model.effects import effect_key, library_entry
     from transforms.discrepancy import split_records
     from transforms.discrepancy.nuisance import NuisancePriors
@@ -175,7 +178,7 @@ def run_cell(key: str, magnitude: str, commissioning: bool, seed: int, n_windows
         effects = spec.effects(value)
     s = settings_for(reconstruct)
     if plant_source == "ref":
-        lake = ref_lake(None if key == "none" else key, value, seed, 100 + seed, n_windows, load_interval_s, sensors)
+        lake = ref_lake(None if key == "none" else key, value, seed, 100 + seed, n_windows, load_interval_s, sensors, operation)
     else:
         lake = _lake(effects, 100 + seed, n_windows, true_plant(seed, family)[0])
     recs = split_records(lake, s)
@@ -237,7 +240,7 @@ def run_cell(key: str, magnitude: str, commissioning: bool, seed: int, n_windows
         rel_err = abs(got_value - value) / abs(value - spec.neutral)
     return {
         "effect": key, "magnitude": magnitude, "commissioning": commissioning, "seed": seed, "value": value, "method": method, "family": family, "declared": declared,
-        "plant": plant_source, "sensors": sensors, "reconstruct": reconstruct, "load_interval_s": load_interval_s, "pressure_delay_samples": d.pressure_delay_samples, "pressure_delays": d.pressure_delays,
+        "plant": plant_source, "sensors": sensors, "reconstruct": reconstruct, "operation": operation, "load_interval_s": load_interval_s, "pressure_delay_samples": d.pressure_delay_samples, "pressure_delays": d.pressure_delays,
         "lag_finding": d.lag_finding, "reason": d.verdict.reason if d.verdict is not None else "",
         "verdict": verdict, "got": got, "got_value": got_value, "alternatives": alts, "confidence": conf, "outcome": outcome,
         "rel_err": rel_err, "gap_nominal": d.gap_nominal, "gap_before": d.stage_gaps[0], "gap_after": d.stage_gaps[-1],
@@ -303,6 +306,8 @@ def main(argv=None) -> None:
                     help="with --plant ref: positions recorded at 1 µm, or at the noisy end of plants (spool 0.2 %% of x_max, cylinder 10 µm in 5 µm steps)")
     ap.add_argument("--reconstruct", default="", choices=("", "x", "X", "xX"),
                     help="reconstruct the spool (x), the cylinder (X) or both before the diagnosis (settings.reconstruct_spool, reconstruct_cylinder)")
+    ap.add_argument("--operation", default="busy", choices=("busy", "sparse"),
+                    help="with --plant ref: the diagnosed windows' operation, dwells of 0.2-0.8 s (busy) or 2-10 s (sparse; the commissioning window stays busy)")
     ap.add_argument("--out", default="bench/discrepancy_robustness.jsonl")
     a = ap.parse_args(argv)
     keys = [s.key for s in EFFECT_LIBRARY] + (list(REF_OUTSIDE) if a.plant == "ref" else []) if a.effects == "all" else a.effects.split(",")
@@ -313,15 +318,17 @@ def main(argv=None) -> None:
         ap.error("--load-interval-s needs --plant ref")
     if a.sensors != "quiet" and a.plant != "ref":
         ap.error("--sensors needs --plant ref")
+    if a.operation != "busy" and a.plant != "ref":
+        ap.error("--operation needs --plant ref")
     interval = tuple(float(v) for v in a.load_interval_s.split(",")) if a.load_interval_s else None
     tasks = []
     for c in comms:
         for seed in seeds:  # seed-major, so a worker reuses its commissioning calibration
             if a.effects == "all" or "none" in keys:
-                tasks.append(("none", "typical", c, seed, a.windows, a.method, a.family, a.declared, a.plant, interval, a.sensors, a.reconstruct))
+                tasks.append(("none", "typical", c, seed, a.windows, a.method, a.family, a.declared, a.plant, interval, a.sensors, a.reconstruct, a.operation))
             for m in mags:
                 for k in (k for k in keys if k != "none"):
-                    tasks.append((k, m, c, seed, a.windows, a.method, a.family, a.declared, a.plant, interval, a.sensors, a.reconstruct))
+                    tasks.append((k, m, c, seed, a.windows, a.method, a.family, a.declared, a.plant, interval, a.sensors, a.reconstruct, a.operation))
     t0 = time.time()
     rows = []
     out = Path(a.out)

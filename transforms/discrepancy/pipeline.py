@@ -263,11 +263,12 @@ directions are projected out is not selected on the residuals (it is a nuisance 
 
 
 def _select(prepared, plant, condition, specs, settings, nuisance=None):
-    """Rows, weights and forward selection against the base model (module docstring). With
-    ``nuisance`` = (NuisanceModel, z) the plant and condition are the nuisance model at z and the
-    residual and every candidate's regressor are first cleared of what the nuisances (within
-    their priors) explain (:func:`_project_out`): a candidate is then scored only on what the
-    nuisances cannot explain."""
+    """(rows, weights, forward selection, equation sigmas, patterns) against the base model
+    (module docstring). With ``nuisance`` = (NuisanceModel, z) the plant and condition are the
+    nuisance model at z and the residual and every candidate's regressor are first cleared of what
+    the nuisances (within their priors) explain (:func:`_project_out`): a candidate is then scored
+    only on what the nuisances cannot explain; ``patterns`` are the candidates the nuisances
+    reproduce (nothing left to score), which the verdict weighs by their priors."""
     base = Effects()
     rows0 = _rows(prepared, plant, condition, base, settings)
     r0 = _eliminate_load(rows0.y, rows0)
@@ -293,13 +294,14 @@ def _select(prepared, plant, condition, specs, settings, nuisance=None):
         # a candidate the nuisances reproduce (a spool offset is an underlap pattern, a mass change
         # the mass) has nothing left to select on; the verdict weighs it against the priors
         cand = [j for j in cand if after[j] > NUISANCE_COLLINEAR * before[j]]
+    patterns = [specs[j] for j in range(len(specs)) if j not in cand]
     st = block_stats(yw, Jw, rows0.block, noise)
     sel: SelectionResult = forward_select(
         st, cand, max_effects=settings.max_effects, min_t_stat=settings.min_t_stat,
         min_relative_gain=settings.min_relative_gain, min_z=settings.min_z,
         positive=frozenset(j for j, spec in enumerate(specs) if spec.lower is not None),
     )
-    return rows0, w_rows, sel, sig
+    return rows0, w_rows, sel, sig, patterns
 
 
 def diagnose(records: list[Record], plant: PlantParams, condition: ValveCondition | None = None, settings: DiscrepancySettings | None = None, *, library: tuple[EffectSpec, ...] = EFFECT_LIBRARY, trace_records: int = 1, monitoring: bool = True, priors: NuisancePriors | None = None) -> Diagnosis:
@@ -370,7 +372,7 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
     # inertia mismatch changes fast it can pass for a load step and absorb part of the effect):
     # once effects are named, the load is segmented again with the fitted model and the
     # selection repeated (alternating between the nuisance load and the effects)
-    rows0, w_rows, sel, sig = _select(prepared, plant, condition, specs, settings, None if nm is None else (nm, z_cal))
+    rows0, w_rows, sel, sig, patterns = _select(prepared, plant, condition, specs, settings, None if nm is None else (nm, z_cal))
     floors = noise_floors(prepared, plant, condition, base, settings)
 
     def refine(named_specs, start):
@@ -391,7 +393,7 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
         if nm is not None:
             z_cal = calibrate_prepared(prepared, nm, settings, z0=z_cal, split=True)[0].z
             plant, condition = nm.model(z_cal)
-        rows0, w_rows, sel, sig = _select(prepared, plant, condition, specs, settings, None if nm is None else (nm, z_cal))
+        rows0, w_rows, sel, sig, patterns = _select(prepared, plant, condition, specs, settings, None if nm is None else (nm, z_cal))
     B = sel.n_blocks
     q = float(_stats.t.ppf(0.5 + settings.ci_level / 2.0, max(B - 1, 1)))
     candidates = []
@@ -478,7 +480,7 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
     verdict = None
     gap_nominal = stage_gaps[0]
     if nm is not None:
-        from transforms.discrepancy.verdict import beyond_selection, nuisance_verdict
+        from transforms.discrepancy.verdict import against_patterns, beyond_selection, nuisance_scores, nuisance_verdict
 
         if final_fit is None:
             final_fit = joint_fit(prepared, nm, z_cal, [], base, rows0, w_rows, settings, iterations=0)
@@ -486,13 +488,20 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
             return _gaps(prepared, *model, fx, settings, set())[0]
 
         verdict = nuisance_verdict(prepared, nm, final_fit, named_specs, specs, rows0, w_rows, settings, named, gap_of, stage_gaps[0], floors, stage_acc)
-        if named and not named[0].confirmed:
-            # the selection's effect does not close its gap: the other candidates' readings against
-            # the calibrated base model, judged as where nothing was selected (verdict.beyond_selection)
+        if named:
             base_fit = joint_fit(prepared, nm, z_cal, [], base, rows0, w_rows, settings, iterations=0)
-            rest = [s for s in specs if s != named[0].spec]
-            verdict = beyond_selection(verdict, nuisance_verdict(prepared, nm, base_fit, [], rest, rows0, w_rows, settings, [], gap_of,
-                                                                 stage_gaps[0], floors, stage_acc))
+
+            def judged(rest):
+                """The readings of ``rest`` against the calibrated base model, judged as where nothing was selected."""
+                return nuisance_verdict(prepared, nm, base_fit, [], rest, rows0, w_rows, settings, [], gap_of, stage_gaps[0], floors, stage_acc)
+
+            if not named[0].confirmed:
+                # the selection's effect does not close its gap: the other candidates' readings (verdict.beyond_selection)
+                verdict = beyond_selection(verdict, judged([s for s in specs if s != named[0].spec]))
+            elif patterns:
+                # the candidates the selection could not score, by their priors (verdict.against_patterns)
+                verdict = against_patterns(verdict, nuisance_scores(nm, base_fit, [], [named[0].spec] + patterns, rows0, w_rows, settings, prepared),
+                                           lambda: judged(specs))
         for p, p0 in zip(prepared, prepared0):  # the same records (prepare_records keeps or drops a record by its length)
             p.loads.setdefault((*nominal, base), p0.base_load)
         gap_nominal = _gaps(prepared, *nominal, base, settings, set(), split=False)[0].gap()

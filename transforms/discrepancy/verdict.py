@@ -6,7 +6,9 @@ Two kinds of evidence (docs/discrepancy.md, "Verdicts"):
 1. **What the nuisances cannot explain at all.** The forward selection runs on the residuals and
    regressors cleared of the nuisance directions (``pipeline._select``); an effect it names has a
    signature no combination of the base model's uncertain parameters has. Named; ambiguous when
-   the runner-up effect is hard to tell from it (advantage t < ``AMBIGUITY_T``).
+   the runner-up effect is hard to tell from it (advantage t < ``AMBIGUITY_T``). The candidates
+   whose signature the nuisances reproduce are not scored there: the named effect is weighed
+   against them as in (2) (:func:`against_patterns`).
 2. **What the nuisances explain only outside their tolerances.** An effect whose signature *is* a
    nuisance pattern (a spool sensor offset is exactly the underlap pattern (−Δx, +Δx, +Δx, −Δx);
    a moving-mass change is a mass off its datasheet; air at high pressure is a lower β) leaves no
@@ -65,7 +67,7 @@ from transforms.discrepancy.corrected import corrected_lstsq
 from transforms.discrepancy.gaps import GAP_SCALES, NOISE_GAP, SPLIT_GAPS
 from transforms.discrepancy.nuisance import NUISANCE_UNITS
 
-__all__ = ["CANDIDATE_REPLAY_FLOOR", "FAR_BEYOND_FLOOR", "GAP_SHRINK", "REPLAY_CLOSES", "SEPARATE_BY", "Verdict", "Z_AMBIGUOUS", "Z_NAMED", "above_floor", "acting_gap",
+__all__ = ["CANDIDATE_REPLAY_FLOOR", "FAR_BEYOND_FLOOR", "GAP_SHRINK", "REPLAY_CLOSES", "SEPARATE_BY", "Verdict", "Z_AMBIGUOUS", "Z_NAMED", "above_floor", "acting_gap", "against_patterns",
            "beats_base_model", "beyond_selection", "confirmed", "far_beyond_the_floor", "farthest_beyond", "found_nothing",
            "lagging_transmitter", "nuisance_verdict", "replay_closes", "strongest_candidate", "unexplained", "whole_replay_refutes"]
 
@@ -217,6 +219,45 @@ def beyond_selection(unexp: "Verdict", reading: "Verdict") -> "Verdict":
            f"{unexp.gap_before:.3g} → {unexp.gap_after:.3g} (not confirmed); without it, ")
     return replace(reading, verdict="ambiguous", alternatives=reading.alternatives + unexp.alternatives,
                    reason=why + reading.reason + f" (its replay: the {reading.gap_kind} gap {reading.acting_before:.3g} → {reading.acting_after:.3g})")
+
+
+def against_patterns(verdict: "Verdict", scores: list[dict], judged) -> "Verdict":
+    """The selection's verdict (``verdict``: its first effect named or ``ambiguous``, confirmed by
+    the replay) weighed against the candidates the selection could not score, those whose
+    signature the nuisances reproduce: ``scores`` (:func:`nuisance_scores` of the selection's
+    effect and of those, each alone against the calibrated base model) read both kinds as in (2).
+    Where one of them reads more than the selection's effect, the verdict is the nuisance verdict
+    over the library, as where nothing was selected (``judged()``), the selection's effect among
+    its readings; where it reads at least max(``Z_AMBIGUOUS``², half the effect's ΔO), the verdict
+    is ``ambiguous`` with it listed (confidence: the two readings' evidence ratio,
+    1/(1 + exp(−(ΔO − ΔO_rival)/2))). On the reference plant at the noisy end, dwelling 2–10 s
+    between moves (seed 1, no commissioning), a true internal leak of 2e-12 m³/(s Pa), which the
+    nuisances mimic within their tolerances, left the selection external leakage (gain 10 %,
+    t = 4.56); against the calibrated base model the internal leak reads ΔO = 161 at 1.94e-12, the
+    external leak 78."""
+    own = next(s for s in scores if s["spec"] is verdict.effect or s["key"] == verdict.effect.key)
+    lead = scores[0]
+    if lead is not own and lead["delta_objective"] > own["delta_objective"]:
+        reading = judged()
+        why = (f"the equations' selection pointed at {verdict.effect.key}, but {lead['key']}, whose pattern the nuisances reproduce, "
+               f"reads more against the calibrated base model (ΔO {lead['delta_objective']:.3g} against {own['delta_objective']:.3g}); ")
+        if reading.verdict in ("named", "ambiguous"):
+            alts = [a for a in verdict.alternatives if a not in reading.alternatives]
+            own_reading = f"{verdict.effect.key} {verdict.effect.parameter_name}={verdict.value:.3g} {verdict.effect.unit}"
+            return replace(reading, alternatives=reading.alternatives + [own_reading] + alts, reason=why + reading.reason)
+        rivals = [lead]
+    else:
+        rivals = [s for s in scores if s is not own and s["delta_objective"] >= max(Z_AMBIGUOUS**2, 0.5 * own["delta_objective"])]
+        why = ""
+    if not rivals:
+        return verdict
+    gap = own["delta_objective"] - max(r["delta_objective"] for r in rivals)
+    alts = [f"{r['key']} {r['spec'].parameter_name}={r['value']:.3g} {r['spec'].unit}" for r in rivals]
+    return replace(verdict, verdict="ambiguous", confidence=float(min(MAX_CONFIDENCE, 1.0 / (1.0 + np.exp(-gap / 2.0)))),
+                   alternatives=verdict.alternatives + alts, alternative_keys=verdict.alternative_keys + [r["key"] for r in rivals],
+                   reason=(why + verdict.reason + "; but " + ", ".join(f"{r['key']} (ΔO {r['delta_objective']:.3g})" for r in rivals)
+                           + f", whose pattern the nuisances reproduce, reads about as much against the calibrated base model ({verdict.effect.key}: "
+                           f"ΔO {own['delta_objective']:.3g})"))
 
 
 def lagging_transmitter(verdict: "Verdict | None", named: bool, finding: str, gap: float, floor: float) -> "Verdict | None":
