@@ -228,9 +228,9 @@ def against_patterns(verdict: "Verdict", scores: list[dict], judged) -> "Verdict
     effect and of those, each alone against the calibrated base model) read both kinds as in (2).
     Where one of them reads more than the selection's effect, the verdict is the nuisance verdict
     over the library, as where nothing was selected (``judged()``), the selection's effect among
-    its readings; where it reads at least max(``Z_AMBIGUOUS``², half the effect's ΔO), the verdict
-    is ``ambiguous`` with it listed (confidence: the two readings' evidence ratio,
-    1/(1 + exp(−(ΔO − ΔO_rival)/2))). On the reference plant at the noisy end, dwelling 2–10 s
+    its readings; where it reads within ``Z_AMBIGUOUS``² of the effect's ΔO (an evidence ratio
+    under e^4.5), the verdict is ``ambiguous`` with it listed (confidence: the two readings'
+    evidence ratio as a probability, 1/(1 + exp(−(ΔO − ΔO_rival)/2))). On the reference plant at the noisy end, dwelling 2–10 s
     between moves (seed 1, no commissioning), a true internal leak of 2e-12 m³/(s Pa), which the
     nuisances mimic within their tolerances, left the selection external leakage (gain 10 %,
     t = 4.56); against the calibrated base model the internal leak reads ΔO = 161 at 1.94e-12, the
@@ -247,7 +247,7 @@ def against_patterns(verdict: "Verdict", scores: list[dict], judged) -> "Verdict
             return replace(reading, alternatives=reading.alternatives + [own_reading] + alts, reason=why + reading.reason)
         rivals = [lead]
     else:
-        rivals = [s for s in scores if s is not own and s["delta_objective"] >= max(Z_AMBIGUOUS**2, 0.5 * own["delta_objective"])]
+        rivals = [s for s in scores if s is not own and s["delta_objective"] >= max(Z_AMBIGUOUS**2, own["delta_objective"] - Z_AMBIGUOUS**2)]
         why = ""
     if not rivals:
         return verdict
