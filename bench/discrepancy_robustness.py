@@ -23,7 +23,8 @@ apart from ``model/``: its own integrator, Karnopp sticking, loads ramping to a 
 the hidden effect in that package's own implementation (``--load-interval-s 1,1``: a new load level
 every second); the two effects outside the library (``pressure_dependent_friction``, ``transmitter_lag`` on p1) are
 added to ``--effects all``, and for them ``unexplained``, ``ambiguous`` or ``none`` are right and
-any name is wrong.
+any name is wrong. ``--operation sparse`` makes the diagnosed windows' valve dwell 2–10 s between
+moves (``tests.refplant.sparse``; the commissioning window stays busy).
 
 ``--method before`` runs the workflow as it was before the nuisance calibration on the same cells (the design data
 taken as exact; with commissioning only α and underlap fitted, ``pipeline.fit_condition``).
