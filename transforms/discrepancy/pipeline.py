@@ -491,17 +491,18 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
         if named:
             base_fit = joint_fit(prepared, nm, z_cal, [], base, rows0, w_rows, settings, iterations=0)
 
-            def judged(rest):
+            def judged(rest, scores=None):
                 """The readings of ``rest`` against the calibrated base model, judged as where nothing was selected."""
-                return nuisance_verdict(prepared, nm, base_fit, [], rest, rows0, w_rows, settings, [], gap_of, stage_gaps[0], floors, stage_acc)
+                return nuisance_verdict(prepared, nm, base_fit, [], rest, rows0, w_rows, settings, [], gap_of, stage_gaps[0], floors, stage_acc, scores)
 
             if not named[0].confirmed:
                 # the selection's effect does not close its gap: the other candidates' readings (verdict.beyond_selection)
                 verdict = beyond_selection(verdict, judged([s for s in specs if s != named[0].spec]))
             elif patterns:
                 # the candidates the selection could not score, by their priors (verdict.against_patterns)
-                verdict = against_patterns(verdict, nuisance_scores(nm, base_fit, [], [named[0].spec] + patterns, rows0, w_rows, settings, prepared),
-                                           lambda: judged(specs))
+                rest = [named[0].spec] + patterns
+                scores = nuisance_scores(nm, base_fit, [], rest, rows0, w_rows, settings, prepared)
+                verdict = against_patterns(verdict, scores, lambda: judged(rest, scores))
         for p, p0 in zip(prepared, prepared0):  # the same records (prepare_records keeps or drops a record by its length)
             p.loads.setdefault((*nominal, base), p0.base_load)
         gap_nominal = _gaps(prepared, *nominal, base, settings, set(), split=False)[0].gap()

@@ -227,8 +227,8 @@ def against_patterns(verdict: "Verdict", scores: list[dict], judged) -> "Verdict
     signature the nuisances reproduce: ``scores`` (:func:`nuisance_scores` of the selection's
     effect and of those, each alone against the calibrated base model) read both kinds as in (2).
     Where one of them reads more than the selection's effect, the verdict is the nuisance verdict
-    over the library, as where nothing was selected (``judged()``), the selection's effect among
-    its readings; where it reads within ``Z_AMBIGUOUS``² of the effect's ΔO (an evidence ratio
+    on these readings, as where nothing was selected (``judged()``; the other candidates the
+    selection scored below its effect), the selection's effect among its readings; where it reads within ``Z_AMBIGUOUS``² of the effect's ΔO (an evidence ratio
     under e^4.5), the verdict is ``ambiguous`` with it listed (confidence: the two readings'
     evidence ratio as a probability, 1/(1 + exp(−(ΔO − ΔO_rival)/2))). On the reference plant at the noisy end, dwelling 2–10 s
     between moves (seed 1, no commissioning), a true internal leak of 2e-12 m³/(s Pa), which the
@@ -530,9 +530,11 @@ def nuisance_scores(nm, fit, named_specs, specs, rows0, w_rows, settings, prepar
     return sorted(out, key=lambda r: -r["delta_objective"])
 
 
-def nuisance_verdict(prepared, nm, fit, named_specs, specs, rows0, w_rows, settings, named, gap_of, gap_before: float, floors: dict, accs: list) -> Verdict:
+def nuisance_verdict(prepared, nm, fit, named_specs, specs, rows0, w_rows, settings, named, gap_of, gap_before: float, floors: dict, accs: list,
+                     scores: list[dict] | None = None) -> Verdict:
     """The verdict of a run with nuisances (module docstring). ``named`` are the pipeline's
     NamedEffects (selection on what the nuisances cannot explain); ``fit`` the final joint fit;
+    ``scores`` the candidates' :func:`nuisance_scores` on it where the caller has them;
     ``gap_of(effects, (plant, condition))`` replays the records and returns their
     :class:`~transforms.discrepancy.gaps.GapAccumulator`; ``floors`` the split gaps' noise floors,
     ``accs`` the pipeline's stage accumulators. A ``named`` verdict the replay does not confirm
@@ -542,7 +544,7 @@ def nuisance_verdict(prepared, nm, fit, named_specs, specs, rows0, w_rows, setti
 
     cal = Calibration(nm=nm, z=fit.z, z_se=fit.z_se, plant=None, condition=None, sigmas=(0.0, 0.0, 0.0))  # type: ignore[arg-type]
     table = cal.table()
-    scores = nuisance_scores(nm, fit, named_specs, specs, rows0, w_rows, settings, prepared)
+    scores = nuisance_scores(nm, fit, named_specs, specs, rows0, w_rows, settings, prepared) if scores is None else scores
     for s in scores:
         s["confidence"] = _logistic(s["delta_objective"])
     public = [{k: v for k, v in s.items() if k not in ("spec", "refit")} for s in scores]
