@@ -233,8 +233,8 @@ def against_patterns(verdict: "Verdict", scores: list[dict], judged) -> "Verdict
     evidence ratio as a probability, 1/(1 + exp(−(ΔO − ΔO_rival)/2))). On the reference plant at the noisy end, dwelling 2–10 s
     between moves (seed 1, no commissioning), a true internal leak of 2e-12 m³/(s Pa), which the
     nuisances mimic within their tolerances, left the selection external leakage (gain 10 %,
-    t = 4.56); against the calibrated base model the internal leak reads ΔO = 161 at 1.94e-12, the
-    external leak 78."""
+    t = 4.56); against the calibrated base model the internal leak reads ΔO = 131, the external
+    leak 64, and the internal leak is named at 1.94e-12."""
     own = next(s for s in scores if s["spec"] is verdict.effect or s["key"] == verdict.effect.key)
     lead = scores[0]
     if lead is not own and lead["delta_objective"] > own["delta_objective"]:
