@@ -222,19 +222,20 @@ def beyond_selection(unexp: "Verdict", reading: "Verdict") -> "Verdict":
 
 
 def against_patterns(verdict: "Verdict", scores: list[dict], judged) -> "Verdict":
-    """The selection's verdict (``verdict``: its first effect named or ``ambiguous``, confirmed by
-    the replay) weighed against the candidates the selection could not score, those whose
-    signature the nuisances reproduce: ``scores`` (:func:`nuisance_scores` of the selection's
-    effect and of those, each alone against the calibrated base model) read both kinds as in (2).
-    Where one of them reads more than the selection's effect, the verdict is the nuisance verdict
-    on these readings, as where nothing was selected (``judged()``; the other candidates the
-    selection scored below its effect), the selection's effect among its readings; where it reads within ``Z_AMBIGUOUS``² of the effect's ΔO (an evidence ratio
-    under e^4.5), the verdict is ``ambiguous`` with it listed (confidence: the two readings'
-    evidence ratio as a probability, 1/(1 + exp(−(ΔO − ΔO_rival)/2))). On the reference plant at the noisy end, dwelling 2–10 s
-    between moves (seed 1, no commissioning), a true internal leak of 2e-12 m³/(s Pa), which the
-    nuisances mimic within their tolerances, left the selection external leakage (gain 10 %,
-    t = 4.56); against the calibrated base model the internal leak reads ΔO = 131, the external
-    leak 64, and the internal leak is named at 1.94e-12."""
+    """The selection's verdict (``verdict``: its first effect named or ``ambiguous``, confirmed by the
+    replay) weighed against the candidates the selection could not score, those whose signature the
+    nuisances reproduce: ``scores`` (:func:`nuisance_scores` of the selection's effect and of those,
+    each alone against the calibrated base model) read both kinds as in (2). Where one of them reads
+    more than the selection's effect, the verdict is the nuisance verdict on these readings, as
+    where nothing was selected (``judged()``; the other candidates the selection scored below its
+    effect), the selection's effect among its readings; where it reads within ``Z_AMBIGUOUS``² of
+    the effect's ΔO (an evidence ratio under e^4.5), the verdict is ``ambiguous`` with it listed
+    (confidence: the two readings' evidence ratio as a probability, 1/(1 + exp(−(ΔO −
+    ΔO_rival)/2))). On the reference plant at the noisy end, dwelling 2–10 s between moves (seed 1,
+    no commissioning), a true internal leak of 2e-12 m³/(s Pa), which the nuisances mimic within
+    their tolerances, left the selection external leakage (gain 10 %, t = 4.56); against the
+    calibrated base model the internal leak reads ΔO = 131, the external leak 64, and the internal
+    leak is named at 1.94e-12."""
     own = next(s for s in scores if s["spec"] is verdict.effect or s["key"] == verdict.effect.key)
     lead = scores[0]
     if lead is not own and lead["delta_objective"] > own["delta_objective"]:
