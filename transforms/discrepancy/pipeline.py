@@ -488,7 +488,7 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
             return _gaps(prepared, *model, fx, settings, set())[0]
 
         verdict = nuisance_verdict(prepared, nm, final_fit, named_specs, specs, rows0, w_rows, settings, named, gap_of, stage_gaps[0], floors, stage_acc)
-        if named:
+        if named and (not named[0].confirmed or patterns):
             base_fit = joint_fit(prepared, nm, z_cal, [], base, rows0, w_rows, settings, iterations=0)
 
             def judged(rest, scores=None):
@@ -498,7 +498,7 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
             if not named[0].confirmed:
                 # the selection's effect does not close its gap: the other candidates' readings (verdict.beyond_selection)
                 verdict = beyond_selection(verdict, judged([s for s in specs if s != named[0].spec]))
-            elif patterns:
+            else:
                 # the candidates the selection could not score, by their priors (verdict.against_patterns)
                 rest = [named[0].spec] + patterns
                 scores = nuisance_scores(nm, base_fit, [], rest, rows0, w_rows, settings, prepared)

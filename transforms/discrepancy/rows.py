@@ -178,14 +178,16 @@ def tapered(x: float, limit: float) -> float:
     return float(np.sign(x) * np.clip(2.0 * limit - abs(x), 0.0, limit)) if abs(x) > limit else float(x)
 
 
-def _mechanical_model(p: _Prepared, plant, condition, effects, settings, load: np.ndarray) -> tuple[PlantParams, np.ndarray]:
+def _mechanical_model(p: _Prepared, plant, condition, effects, settings, load: np.ndarray | None = None) -> tuple[PlantParams, np.ndarray]:
     """(plant, load [N]) the mechanical replay integrates: the model's viscous friction d_v and
     mass moved by the friction and the mass its load leaves in the record's force balance
     (:attr:`LoadEstimate.friction_mismatch`, :attr:`LoadEstimate.mass_mismatch`): d_v by at most
     ``settings.mechanical_friction_rel`` of it, the mass by at most ``mechanical_mass_rel`` of it
     and not at all beyond twice that (:func:`tapered`; ``DiscrepancySettings``); ``load`` (the
-    replay's, :func:`_replay_load_for`) plus the moved mass's weight, which the load estimate
-    already holds."""
+    replay's, :func:`_replay_load_for`, which is the default) plus the moved mass's weight, which
+    the load estimate already holds."""
+    if load is None:
+        load = _replay_load_for(p, plant, condition, effects, settings)
     est = _load_estimate_for(p, plant, condition, effects, settings)
     c = plant.cylinder
     lim_v = settings.mechanical_friction_rel * c.d_v_n_s_m
@@ -663,7 +665,7 @@ def noise_floors(prepared, plant, condition, effects, settings, draws: int = NOI
         key, est = (plant, condition, effects), _load_estimate_for(p, plant, condition, effects, settings)
         judged, mstarts = _mechanical_restarts(rec, settings, est)
         judged[rec.n - h:] = False
-        mplant, load = _mechanical_model(p, plant, condition, effects, settings, _replay_load_for(p, plant, condition, effects, settings))
+        mplant, load = _mechanical_model(p, plant, condition, effects, settings)
         nominal = _mechanical_replay(rec, mplant, condition, effects, load, mstarts)
         nominal_h = hydraulic_readings(p, plant, condition, effects, settings)
         rng = np.random.default_rng([seed, i])
@@ -675,7 +677,7 @@ def noise_floors(prepared, plant, condition, effects, settings, draws: int = NOI
             noisy = prepare_record(Record(rec.valve_id, rec.start_us, rec.end_us, rec.dt, raw), settings, plant.spool)
             # the load's values estimated again on the noisy record, its steps and knots kept
             again = replace(p, rec=noisy, loads={key: _fit_load(noisy, est, _load_inputs(noisy, plant, condition, effects, settings), plant, settings)})
-            mplant_n, load_n = _mechanical_model(again, plant, condition, effects, settings, _replay_load_for(again, plant, condition, effects, settings))
+            mplant_n, load_n = _mechanical_model(again, plant, condition, effects, settings)
             d = (_mechanical_replay(noisy, mplant_n, condition, effects, load_n, mstarts) - nominal)[judged]
             ok = np.isfinite(d)
             mech[0] += float(np.sum(d[ok] ** 2))

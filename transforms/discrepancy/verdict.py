@@ -236,7 +236,7 @@ def against_patterns(verdict: "Verdict", scores: list[dict], judged) -> "Verdict
     their tolerances, left the selection external leakage (gain 10 %, t = 4.56); against the
     calibrated base model the internal leak reads ΔO = 131, the external leak 64, and the internal
     leak is named at 1.94e-12."""
-    own = next(s for s in scores if s["spec"] is verdict.effect or s["key"] == verdict.effect.key)
+    own = next(s for s in scores if s["key"] == verdict.effect.key)
     lead = scores[0]
     if lead is not own and lead["delta_objective"] > own["delta_objective"]:
         reading = judged()
