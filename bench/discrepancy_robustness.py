@@ -322,14 +322,12 @@ def main(argv=None) -> None:
     if a.operation != "busy" and a.plant != "ref":
         ap.error("--operation needs --plant ref")
     interval = tuple(float(v) for v in a.load_interval_s.split(",")) if a.load_interval_s else None
+    rest = (a.windows, a.method, a.family, a.declared, a.plant, interval, a.sensors, a.reconstruct, a.operation)
     tasks = []
     for c in comms:
         for seed in seeds:  # seed-major, so a worker reuses its commissioning calibration
-            if a.effects == "all" or "none" in keys:
-                tasks.append(("none", "typical", c, seed, a.windows, a.method, a.family, a.declared, a.plant, interval, a.sensors, a.reconstruct, a.operation))
-            for m in mags:
-                for k in (k for k in keys if k != "none"):
-                    tasks.append((k, m, c, seed, a.windows, a.method, a.family, a.declared, a.plant, interval, a.sensors, a.reconstruct, a.operation))
+            cells = ([("none", "typical")] if a.effects == "all" or "none" in keys else []) + [(k, m) for m in mags for k in keys if k != "none"]
+            tasks += [(k, m, c, seed) + rest for k, m in cells]
     t0 = time.time()
     rows = []
     out = Path(a.out)
