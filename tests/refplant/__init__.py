@@ -5,8 +5,8 @@ same equations with different choices, so that a structural difference between a
 
 What differs from ``model/`` on purpose:
 
-* integration: scipy ``solve_ivp`` (LSODA; BDF or Radau by ``Integration.method``), one call per
-  10 s window, dense output sampled at 1 kHz; a continuous-time PI position controller with its
+* integration: scipy's LSODA (or ``solve_ivp``'s BDF or Radau, ``Integration.method``), one
+  integration per 10 s window, its dense output sampled at 1 kHz; a continuous-time PI position controller with its
   own closed-form feed-forward (``model/``: fixed-step RK4 and a digital PI);
 * friction: Karnopp sticking inside a band |v_X| < 1 mm/s while |F_R| <= d_s, Stribeck (Eq. 5)
   when sliding;
