@@ -270,11 +270,16 @@ def integrate(inp: Inputs, y0: np.ndarray, t_grid: np.ndarray, plant: RefPlant) 
     atol = np.array([1e-9, 1e-6, 1e-8, 1e-6, 1.0, 1.0, 1e-9]) * (it.rtol / 1e-6)
     span = (float(t_grid[0]), float(t_grid[-1]))
     if it.method == "LSODA":
-        return _integrate_lsoda(inp, y0, t_grid, span, it.rtol, atol, it.max_step_s)
-    sol = solve_ivp(inp.rhs, span, y0, method=it.method, rtol=it.rtol, atol=atol, dense_output=True, max_step=it.max_step_s)
-    if not sol.success:
-        raise RuntimeError(f"integration failed at t = {sol.t[-1]:.4f} s: {sol.message}")
-    return sol.sol(t_grid), int(sol.nfev)
+        out, nfev = _integrate_lsoda(inp, y0, t_grid, span, it.rtol, atol, it.max_step_s)
+    else:
+        sol = solve_ivp(inp.rhs, span, y0, method=it.method, rtol=it.rtol, atol=atol, dense_output=True, max_step=it.max_step_s)
+        if not sol.success:
+            raise RuntimeError(f"integration failed at t = {sol.t[-1]:.4f} s: {sol.message}")
+        out, nfev = sol.sol(t_grid), int(sol.nfev)
+    bad = ~np.isfinite(out).all(axis=0)
+    if bad.any():  # LSODA steps on through NaN derivatives (its error test never fails on them)
+        raise RuntimeError(f"integration failed at t = {t_grid[np.argmax(bad)]:.4f} s: a state is not finite")
+    return out, nfev
 
 
 LSODA_MAX_ORDER = 12

@@ -6,7 +6,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from . import (NAMEPLATE, Edge, Load, Trajectory, Valve, edge_area, family, simulate, without_noise, worn)
+from . import (NAMEPLATE, Edge, Effects, Load, Trajectory, Valve, edge_area, family, manufactured, simulate, without_noise, worn)
 from .params import idealised
 from .sensors import first_order_lag
 
@@ -127,3 +127,45 @@ def test_wear_moves_the_named_edge_only():
     assert truth["s2"]["gradient_m"] == pytest.approx(math.sin(math.radians(5.24)) * math.pi * 0.02)
     with pytest.raises(ValueError, match="unknown edges"):
         worn(NAMEPLATE, alpha_scale={"s3": 1.1})
+
+
+def _window_inputs(plant, seed, duration_s=2.0):
+    from .plant import Inputs, rest_state
+    from .recording import draw_supply
+    from .scenarios import draw_load, draw_trajectory
+
+    inp = Inputs.build(plant, Effects(), draw_supply(plant, np.random.default_rng([seed, 3])),
+                       draw_trajectory(plant.operation, duration_s, np.random.default_rng([seed, 1])),
+                       draw_load(plant.operation, duration_s, np.random.default_rng([seed, 2])))
+    return inp, rest_state(inp), np.arange(int(duration_s * 10_000) + 1) / 10_000
+
+
+@pytest.mark.parametrize("law", ["eq3", "sharp"])
+def test_lsoda_stepped_by_hand_is_solve_ivps_dense_output(law):
+    """integrate() steps LSODA itself and evaluates the grid from the kept Nordsieck arrays: the
+    same states as solve_ivp's dense output on a 10 kHz grid over moves and load steps (a wrong
+    column, order or step size in the interpolation is off by far more than rounding)."""
+    from scipy.integrate import solve_ivp
+
+    from .plant import integrate
+
+    plant = family(manufactured(NAMEPLATE, 3), law)
+    inp, y0, t = _window_inputs(plant, 5)
+    ours, nfev = integrate(inp, y0, t, plant)
+    it = plant.integration
+    atol = np.array([1e-9, 1e-6, 1e-8, 1e-6, 1.0, 1.0, 1e-9]) * (it.rtol / 1e-6)
+    ref = solve_ivp(inp.rhs, (t[0], t[-1]), y0, method="LSODA", rtol=it.rtol, atol=atol, dense_output=True, max_step=it.max_step_s)
+    assert nfev == ref.nfev
+    scale = np.abs(ref.sol(t)).max(axis=1, keepdims=True)
+    np.testing.assert_allclose(ours / scale, ref.sol(t) / scale, rtol=0, atol=1e-13)
+    assert np.ptp(ours[2]) > 1e-3  # the window moved the rod
+
+
+def test_a_failed_integration_says_when():
+    from .plant import _BETA, integrate
+
+    inp, y0, t = _window_inputs(NAMEPLATE, 5, 0.1)
+    P = inp.P.copy()
+    P[_BETA] = np.nan  # the chambers' derivatives NaN from the start
+    with pytest.raises(RuntimeError, match=r"integration failed at t = 0\.0000 s"):
+        integrate(replace(inp, P=P), y0, t, NAMEPLATE)
