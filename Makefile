@@ -61,9 +61,11 @@ chromium:
 
 # pytest rewrites every test module's asserts (~5 s of CPU a process) and caches that beside it,
 # except under PYTHONDONTWRITEBYTECODE=1 (as on CI): written here once, every xdist worker reads
-# it (collection 4.6 s instead of 9.7 a worker)
+# it (collection 4.6 s instead of 9.7 a worker). The reference plant's cached kernels are dropped
+# with it: a cached kernel would keep an old callee, as numba's cache above (~5 s to compile again)
 TEST_SOURCES := $(shell find tests -name '*.py' 2>/dev/null)
 $(VENV)/.tests-compiled: $(TEST_SOURCES) | $(VENV)/.synced
+	find tests -name '*.nb[ic]' -delete
 	env -u PYTHONDONTWRITEBYTECODE $(VENV)/bin/python -m pytest --collect-only -q -p no:cacheprovider >/dev/null
 	touch $@
 
