@@ -32,7 +32,7 @@ from scipy.integrate import LSODA, solve_ivp
 from scipy.optimize import root
 
 from .edges import area_kernel, edge_rows, laminar_factor
-from .params import RefPlant
+from .params import Integration, RefPlant
 from .scenarios import Effects, Load, Trajectory
 
 P_ATM = 1.013e5
@@ -263,11 +263,16 @@ def rest_state(inp: Inputs) -> np.ndarray:
     return y
 
 
+def absolute_tolerance(it: Integration) -> np.ndarray:
+    """The absolute tolerance per state (x, v, X, v_X, p1, p2, z) at ``it.rtol``."""
+    return np.array([1e-9, 1e-6, 1e-8, 1e-6, 1.0, 1.0, 1e-9]) * (it.rtol / 1e-6)
+
+
 def integrate(inp: Inputs, y0: np.ndarray, t_grid: np.ndarray, plant: RefPlant) -> tuple[np.ndarray, int]:
     """States (7, len(t_grid)) on ``t_grid`` (increasing, from the start time t_grid[0]) from
     one integration with dense output; returns (states, number of rhs evaluations)."""
     it = plant.integration
-    atol = np.array([1e-9, 1e-6, 1e-8, 1e-6, 1.0, 1.0, 1e-9]) * (it.rtol / 1e-6)
+    atol = absolute_tolerance(it)
     span = (float(t_grid[0]), float(t_grid[-1]))
     if it.method == "LSODA":
         out, nfev = _integrate_lsoda(inp, y0, t_grid, span, it.rtol, atol, it.max_step_s)

@@ -68,6 +68,16 @@ def draw_supply(plant: RefPlant, rng: np.random.Generator) -> tuple:
             s.ripple_pa, s.ripple_hz, rng.uniform(0, 2 * math.pi), s.p_r_pa)
 
 
+def draw_window(plant: RefPlant, duration_s: float, seed: int, *, load: Load | None = None,
+                trajectory: Trajectory | None = None, supply: tuple | None = None) -> tuple[Trajectory, Load, tuple]:
+    """(trajectory, load, supply) of a window: those not given drawn from ``seed``'s streams 1, 2
+    and 3 (the noise draws from stream 4)."""
+    trajectory = draw_trajectory(plant.operation, duration_s, np.random.default_rng([seed, 1])) if trajectory is None else trajectory
+    load = draw_load(plant.operation, duration_s, np.random.default_rng([seed, 2])) if load is None else load
+    supply = draw_supply(plant, np.random.default_rng([seed, 3])) if supply is None else supply
+    return trajectory, load, supply
+
+
 def simulate(plant: RefPlant, duration_s: float, seed: int, *, effects: Effects | None = None,
              load: Load | None = None, trajectory: Trajectory | None = None,
              supply: tuple | None = None, spool_command: np.ndarray | None = None,
@@ -100,9 +110,7 @@ def simulate(plant: RefPlant, duration_s: float, seed: int, *, effects: Effects 
     n = int(round(duration_s * fs))
     if n < 2 or abs(n - duration_s * fs) > 1e-6:
         raise ValueError("duration_s must be a whole number (>= 2) of samples")
-    trajectory = draw_trajectory(plant.operation, duration_s, np.random.default_rng([seed, 1])) if trajectory is None else trajectory
-    load = draw_load(plant.operation, duration_s, np.random.default_rng([seed, 2])) if load is None else load
-    supply = draw_supply(plant, np.random.default_rng([seed, 3])) if supply is None else supply
+    trajectory, load, supply = draw_window(plant, duration_s, seed, load=load, trajectory=trajectory, supply=supply)
     inp = Inputs.build(plant, effects, supply, trajectory, load, spool_command)
     y = rest_state(inp) if initial_state is None else np.asarray(initial_state, float)
 
