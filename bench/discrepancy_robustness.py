@@ -267,9 +267,12 @@ def table(rows: list[dict]) -> str:
     groups = defaultdict(list)
     for r in rows:
         groups[(r["commissioning"], r["magnitude"], r["effect"])].append(r)
+    # the clean valve of the same seed and mode: what the model leaves without the effect
+    clean_gap = {(r["commissioning"], r["seed"]): r["split_before"] for r in rows if r["effect"] == "none" and r.get("split_before")}
     lines = ["| commissioning | magnitude | effect | runs | named first | ambiguous (right listed) | none | unexplained | wrong | max rel. error (named) "
-             "| gap shrink where it acts (least, named or ambiguous; above the noise) | clean valve: gap / noise floor (hydraulic, mechanical; largest) |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "| gap shrink where it acts (least, named or ambiguous; above the noise) | gap after / the clean valve's (largest) "
+             "| clean valve: gap / noise floor (hydraulic, mechanical; largest) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for (c, m, e), rs in sorted(groups.items(), key=lambda kv: (kv[0][0], kv[0][1] != "typical", kv[0][2])):
         n = len(rs)
         cnt = {o: sum(r["outcome"] == o for r in rs) for o in ("named", "ambiguous", "none", "unexplained", "wrong", "error")}
@@ -279,10 +282,12 @@ def table(rows: list[dict]) -> str:
         ok = [r for r in rs if r.get("shrink") is not None and r["outcome"] in ("named", "ambiguous")]
         above = [r["shrink_above_noise"] for r in ok if r.get("shrink_above_noise") is not None]
         shrink = f"{min(r['shrink'] for r in ok):.2g}× ({ok[0]['acting_gap']}; {min(above):.2g}×)" if ok and above else "–"
+        vs_clean = [r["acting_before_after"][1] / clean_gap[(c, r["seed"])][r["acting_gap"]] for r in ok if (c, r["seed"]) in clean_gap]
+        after_clean = f"{max(vs_clean):.2f}×" if vs_clean else "–"
         over = [r["over_floor"] for r in rs if r.get("over_floor")]
         clean = f"{max(o['hydraulic'] for o in over):.2g}, {max(o['mechanical'] for o in over):.2g}" if over else "–"
         lines.append(f"| {'yes' if c else 'no'} | {m if e != 'none' else '–'} | {e} | {n} | {cnt['named']} | {cnt['ambiguous']} | {cnt['none']} | {cnt['unexplained']} | {wrong} | {err} "
-                     f"| {shrink} | {clean} |")
+                     f"| {shrink} | {after_clean} | {clean} |")
     return "\n".join(lines)
 
 

@@ -80,7 +80,7 @@ REPLAY_REFUTES = 1.1
 """Where the calibrated base model replays within the noise floor (gap ≤ ``gaps.NOISE_GAP``), a
 reading whose exact fit widens the replay gap beyond this factor is refuted, unless it acts on the
 hydraulic gap and narrows that by ``FLOOR_NARROWS``, or is a mass or friction reading that leaves the
-mechanical gap within ``FLOOR_REFUTES`` (:func:`whole_replay_refutes`; an effect that is a nuisance
+mechanical gap within ``FLOOR_REFUTES`` or ``FLOOR_FACTOR`` × its floor (:func:`whole_replay_refutes`; an effect that is a nuisance
 pattern leaves the gap about as it is, one that explains the data shrinks it; the whole replay also
 holds the load estimate, which the reading's joint fit moves). Above the
 floor the replay is dominated by what neither model describes (the load estimate around frequent
@@ -156,13 +156,17 @@ def beats_base_model(before: float, after: float, floor: float) -> bool:
     return confirmed(before, after, floor) and not (at_floor and after * FLOOR_NARROWS > before)
 
 
-def whole_replay_refutes(kind: str, gap_before: float, gap_after: float, acting_before: float, acting_after: float) -> bool:
+def whole_replay_refutes(kind: str, gap_before: float, gap_after: float, acting_before: float, acting_after: float, floor: float) -> bool:
     """Does the whole replay refute a reading (``REPLAY_REFUTES``): the calibrated base model replays
     within the noise floor (``gap_before`` ≤ ``gaps.NOISE_GAP``), the reading's exact joint fit widens
     that gap beyond ``REPLAY_REFUTES``, and the gap where the reading acts (``kind``,
-    ``acting_before`` → ``acting_after``) does not speak for it: a chamber or sensor reading stands
+    ``acting_before`` → ``acting_after``, its noise ``floor``) does not speak for it: a chamber or sensor reading stands
     where it narrows the hydraulic gap by ``FLOOR_NARROWS``, a mass or friction reading where it
-    leaves the mechanical gap within ``FLOOR_REFUTES`` of the base model's. The whole replay
+    leaves the mechanical gap within ``FLOOR_REFUTES`` of the base model's or within what confirms a
+    reading there, ``FLOOR_FACTOR`` × its floor (:func:`confirmed`): the replay cannot refute what it
+    would confirm. At the noisy end of plant sensors (the reference plant, seed 2, no commissioning,
+    the spool reconstructed) a true 600 kg mass read 672 kg (4.6σ) moved the mechanical gap
+    0.0601 → 0.0994 mm, both within its floor of 0.091 mm, and the whole gap 0.189 → 0.32. The whole replay
     integrates the motion on the load estimate, which the joint fit moves; a mass or friction
     reading is a nuisance pattern (the mass, d_v), which the mechanical replay cannot narrow: on the
     reference plant (seed 2, two windows, no commissioning) a true 600 kg mass read 551 kg (4.5σ)
@@ -172,7 +176,7 @@ def whole_replay_refutes(kind: str, gap_before: float, gap_after: float, acting_
         return False
     if kind == "hydraulic":
         return bool(acting_after * FLOOR_NARROWS > acting_before)
-    return bool(acting_after > FLOOR_REFUTES * acting_before)
+    return bool(acting_after > FLOOR_REFUTES * acting_before and acting_after > FLOOR_FACTOR * floor)
 
 
 def where_it_disagrees(acc, kind: str, floor: float) -> str:
@@ -587,7 +591,7 @@ def nuisance_verdict(prepared, nm, fit, named_specs, specs, rows0, w_rows, setti
         gap_after = acc_after.gap()
         kind = acting_gap(best["spec"])
         a_before, a_after = accs[0].split_gap(kind), acc_after.split_gap(kind)
-        if whole_replay_refutes(kind, gap_before, gap_after, a_before, a_after):
+        if whole_replay_refutes(kind, gap_before, gap_after, a_before, a_after, floors[kind]):
             # (not where the gap the reading acts on speaks for it: the whole replay's load estimate
             # moves with the joint fit; a true p1 gain narrowed the hydraulic gap 1.18x)
             refuted = (f"the equations' leading reading {best['key']} ({np.sqrt(best['delta_objective']):.2g}σ) is refuted by the "
