@@ -166,7 +166,7 @@ def whole_replay_refutes(kind: str, gap_before: float, gap_after: float, acting_
     reading there, ``FLOOR_FACTOR`` × its floor (:func:`confirmed`): the replay cannot refute what it
     would confirm. At the noisy end of plant sensors (the reference plant, seed 2, no commissioning,
     the spool reconstructed) a true 600 kg mass read 672 kg (4.6σ) moved the mechanical gap
-    0.0601 → 0.0994 mm, both within its floor of 0.091 mm, and the whole gap 0.189 → 0.32. The whole replay
+    0.0601 → 0.0994 mm, both within twice its floor of 0.091 mm, and the whole gap 0.189 → 0.32. The whole replay
     integrates the motion on the load estimate, which the joint fit moves; a mass or friction
     reading is a nuisance pattern (the mass, d_v), which the mechanical replay cannot narrow: on the
     reference plant (seed 2, two windows, no commissioning) a true 600 kg mass read 551 kg (4.5σ)
