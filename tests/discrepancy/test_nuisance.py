@@ -277,7 +277,8 @@ def test_a_gap_far_off_that_the_candidate_all_but_closes_is_ambiguous_though_abo
 
 
 def test_the_gap_where_a_reading_acts_decides_against_the_whole_replay():
-    # the reference plant without commissioning, two windows (the study's figures): seed 2's true
+    # the reference plant without commissioning, two windows (the study's gaps; the floors 0.03 and
+    # 0.05 mm are set here, so that a gap widened beyond twice its floor is refuted): seed 2's true
     # 600 kg mass read 551 kg, the whole gap 0.114 -> 0.141 but the mechanical 0.0709 -> 0.0713 mm
     # (it was refuted, `none`); seed 0's true 3 % p1 gain narrowed the hydraulic gap 0.0767 -> 0.0649
     assert not whole_replay_refutes("mechanical", 0.114, 0.141, 0.0709, 0.0713, 0.03)
