@@ -19,11 +19,12 @@ from model.params import GEOMETRY_FAMILIES
 from transforms.discrepancy import DiscrepancySettings, split_records
 from transforms.discrepancy.calibration import _split_gains, calibrate
 from transforms.discrepancy.corrected import corrected_lstsq
+from transforms.discrepancy.gaps import GapAccumulator
 from transforms.discrepancy.load import LoadEstimate
 from transforms.discrepancy.nuisance import NUISANCES, NuisancePriors, apply_nuisances, nuisance_sigmas, nuisance_values
 from transforms.discrepancy.pipeline import _project_out, diagnose
-from transforms.discrepancy.verdict import (CANDIDATE_REPLAY_FLOOR, FAR_BEYOND_FLOOR, Verdict, acting_gap, beyond_selection, confirmed, far_beyond_the_floor, replay_closes,
-                                           strongest_candidate, whole_replay_refutes)
+from transforms.discrepancy.verdict import (CANDIDATE_REPLAY_FLOOR, FAR_BEYOND_FLOOR, Verdict, acting_gap, beyond_selection, confirmed, far_beyond_the_floor,
+                                           gap_to_replay, replay_closes, strongest_candidate, whole_replay_refutes)
 
 from .simdata import perturbed_plant, simulate_lake, study_conditions
 
@@ -217,10 +218,13 @@ def test_nothing_found_with_a_gap_far_beyond_its_floor_is_unexplained():
     assert (v.verdict, v.effect, v.gap_kind, v.floor) == ("unexplained", None, "mechanical", 0.0114), v
     assert v.gap_before == v.gap_after == pytest.approx(4.05) and "the motion (Eq. 5, X)" in v.where and "region extending" in v.where, v.where
     assert "355× its noise floor" in v.reason, v.reason
-    candidates = [{"effect": "friction_change", "variant": "", "relative_gain": 0.705, "t_stat": 3.454},
-                  {"effect": "entrained_air", "variant": "", "relative_gain": 0.0, "t_stat": -0.2}]
+    candidates = [{"effect": "friction_change", "variant": "", "parameter_name": "delta_d_v", "parameter_unit": "N*s/m", "linear_value": 19870.0,
+                   "z": 75.4, "relative_gain": 0.705, "t_stat": 3.454},
+                  {"effect": "entrained_air", "variant": "", "parameter_name": "air_fraction", "parameter_unit": "-", "linear_value": 1e-4,
+                   "z": 0.3, "relative_gain": 0.0, "t_stat": -0.2}]
     hint = strongest_candidate(candidates, 4.0)
-    assert hint == "the equations' strongest candidate, friction_change, takes 70% of their residual at t = 3.5 (a name needs t ≥ 4)"
+    assert hint == ("the equations' strongest candidate, friction_change delta_d_v=1.99e+04 N*s/m (z = 75), takes 70% of their residual "
+                    "at t = 3.5 (a name needs t ≥ 4)"), hint
     assert far_beyond_the_floor(None, False, acc(4.05), floors, hint).reason.endswith("; " + hint)
     assert strongest_candidate(candidates[1:], 4.0) == strongest_candidate([], 4.0) == ""  # nothing reduced the residual
     none = Verdict("none", 0.9, None, float("nan"), nuisances=[{"name": "d_v"}], scores=[{"key": "friction_change"}])
@@ -274,6 +278,21 @@ def test_a_gap_far_off_that_the_candidate_all_but_closes_is_ambiguous_though_abo
     # friction (6.1x -> 6.3x) or for a mass change (6.8x -> 6.81x) shrink nothing
     assert replay_closes(none, False, friction, 1e4, 1.9, 0.0534, 6.1 * 0.0534, 6.3 * 0.0534, 0.5, 0.5) is none
     assert replay_closes(none, False, friction, 1e4, 1.6, 0.0534, 6.8 * 0.0534, 6.81 * 0.0534, 0.5, 0.5) is none
+
+
+def test_the_strongest_candidate_is_replayed_on_its_own_gap_even_where_the_other_lies_farther():
+    # a valve dwelling between moves, calibrated on a busy commissioning window (reference plant,
+    # seed 1, the noisy end): the motion replays 18.9x its floor, the chambers 6.2x theirs; the
+    # equations' strongest candidate, a typical supply line, acts on the chambers
+    acc = GapAccumulator()
+    for signal, err in (("p1_hydraulic", 1.694e5), ("p2_hydraulic", 1.694e5), ("X_mechanical", 1.191e-3)):
+        acc.add(signal, np.full(4, err), {"all": np.ones(4, bool)})
+    floors = {"hydraulic": 0.272, "mechanical": 0.063}
+    supply, friction = library_entry("supply_line_resistance"), library_entry("friction_change")
+    assert gap_to_replay(supply, acc, floors) == "hydraulic"
+    assert gap_to_replay(friction, acc, floors) == "mechanical"
+    assert gap_to_replay(supply, acc, {"hydraulic": 1.694 / (0.99 * CANDIDATE_REPLAY_FLOOR), "mechanical": 0.063}) is None
+    assert gap_to_replay(supply, acc, {"hydraulic": 0.0, "mechanical": 0.063}) is None  # no floor, nothing to judge against
 
 
 def test_the_gap_where_a_reading_acts_decides_against_the_whole_replay():

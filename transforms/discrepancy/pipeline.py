@@ -168,6 +168,9 @@ class Diagnosis:
     spool_reconstructed: int = 0
     """Records whose spool position was taken as Eq. 1's response to x_ref (``settings.reconstruct_spool``
     and the reading follows it, :func:`transforms.discrepancy.states.spool_from_reference`)."""
+    strongest: str = ""
+    """The equations' strongest candidate, its reading and why it was not named, as a clause
+    (:func:`transforms.discrepancy.verdict.strongest_candidate`); "" where none reduced their residual."""
 
     @property
     def final_effects(self) -> Effects:
@@ -336,7 +339,7 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
     from transforms.discrepancy.calibration import NuisanceModel, calibrate_best, calibrate_prepared, is_sharp, joint_fit, refine_breakaway, sharp_edges_reason
     from transforms.discrepancy.alignment import PRESSURES, align_prepared
     from transforms.discrepancy.transmitter import GAIN_OR_OFFSET, gain_or_offset
-    from transforms.discrepancy.verdict import (CANDIDATE_REPLAY_FLOOR, acting_gap, far_beyond_the_floor, farthest_beyond, found_nothing,
+    from transforms.discrepancy.verdict import (acting_gap, far_beyond_the_floor, found_nothing, gap_to_replay,
                                                lagging_transmitter, replay_closes, strongest_candidate, unexplained)
 
     settings = settings or DiscrepancySettings()
@@ -521,18 +524,20 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
     lag = delays.finding()
     if lag:  # a transmitter lagging the others: a finding of its own (aligned for, not absorbed)
         verdict = lagging_transmitter(verdict, bool(named), lag, stage_acc[0].split_gap("hydraulic"), floors["hydraulic"])
-    kind, ratio = farthest_beyond(stage_acc[0], floors)
     top = max(sel.first_step, key=lambda c: c.gain, default=None)
     top_spec = specs[top.column] if top is not None else None
-    if (ratio >= CANDIDATE_REPLAY_FLOOR and found_nothing(verdict, bool(named)) and top is not None and top.gain > 0.0
-            and acting_gap(top_spec) == kind and (top_spec.lower is None or top_spec.neutral + top.theta > top_spec.lower)):
-        # nothing stood out, yet a gap lies far beyond its floor: the equations' strongest
-        # (physical) candidate, fitted (with the nuisances), replayed on that gap (verdict.replay_closes)
+    kind = gap_to_replay(top_spec, stage_acc[0], floors) if top is not None else None
+    if (kind is not None and found_nothing(verdict, bool(named)) and top.gain > 0.0
+            and (top_spec.lower is None or top_spec.neutral + top.theta > top_spec.lower)):
+        # nothing stood out, yet the gap where the equations' strongest (physical) candidate acts
+        # lies far beyond its floor: that candidate, fitted (with the nuisances), replayed on that
+        # gap (verdict.replay_closes)
         fx, _, model, _ = refine([top_spec], perturbed(base, top_spec, top.theta))
         acc = _gaps(prepared, *model, fx, settings, set())[0]
         verdict = replay_closes(verdict, bool(named), top_spec, top_spec.value(fx), top.t_stat, floors[kind], stage_acc[0].split_gap(kind),
                                 acc.split_gap(kind), stage_gaps[0], acc.gap())
-    verdict = far_beyond_the_floor(verdict, bool(named), stage_acc[0], floors, strongest_candidate(candidates, settings.min_t_stat))
+    strongest = strongest_candidate(candidates, settings.min_t_stat)
+    verdict = far_beyond_the_floor(verdict, bool(named), stage_acc[0], floors, strongest)
     return Diagnosis(
         n_records=len(prepared), records=[(p.rec.start_us, p.rec.end_us) for p in prepared], named=named,
         candidates=candidates, gap_rows=gap_rows, residual_rows=residual_rows, stage_effects=stage_effects,
@@ -540,7 +545,7 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
         monitoring=mon, verdict=verdict, gap_nominal=gap_nominal, model=stage_model, noise_floors=floors,
         split_gaps=[{k: a.split_gap(k) for k in ("hydraulic", "mechanical")} for a in stage_acc], pressure_delay_samples=delays.shared,
         pressure_delays={c: delays.of(c) for c in PRESSURES}, lag_finding=lag,
-        position_noise=pooled_noise(prepared, ("x", "X")), spool_reconstructed=sum("x" in p.rec.pos for p in prepared),
+        position_noise=pooled_noise(prepared, ("x", "X")), spool_reconstructed=sum("x" in p.rec.pos for p in prepared), strongest=strongest,
     )
 
 
