@@ -173,20 +173,6 @@ def test_findings_row_of_a_reading_decided_against_the_tolerances_has_its_acting
     assert none["gap_kind"] is None and none["gap_kind_before"] is None
 
 
-def test_a_none_of_the_model_taken_as_exact_says_what_the_equations_read_and_why_it_is_not_named():
-    # with a commissioning window (no nuisance verdict), nothing named: the reason carries the
-    # equations' strongest candidate (the reference plant at the noisy end, seed 0, a 600 kg mass)
-    from types import SimpleNamespace
-
-    from flows.discrepancy.flow import verdict_columns
-
-    hint = "the equations' strongest candidate, load_mass_change delta_m=636 kg (z = 7.5), takes 4% of their residual at t = 2.9 (a name needs t ≥ 4)"
-    row = verdict_columns(SimpleNamespace(verdict=None, named=[], gap_nominal=1.0, lag_finding="", strongest=hint), 1)
-    assert row["verdict"] == "none" and row["verdict_reason"].endswith("model taken as exact; " + hint), row["verdict_reason"]
-    quiet = verdict_columns(SimpleNamespace(verdict=None, named=[], gap_nominal=1.0, lag_finding="", strongest=""), 1)
-    assert quiet["verdict_reason"].endswith("model taken as exact"), quiet["verdict_reason"]
-
-
 def test_a_plant_grade_spool_reading_with_its_reference_gets_the_hint_to_reconstruct_it():
     from flows.discrepancy.flow import DiscrepancyReport, summary_lines
 
