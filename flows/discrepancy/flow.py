@@ -223,8 +223,7 @@ def verdict_columns(d: Diagnosis, rank: int) -> dict:
                 **common}
     if not d.named:
         return {"verdict": "none", "confidence": None, "alternatives": None, "separate_by": None,
-                "verdict_reason": "no library effect explains a significant share of the residuals of the model taken as exact"
-                                  + (f"; {d.strongest}" if d.strongest else ""),
+                "verdict_reason": "no library effect explains a significant share of the residuals of the model taken as exact",
                 "nuisances": None, **common}
     conf = float(min(0.999, stats.norm.cdf(n.alternative_t))) if math.isfinite(n.alternative_t) else 0.999
     return {"verdict": "ambiguous" if n.alternative else "named", "confidence": conf,

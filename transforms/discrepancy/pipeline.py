@@ -168,9 +168,6 @@ class Diagnosis:
     spool_reconstructed: int = 0
     """Records whose spool position was taken as Eq. 1's response to x_ref (``settings.reconstruct_spool``
     and the reading follows it, :func:`transforms.discrepancy.states.spool_from_reference`)."""
-    strongest: str = ""
-    """The equations' strongest candidate, its reading and why it was not named, as a clause
-    (:func:`transforms.discrepancy.verdict.strongest_candidate`); "" where none reduced their residual."""
 
     @property
     def final_effects(self) -> Effects:
@@ -536,8 +533,7 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
         acc = _gaps(prepared, *model, fx, settings, set())[0]
         verdict = replay_closes(verdict, bool(named), top_spec, top_spec.value(fx), top.t_stat, floors[kind], stage_acc[0].split_gap(kind),
                                 acc.split_gap(kind), stage_gaps[0], acc.gap())
-    strongest = strongest_candidate(candidates, settings.min_t_stat)
-    verdict = far_beyond_the_floor(verdict, bool(named), stage_acc[0], floors, strongest)
+    verdict = far_beyond_the_floor(verdict, bool(named), stage_acc[0], floors, strongest_candidate(candidates, settings.min_t_stat))
     return Diagnosis(
         n_records=len(prepared), records=[(p.rec.start_us, p.rec.end_us) for p in prepared], named=named,
         candidates=candidates, gap_rows=gap_rows, residual_rows=residual_rows, stage_effects=stage_effects,
@@ -545,7 +541,7 @@ def diagnose(records: list[Record], plant: PlantParams, condition: ValveConditio
         monitoring=mon, verdict=verdict, gap_nominal=gap_nominal, model=stage_model, noise_floors=floors,
         split_gaps=[{k: a.split_gap(k) for k in ("hydraulic", "mechanical")} for a in stage_acc], pressure_delay_samples=delays.shared,
         pressure_delays={c: delays.of(c) for c in PRESSURES}, lag_finding=lag,
-        position_noise=pooled_noise(prepared, ("x", "X")), spool_reconstructed=sum("x" in p.rec.pos for p in prepared), strongest=strongest,
+        position_noise=pooled_noise(prepared, ("x", "X")), spool_reconstructed=sum("x" in p.rec.pos for p in prepared),
     )
 
 
