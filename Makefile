@@ -71,11 +71,14 @@ $(VENV)/.tests-compiled: $(TEST_SOURCES) | $(VENV)/.synced
 
 # the set-up (its two kernel parts side by side), the tests' rewritten asserts and Chromium's
 # install, which on a fresh machine waits ~26 s on the network and dpkg, all at once (-j3)
-# OPENBLAS_NUM_THREADS=1: two xdist workers on two cores, each with its own BLAS threads, spun
-# against each other (the discrepancy tests' least squares: 41 s of CPU for 39 s of wall, 16 for 19 without)
+# Three xdist workers on two cores: some tests wait on their subprocesses (the Prefect API, serve,
+# the command line's), and two workers left 9 % of the cores idle: back to back, the same CPU
+# (586-590 s) took 325 s of wall with two, 300 with three. OPENBLAS_NUM_THREADS=1: workers each with
+# their own BLAS threads spun against each other (the discrepancy tests' least squares: 41 s of
+# CPU for 39 s of wall, 16 for 19 without)
 test:
 	$(MAKE) --no-print-directory -j3 setup chromium $(VENV)/.tests-compiled
-	OPENBLAS_NUM_THREADS=1 $(VENV)/bin/python -m pytest -n 2 --dist loadgroup --durations=15
+	OPENBLAS_NUM_THREADS=1 $(VENV)/bin/python -m pytest -n 3 --dist loadgroup --durations=15
 
 bench: setup
 	$(VENV)/bin/python bench/simulate.py

@@ -1,4 +1,4 @@
-"""The Prefect API's tests share one xdist worker under ``make test`` (``-n 2 --dist loadgroup``).
+"""The Prefect API's tests share one xdist worker under ``make test`` (``-n 3 --dist loadgroup``).
 
 ``tests/conftest.py`` marks every test that uses the ``prefect_server`` fixture with
 ``xdist_group("prefect")``, so the test API (~20 s to start) starts once per suite. That grouping
